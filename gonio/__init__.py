@@ -1,0 +1,59 @@
+"""gonio: a virtual gonioreflectometer and measurement-analysis suite.
+
+The public entry points (DESIGN.md, "Public API contract")::
+
+    import gonio
+    gonio.models.available()                      # registered model names
+    gonio.models.get("oren-nayar")                # Model: .name, .params, .reference
+    gonio.brdf("oren-nayar", 45, 0, 30, 180, rho=0.9, sigma=30)   # [1/sr]
+
+Angles are in degrees everywhere in the public interface.
+"""
+from __future__ import annotations
+
+from importlib.metadata import PackageNotFoundError, version as _version
+
+import numpy as np
+
+from . import models
+
+try:
+    __version__ = _version("gonio")
+except PackageNotFoundError:  # running from a source tree that was not installed
+    __version__ = "0.0.0+unknown"
+
+__all__ = ["__version__", "brdf", "models"]
+
+
+def brdf(name: str, theta_i, phi_i, theta_r, phi_r, **params) -> np.ndarray:
+    """Evaluate the registered model ``name`` [1/sr].
+
+    Parameters
+    ----------
+    name : str
+        Registered model name (see :func:`gonio.models.available`).
+    theta_i, phi_i : array_like
+        Source polar angle and azimuth [deg].
+    theta_r, phi_r : array_like
+        Viewing polar angle and azimuth [deg].
+    **params
+        Model parameters by name (see ``gonio.models.get(name).params``); missing ones
+        take their defaults.
+
+    Returns
+    -------
+    numpy.ndarray
+        BRDF [1/sr], broadcast over the angle arrays; 0 below the horizon, NaN where an
+        angle is NaN.
+
+    Raises
+    ------
+    ValueError
+        Unknown model, unknown parameter, or a parameter outside its physical range.
+
+    Examples
+    --------
+    >>> float(brdf("lambert", 30, 0, 10, 180, rho=0.5)) * 3.141592653589793
+    0.5
+    """
+    return models.get(name)(theta_i, phi_i, theta_r, phi_r, **params)

@@ -1,0 +1,1 @@
+"""Figures and reports (the only part of gonio that imports matplotlib)."""
