@@ -68,11 +68,11 @@ def brdf_from_radiance(radiance: ArrayLike, irradiance: ArrayLike, theta_i: Arra
     ValueError
         If any theta_i is at or beyond 90 deg, where the surface receives no irradiance.
     """
-    cos_i = np.cos(np.radians(np.asarray(theta_i, float)))
-    if np.any(cos_i <= 0.0):
+    theta = np.asarray(theta_i, float)
+    if np.any(theta >= 90.0):
         raise ValueError("theta_i must be below 90 deg to recover a BRDF from radiance "
                          "(the surface receives no irradiance at or beyond grazing incidence)")
-    return np.asarray(radiance, float) / (np.asarray(irradiance, float) * cos_i)
+    return np.asarray(radiance, float) / (np.asarray(irradiance, float) * np.cos(np.radians(theta)))
 
 
 def lambertian_radiance(rho: ArrayLike, irradiance: ArrayLike, theta_i: ArrayLike) -> np.ndarray:
