@@ -1,0 +1,66 @@
+"""Helpers shared by the benchmark scripts: machine facts, timing, JSON output."""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "docs" / "benchmarks"
+
+
+def machine() -> dict:
+    """Facts about the machine a benchmark ran on (so ratios can be read in context)."""
+    info = {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+    }
+    try:
+        cc = subprocess.run(["cc", "--version"], capture_output=True, text=True, check=True)
+        info["cc"] = cc.stdout.splitlines()[0]
+    except (OSError, subprocess.CalledProcessError):
+        info["cc"] = None
+    return info
+
+
+def best_time(function: Callable[[], object], repeats: int = 5, min_time: float = 0.05) -> float:
+    """Best wall time of ``function()`` over ``repeats`` runs [s] (each run repeated until
+    it lasts ``min_time`` to beat timer resolution)."""
+    best = float("inf")
+    for _ in range(repeats):
+        loops, elapsed = 0, 0.0
+        start = time.perf_counter()
+        while elapsed < min_time or loops == 0:
+            function()
+            loops += 1
+            elapsed = time.perf_counter() - start
+        best = min(best, elapsed / loops)
+    return best
+
+
+def write_json(name: str, payload: dict) -> Path:
+    """Write ``docs/benchmarks/<name>.json`` and return its path."""
+    OUT.mkdir(parents=True, exist_ok=True)
+    path = OUT / f"{name}.json"
+    path.write_text(json.dumps(payload, indent=2, default=float) + "\n")
+    return path
+
+
+def random_geometries(n: int, seed: int = 0, max_theta: float = 89.9) -> tuple[np.ndarray, ...]:
+    """``n`` random (theta_i, phi_i, theta_r, phi_r) [deg], uniform in angle."""
+    rng = np.random.default_rng(seed)
+    return (
+        rng.uniform(0.0, max_theta, n),
+        rng.uniform(-180.0, 180.0, n),
+        rng.uniform(0.0, max_theta, n),
+        rng.uniform(-180.0, 180.0, n),
+    )
