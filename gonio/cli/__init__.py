@@ -15,7 +15,7 @@ import sys
 import gonio
 
 #: Sub-command modules in the order ``gonio --help`` lists them.
-SUBCOMMANDS = ("models", "figures")
+SUBCOMMANDS = ("models", "figures", "plan")
 
 
 class CLIError(Exception):

@@ -1,0 +1,32 @@
+"""``gonio plan FILE``: dry-run a sweep protocol."""
+from __future__ import annotations
+
+import argparse
+
+from gonio import protocols
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``gonio plan``."""
+    parser = subparsers.add_parser(
+        "plan",
+        help="dry-run a sweep protocol: points, refused points, estimated time",
+        description=(
+            "Validate a protocol file and print its plan: the number of points, every point "
+            "the rig would refuse (travel limits, camera/lamp separation) with the reason, "
+            "and the estimated instrument time. Nothing is moved."
+        ),
+    )
+    parser.add_argument("protocol", help="protocol TOML file (see docs/protocols.md)")
+    parser.add_argument("--points", action="store_true", help="also list every planned point")
+    parser.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    result = protocols.plan(protocols.load(args.protocol))
+    print(result.summary())
+    if args.points:
+        print("planned points (index, block, repeat, theta_i, phi_i, view) [deg]:")
+        for p in result.points:
+            print(f"  {p.index:5d}  {p.block:<32} {p.repeat:3d}  {p.theta_i:7.2f} {p.phi_i:8.2f} {p.view:8.2f}")
+    return 0
