@@ -23,6 +23,11 @@ MODEL_MODULES = (
     "lambert",
     "minnaert",
     "phong",
+    "kvd",
+    "oren_nayar.functional",
+    "torrance_sparrow",
+    "pitted.model",
+    "wolff",
 )
 
 for _module in MODEL_MODULES:

@@ -1,0 +1,435 @@
+"""The emulated rig: world, instruments, transports and the control side channel for tests.
+
+Examples
+--------
+>>> import numpy as np, serial
+>>> lambert = lambda ti, pi, tr, pr: np.full(np.broadcast(ti, pi, tr, pr).shape, 0.9 / np.pi)
+>>> with EmulatedRig(lambert, seed=1, name="doc") as rig:
+...     addresses = rig.start(pty=False)
+...     port = serial.serial_for_url(rig.url("stage"), baudrate=19200, timeout=1)
+...     _ = port.write(b"VE?\\r")
+...     port.readline()
+...     port.close()
+b'ESP300 Version 3.08 09/09/02\\r\\n'
+"""
+from __future__ import annotations
+
+import threading
+import weakref
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import serial
+
+from .camera_firmware import CameraFirmware
+from .ccd import CCDParams, CCDSensor
+from .clock import SimClock
+from .lamp import Lamp, LampParams
+from .lamp_firmware import LampFirmware
+from .stage_firmware import DEFAULT_AXES, Esp300Firmware
+from .transports import DeviceChannel, PtyTransport, TcpTransport
+from .world import Optics, camera_angles, cone_averaged_reflectance, footprint_coverage, separation_deg
+
+__all__ = ["EmulatedRig", "RigControl", "Scene", "TrueState", "find_rig", "BAUDRATES",
+           "DEFAULT_LAMP_IRRADIANCE_W_M2"]
+
+#: Line speeds of the instruments [bit/s] (docs/protocol.md).
+BAUDRATES = {"stage": 19200, "camera": 115200, "lamp": 9600}
+
+#: In-band irradiance of the warm lamp at rated voltage on a surface facing it [W/m^2].
+#: Chosen so that a white Lambertian sample at normal incidence and view gives about
+#: 2000 DN (mid-range of the 12-bit ADC) in 25 ms at gain 1 (see docs/emulator.md).
+DEFAULT_LAMP_IRRADIANCE_W_M2 = 0.057
+
+_RIGS: "weakref.WeakValueDictionary[str, EmulatedRig]" = weakref.WeakValueDictionary()
+_RIGS_LOCK = threading.Lock()
+
+Brdf = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def find_rig(name: str) -> "EmulatedRig | None":
+    """The started rig registered under ``name`` in this process, or None."""
+    with _RIGS_LOCK:
+        return _RIGS.get(name)
+
+
+@dataclass(frozen=True)
+class TrueState:
+    """Ground truth of the simulated world at one instant (side channel).
+
+    Attributes
+    ----------
+    time_s : float
+        Simulated time [s].
+    positions_deg : tuple of float
+        True axis positions (a1, a2, a3) [deg].
+    theta_i, phi_i, theta_r, phi_r : float
+        Lamp and camera directions [deg].
+    lamp_output : float
+        Lamp output relative to a warm lamp at rated voltage [-] (no flicker).
+    irradiance_w_m2 : float
+        In-band irradiance the lamp gives on a surface facing it [W/m^2].
+    radiance_w_m2_sr : float
+        Sample radiance toward the camera, averaged over the lamp and camera cones
+        [W/(m^2 sr)].
+    reflectance_factor : float
+        ``<f cos theta_i>`` over the cones [1/sr] (radiance / irradiance).
+    moving : tuple of bool
+        Whether each axis is moving.
+    """
+
+    time_s: float
+    positions_deg: tuple[float, float, float]
+    theta_i: float
+    phi_i: float
+    theta_r: float
+    phi_r: float
+    lamp_output: float
+    irradiance_w_m2: float
+    radiance_w_m2_sr: float
+    reflectance_factor: float
+    moving: tuple[bool, bool, bool]
+
+
+class Scene:
+    """What the camera sees: the sample lit by the lamp, imaged through the optics.
+
+    Parameters
+    ----------
+    brdf : callable
+        Sample BRDF ``brdf(theta_i, phi_i, theta_r, phi_r)`` [1/sr], degrees, broadcasting.
+    optics : Optics
+        Rig layout.
+    lamp : Lamp
+        The lamp (its output at the exposure time).
+    stage : Esp300Firmware
+        The motion controller (true axis positions).
+    lamp_irradiance_w_m2 : float
+        In-band irradiance of the warm lamp at rated voltage on a surface facing it [W/m^2].
+    rng : numpy.random.Generator
+        Lamp flicker source.
+    """
+
+    def __init__(self, brdf: Brdf, optics: Optics, lamp: Lamp, stage: Esp300Firmware,
+                 lamp_irradiance_w_m2: float, rng: np.random.Generator) -> None:
+        self.brdf = brdf
+        self.optics = optics
+        self.lamp = lamp
+        self.stage = stage
+        self.lamp_irradiance_w_m2 = lamp_irradiance_w_m2
+        self.rng = rng
+        self._reflectance_cache: dict[tuple[float, float, float], float] = {}
+        self._coverage_cache: dict[float, np.ndarray] = {}
+
+    def angles(self, positions: tuple[float, ...]) -> tuple[float, float, float, float]:
+        """(theta_i, phi_i, theta_r, phi_r) [deg] for axis positions (a1, a2, a3)."""
+        a1, a2, a3 = positions
+        theta_r, phi_r = camera_angles(a1)
+        return float(a2), float(a3), theta_r, phi_r
+
+    def reflectance_factor(self, positions: tuple[float, ...]) -> float:
+        """``<f cos theta_i>`` over the lamp and camera cones at these positions [1/sr]."""
+        key = tuple(float(p) for p in positions)
+        value = self._reflectance_cache.get(key)
+        if value is None:
+            ti, pi_, tr, pr = self.angles(key)
+            value = cone_averaged_reflectance(self.brdf, ti, pi_, tr, pr, self.optics.lamp_solid_angle_sr,
+                                              self.optics.camera_solid_angle_sr)
+            if len(self._reflectance_cache) > 4096:
+                self._reflectance_cache.clear()
+            self._reflectance_cache[key] = value
+        return value
+
+    def coverage(self, theta_r: float) -> np.ndarray:
+        """Cached :func:`~drivers.emulator.world.footprint_coverage`."""
+        cov = self._coverage_cache.get(theta_r)
+        if cov is None:
+            if len(self._coverage_cache) > 64:
+                self._coverage_cache.clear()
+            cov = footprint_coverage(self.optics, theta_r)
+            self._coverage_cache[theta_r] = cov
+        return cov
+
+    def radiance(self, positions: tuple[float, ...], lamp_output: float) -> float:
+        """Sample radiance toward the camera [W/(m^2 sr)]."""
+        return self.lamp_irradiance_w_m2 * lamp_output * self.reflectance_factor(positions)
+
+    def __call__(self, t_start: float, exposure_s: float) -> np.ndarray:
+        """Mean photons per pixel of an exposure [photons], shape (height, width).
+
+        The geometry is taken at mid-exposure; the lamp output is averaged over the
+        exposure and multiplied by one flicker factor.
+        """
+        positions = self.stage.true_positions(t_start + 0.5 * exposure_s)
+        lamp = self.lamp.mean_output(t_start, t_start + exposure_s) * self.lamp.flicker_factor(exposure_s, self.rng)
+        radiance = self.radiance(positions, lamp)
+        if not np.isfinite(radiance) or radiance < 0:
+            raise ValueError(f"the sample BRDF gave radiance {radiance!r} at axis positions "
+                             f"{tuple(round(p, 3) for p in positions)}")
+        _, _, theta_r, _ = self.angles(positions)
+        rate = radiance * self.optics.photon_rate_per_radiance()
+        return self.coverage(theta_r) * (rate * exposure_s)
+
+
+class RigControl:
+    """Side channel of an :class:`EmulatedRig` for tests: faults, clock and ground truth.
+
+    Nothing here is reachable over the serial lines.
+    """
+
+    def __init__(self, rig: "EmulatedRig") -> None:
+        self._rig = rig
+
+    # -- clock ------------------------------------------------------------------------
+    def now(self) -> float:
+        """Simulated time [s]."""
+        return self._rig.clock.now()
+
+    def advance(self, seconds: float) -> None:
+        """Let simulated time pass (fast mode: jump; real-time mode: sleep)."""
+        self._rig.clock.advance(seconds)
+
+    # -- faults -----------------------------------------------------------------------
+    def _channel(self, device: str) -> DeviceChannel:
+        try:
+            return self._rig.channels[device]
+        except KeyError:
+            raise ValueError(f"device must be one of {sorted(self._rig.channels)}, got {device!r}") from None
+
+    def disconnect(self, device: str) -> None:
+        """Cut the line: the instrument ignores input and sends nothing until :meth:`reconnect`."""
+        self._channel(device).faults.disconnected = True
+
+    def reconnect(self, device: str) -> None:
+        """Restore a line cut by :meth:`disconnect`."""
+        self._channel(device).faults.disconnected = False
+
+    def stall(self, device: str, seconds: float) -> None:
+        """Make the instrument hang for ``seconds`` of wall time before its next line."""
+        if seconds < 0:
+            raise ValueError(f"seconds must be >= 0, got {seconds!r}")
+        self._channel(device).faults.stall_s = float(seconds)
+
+    def garble(self, device: str, replies: int = 1) -> None:
+        """Corrupt the bytes of the next ``replies`` replies (terminators kept)."""
+        if replies < 0:
+            raise ValueError(f"replies must be >= 0, got {replies!r}")
+        self._channel(device).faults.garble = int(replies)
+
+    def burn_out_lamp(self) -> None:
+        """The lamp filament breaks: no light, no current, ``STAT:LAMP?`` -> ``FAULT``."""
+        self._rig.lamp.burnt_out = True
+
+    def replace_lamp(self) -> None:
+        """Fit a new lamp (clears the burn-out; output restarts its warm-up at switch-on)."""
+        lamp = self._rig.lamp
+        lamp.burnt_out = False
+        if lamp.on:
+            lamp.switched_at = self.now()
+
+    def hit_limit(self, axis: int) -> None:
+        """The next move of ``axis`` trips a hardware limit switch half way (error x04/x05)."""
+        if axis not in self._rig.stage.axes:
+            raise ValueError(f"axis must be one of {sorted(self._rig.stage.axes)}, got {axis!r}")
+        self._rig.stage.limit_faults.add(axis)
+
+    def camera_fault(self, active: bool = True) -> None:
+        """An internal camera fault: ``ACQ`` fails with -200 while active."""
+        self._rig.camera.fault = bool(active)
+
+    def clear_faults(self) -> None:
+        """Remove every injected line fault, the camera fault and pending limit faults."""
+        for channel in self._rig.channels.values():
+            f = channel.faults
+            f.disconnected, f.stall_s, f.garble = False, 0.0, 0
+        self._rig.stage.limit_faults.clear()
+        self._rig.camera.fault = False
+
+    # -- ground truth -----------------------------------------------------------------
+    def true_state(self) -> TrueState:
+        """Ground truth now (true positions, lamp output, true radiance)."""
+        rig = self._rig
+        t = rig.clock.now()
+        positions = rig.stage.true_positions(t)
+        ti, pi_, tr, pr = rig.scene.angles(positions)
+        lamp = rig.lamp.output(t)
+        factor = rig.scene.reflectance_factor(positions)
+        return TrueState(
+            time_s=t,
+            positions_deg=tuple(positions),  # type: ignore[arg-type]
+            theta_i=ti, phi_i=pi_, theta_r=tr, phi_r=pr,
+            lamp_output=lamp,
+            irradiance_w_m2=rig.scene.lamp_irradiance_w_m2 * lamp,
+            radiance_w_m2_sr=rig.scene.lamp_irradiance_w_m2 * lamp * factor,
+            reflectance_factor=factor,
+            moving=tuple(rig.stage.axes[n].moving(t) for n in sorted(rig.stage.axes)),  # type: ignore[arg-type]
+        )
+
+    def expected_dn(self, exposure_s: float, gain: float = 1.0) -> float:
+        """Noise-free mean DN of a pixel fully inside the sample image, without PRNU/DSNU,
+        for an exposure starting now with the current geometry and lamp output [DN]."""
+        rig = self._rig
+        t = rig.clock.now()
+        positions = rig.stage.true_positions(t)
+        radiance = rig.scene.radiance(positions, rig.lamp.mean_output(t, t + exposure_s))
+        photons = radiance * rig.optics.photon_rate_per_radiance() * exposure_s
+        p = rig.ccd_params
+        electrons = p.quantum_efficiency * photons + p.dark_current_e_per_s * exposure_s
+        return p.offset_dn + p.base_gain_dn_per_e * gain * electrons
+
+
+class EmulatedRig:
+    """The whole emulated goniometer: lab world, three instruments and their transports.
+
+    Parameters
+    ----------
+    brdf : callable
+        Sample BRDF ``brdf(theta_i, phi_i, theta_r, phi_r) -> array`` [1/sr]; angles in
+        degrees; must broadcast.
+    seed : int
+        Seed of every random process (fixed patterns, noise, repeatability, drift phases).
+    realtime : bool
+        False: fast mode (simulated clock jumps); True: replies with hardware timing.
+    min_separation_deg : float
+        Minimum camera-lamp angle enforced by the stage interlock [deg].
+    name : str
+        Name for ``gonio-sim://<device>?rig=<name>`` URLs.
+    lamp_warm : bool
+        Start with the lamp on and warm (as if switched on an hour before) instead of
+        the power-on state (off).
+    motors_on : bool
+        Start with the stage motors on (default: off, as a real controller powers up).
+    optics, ccd_params, lamp_params : optional
+        Override the rig layout and the models' constants.
+    fixed_pattern : bool
+        Include PRNU, DSNU and hot pixels in the CCD.
+    lamp_irradiance_w_m2 : float
+        In-band irradiance of the warm lamp at rated voltage on a surface facing it.
+    """
+
+    def __init__(self, brdf: Brdf, seed: int = 0, realtime: bool = False, min_separation_deg: float = 5.0,
+                 name: str = "default", lamp_warm: bool = False, motors_on: bool = False,
+                 optics: Optics | None = None, ccd_params: CCDParams | None = None,
+                 lamp_params: LampParams | None = None, fixed_pattern: bool = True,
+                 lamp_irradiance_w_m2: float = DEFAULT_LAMP_IRRADIANCE_W_M2) -> None:
+        if not callable(brdf):
+            raise ValueError(f"brdf must be callable brdf(theta_i, phi_i, theta_r, phi_r), got {brdf!r}")
+        if not 0.0 <= min_separation_deg < 90.0:
+            raise ValueError(f"min_separation_deg must be within 0..90, got {min_separation_deg!r}")
+        if lamp_irradiance_w_m2 <= 0:
+            raise ValueError(f"lamp_irradiance_w_m2 must be > 0, got {lamp_irradiance_w_m2!r}")
+        self.name = name
+        self.seed = seed
+        self.min_separation_deg = float(min_separation_deg)
+        self.optics = optics or Optics()
+        self.ccd_params = ccd_params or CCDParams(width=self.optics.width, height=self.optics.height)
+        seeds = np.random.SeedSequence(seed).spawn(7)
+        rngs = [np.random.default_rng(s) for s in seeds]
+        self.clock = SimClock(realtime=realtime)
+        self.lamp = Lamp(params=lamp_params or LampParams(), seed=int(seeds[0].generate_state(1)[0]))
+        if lamp_warm:
+            self.lamp.switch(True, t=-3600.0)
+        self.stage = Esp300Firmware(self.clock, rngs[1], interlock=self._interlock, axes=DEFAULT_AXES,
+                                    baudrate=BAUDRATES["stage"])
+        if motors_on:
+            for axis in self.stage.axes.values():
+                axis.motor_on = True
+        self.sensor = CCDSensor(self.ccd_params, seed=seeds[2], fixed_pattern=fixed_pattern)
+        self.scene = Scene(brdf, self.optics, self.lamp, self.stage, lamp_irradiance_w_m2, rngs[3])
+        self.camera = CameraFirmware(self.clock, self.sensor, self.optics, self.scene, rngs[4])
+        self.lamp_supply = LampFirmware(self.clock, self.lamp, rngs[5])
+        self.channels = {
+            "stage": DeviceChannel("stage", self.stage, self.clock, BAUDRATES["stage"]),
+            "camera": DeviceChannel("camera", self.camera, self.clock, BAUDRATES["camera"]),
+            "lamp": DeviceChannel("lamp", self.lamp_supply, self.clock, BAUDRATES["lamp"]),
+        }
+        for k, channel in enumerate(self.channels.values()):
+            channel.faults.rng = np.random.default_rng(seeds[6].spawn(3)[k])
+        self.control = RigControl(self)
+        self._transports: dict[str, list] = {d: [] for d in self.channels}
+        self._started = False
+
+    def _interlock(self, positions: tuple[float, ...]) -> bool:
+        a1, a2, a3 = positions
+        return separation_deg(a1, a2, a3) >= self.min_separation_deg
+
+    # -- transports -------------------------------------------------------------------
+    def start(self, pty: bool = True, tcp: bool = False, tcp_ports: dict[str, int] | None = None,
+              symlinks: dict[str, str] | None = None) -> dict[str, dict[str, str]]:
+        """Open the transports and register the rig for ``gonio-sim://`` URLs.
+
+        Parameters
+        ----------
+        pty : bool
+            Open a raw-mode pseudo-terminal per instrument.
+        tcp : bool
+            Listen on 127.0.0.1 per instrument.
+        tcp_ports : dict, optional
+            Fixed TCP port per device (default: free ports).
+        symlinks : dict, optional
+            Symlink path per device pointing at its pseudo-terminal.
+
+        Returns
+        -------
+        dict
+            ``{device: {"url": ..., "pty": ..., "tcp": ...}}`` (the kinds opened).
+        """
+        if self._started:
+            raise RuntimeError(f"rig {self.name!r} is already started")
+        with _RIGS_LOCK:
+            other = _RIGS.get(self.name)
+            if other is not None and other is not self:
+                raise ValueError(f"an emulated rig named {self.name!r} is already running in this process")
+            _RIGS[self.name] = self
+        if "drivers.emulator" not in serial.protocol_handler_packages:
+            serial.protocol_handler_packages.append("drivers.emulator")
+        try:
+            for device, channel in self.channels.items():
+                if pty:
+                    link = (symlinks or {}).get(device)
+                    self._transports[device].append(("pty", PtyTransport(channel, symlink=link)))
+                if tcp:
+                    port = (tcp_ports or {}).get(device, 0)
+                    self._transports[device].append(("tcp", TcpTransport(channel, port=port)))
+        except Exception:
+            self.close()
+            raise
+        self._started = True
+        return self.addresses()
+
+    def url(self, device: str) -> str:
+        """``gonio-sim://<device>?rig=<name>`` for the in-process pyserial handler."""
+        if device not in self.channels:
+            raise ValueError(f"device must be one of {sorted(self.channels)}, got {device!r}")
+        return f"gonio-sim://{device}?rig={self.name}"
+
+    def addresses(self) -> dict[str, dict[str, str]]:
+        """Every address of every instrument: ``{device: {"url", "pty", "tcp"}}``."""
+        out: dict[str, dict[str, str]] = {}
+        for device in self.channels:
+            entry = {"url": self.url(device)}
+            for kind, transport in self._transports[device]:
+                entry[kind] = transport.address
+            out[device] = entry
+        return out
+
+    def close(self) -> None:
+        """Stop every transport and unregister the rig."""
+        for transports in self._transports.values():
+            for _, transport in transports:
+                transport._stop.set()  # signal every thread first, then join them
+        for transports in self._transports.values():
+            for _, transport in transports:
+                transport.close()
+            transports.clear()
+        with _RIGS_LOCK:
+            if _RIGS.get(self.name) is self:
+                del _RIGS[self.name]
+        self._started = False
+
+    def __enter__(self) -> "EmulatedRig":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,302 @@
+"""Serial transports of the emulated instruments: pseudo-terminal, TCP loopback, in-process URL.
+
+Every transport feeds received bytes into a :class:`LineSplitter` and hands complete lines
+to the instrument's :class:`DeviceChannel`, which runs the firmware under a lock, applies
+the injected faults and charges the line's transfer time to the simulated clock.
+"""
+from __future__ import annotations
+
+import os
+import select
+import socket
+import threading
+import time
+import tty
+from dataclasses import dataclass, field
+from typing import Callable, Iterator, Protocol
+
+import numpy as np
+
+from .clock import SimClock, transfer_time
+
+__all__ = ["Firmware", "Faults", "LineSplitter", "DeviceChannel", "PtyTransport", "TcpTransport", "MAX_LINE"]
+
+#: Longest accepted command line [bytes]; longer lines are discarded with an error.
+MAX_LINE = 4096
+
+
+class Firmware(Protocol):
+    """What a transport needs from an instrument's firmware."""
+
+    def handle_line(self, line: str) -> bytes: ...
+
+    def overlong_line(self) -> bytes: ...
+
+    def internal_error(self, error: Exception) -> bytes: ...
+
+
+@dataclass
+class Faults:
+    """Injected line faults of one instrument (side channel, see :class:`~drivers.emulator.rig.RigControl`).
+
+    Attributes
+    ----------
+    disconnected : bool
+        The instrument hears nothing and says nothing (cable pulled).
+    stall_s : float
+        Wall-clock seconds the instrument hangs before processing its next line (the reply
+        then comes late; later lines queue up behind it).
+    garble : int
+        Number of next non-empty replies whose bytes are corrupted (terminator kept).
+    """
+
+    disconnected: bool = False
+    stall_s: float = 0.0
+    garble: int = 0
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(12345))
+
+
+class LineSplitter:
+    """Split a byte stream into lines at CR or LF (CR LF gives an empty line, ignored).
+
+    Examples
+    --------
+    >>> s = LineSplitter()
+    >>> list(s.feed(b"1TP\\r\\n2T")), list(s.feed(b"P\\r"))
+    (['1TP'], ['2TP'])
+    """
+
+    OVERLONG = object()
+
+    def __init__(self, max_line: int = MAX_LINE) -> None:
+        self.max_line = max_line
+        self._buffer = bytearray()
+        self._discarding = False
+
+    def feed(self, data: bytes) -> Iterator["str | object"]:
+        """Yield each completed line (str), or :attr:`OVERLONG` for a discarded long line."""
+        for byte in data:
+            if byte in (10, 13):
+                if self._discarding:
+                    self._discarding = False
+                    yield self.OVERLONG
+                elif self._buffer:
+                    yield self._buffer.decode("ascii", errors="replace")
+                self._buffer.clear()
+            elif not self._discarding:
+                self._buffer.append(byte)
+                if len(self._buffer) > self.max_line:
+                    self._buffer.clear()
+                    self._discarding = True
+
+
+class DeviceChannel:
+    """One instrument as seen from its serial line(s): firmware + lock + faults + timing.
+
+    Parameters
+    ----------
+    name : str
+        Instrument name (``stage``, ``camera``, ``lamp``).
+    firmware : Firmware
+        The command interpreter.
+    clock : SimClock
+        Shared simulated clock (charged with each line's transfer time).
+    baudrate : int
+        Line speed [bit/s].
+    """
+
+    def __init__(self, name: str, firmware: Firmware, clock: SimClock, baudrate: int) -> None:
+        self.name = name
+        self.firmware = firmware
+        self.clock = clock
+        self.baudrate = baudrate
+        self.lock = threading.RLock()
+        self.faults = Faults()
+        self.lines_processed = 0
+        self.last_internal_error: Exception | None = None
+
+    def process(self, line: "str | object") -> bytes:
+        """Run one received line through the firmware; return the reply bytes (maybe empty)."""
+        faults = self.faults
+        if faults.disconnected:
+            return b""
+        if faults.stall_s > 0:
+            stall, faults.stall_s = faults.stall_s, 0.0
+            time.sleep(stall)
+        with self.lock:
+            if line is LineSplitter.OVERLONG:
+                reply = self.firmware.overlong_line()
+                n_in = MAX_LINE
+            else:
+                n_in = len(line) + 1  # type: ignore[arg-type]
+                try:
+                    reply = self.firmware.handle_line(line)  # type: ignore[arg-type]
+                except Exception as error:  # a firmware bug must not kill the line
+                    self.last_internal_error = error
+                    reply = self.firmware.internal_error(error)
+            self.lines_processed += 1
+            self.clock.advance(transfer_time(n_in + len(reply), self.baudrate))
+            if reply and faults.garble > 0:
+                faults.garble -= 1
+                reply = self._garbled(reply)
+        if faults.disconnected:
+            return b""
+        return reply
+
+    def _garbled(self, reply: bytes) -> bytes:
+        body = bytearray(reply.rstrip(b"\r\n"))
+        tail = reply[len(body):]
+        rng = self.faults.rng
+        for i in range(len(body)):
+            if rng.random() < 0.5:
+                body[i] = int(rng.integers(33, 127))  # printable noise, never a terminator
+        if not body:
+            body = bytearray(b"?")
+        return bytes(body) + tail
+
+
+class _Worker:
+    """Shared stop flag for transport threads."""
+
+    def __init__(self) -> None:
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+
+    def _spawn(self, target: Callable[..., None], *args, name: str) -> None:
+        thread = threading.Thread(target=target, args=args, name=name, daemon=True)
+        self._threads.append(thread)
+        thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        for thread in self._threads:
+            if thread is not threading.current_thread():
+                thread.join(timeout=2.0)
+
+
+class PtyTransport(_Worker):
+    """The instrument on a pseudo-terminal in raw mode (``/dev/pts/N``, optional symlink).
+
+    The emulator keeps the terminal's slave side open, so a client may open and close the
+    port path as often as it likes.
+    """
+
+    def __init__(self, channel: DeviceChannel, symlink: str | None = None) -> None:
+        super().__init__()
+        self.channel = channel
+        self.master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        tty.setraw(self.master)
+        self.path = os.ttyname(self._slave)
+        self.symlink = symlink
+        if symlink:
+            if os.path.islink(symlink):
+                os.unlink(symlink)
+            os.symlink(self.path, symlink)
+        self._spawn(self._serve, name=f"gonio-pty-{channel.name}")
+
+    @property
+    def address(self) -> str:
+        return self.symlink or self.path
+
+    def _serve(self) -> None:
+        splitter = LineSplitter()
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self.master], [], [], 0.05)
+                if not ready:
+                    continue
+                data = os.read(self.master, 65536)
+            except OSError:
+                return
+            for line in splitter.feed(data):
+                reply = self.channel.process(line)
+                if reply:
+                    self._write(reply)
+
+    def _write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view and not self._stop.is_set():
+            try:
+                _, ready, _ = select.select([], [self.master], [], 0.05)
+                if ready:
+                    n = os.write(self.master, view)
+                    view = view[n:]
+            except OSError:
+                return
+
+    def close(self) -> None:
+        super().close()
+        if self.symlink and os.path.islink(self.symlink):
+            os.unlink(self.symlink)
+        for fd in (self.master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class TcpTransport(_Worker):
+    """The instrument on a TCP socket bound to 127.0.0.1 (``socket://127.0.0.1:PORT``).
+
+    Parameters
+    ----------
+    channel : DeviceChannel
+        The instrument.
+    port : int
+        TCP port; 0 picks a free one.
+    host : str
+        Interface to bind; the loopback interface unless explicitly asked otherwise.
+    """
+
+    def __init__(self, channel: DeviceChannel, port: int = 0, host: str = "127.0.0.1") -> None:
+        super().__init__()
+        self.channel = channel
+        self._server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self._server.bind((host, port))
+        self._server.listen(4)
+        self._server.settimeout(0.05)
+        self.host, self.port = self._server.getsockname()[:2]
+        self._spawn(self._accept, name=f"gonio-tcp-{channel.name}")
+
+    @property
+    def address(self) -> str:
+        return f"socket://{self.host}:{self.port}"
+
+    def _accept(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._server.accept()
+            except socket.timeout:
+                continue
+            except OSError:
+                return
+            self._spawn(self._serve, conn, name=f"gonio-tcp-{self.channel.name}-client")
+
+    def _serve(self, conn: socket.socket) -> None:
+        splitter = LineSplitter()
+        conn.settimeout(0.05)
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        with conn:
+            while not self._stop.is_set():
+                try:
+                    data = conn.recv(65536)
+                except socket.timeout:
+                    continue
+                except OSError:
+                    return
+                if not data:
+                    return
+                for line in splitter.feed(data):
+                    reply = self.channel.process(line)
+                    if reply:
+                        try:
+                            conn.sendall(reply)
+                        except OSError:
+                            return
+
+    def close(self) -> None:
+        self._stop.set()
+        self._server.close()
+        super().close()

@@ -1,0 +1,213 @@
+"""Geometry of the three-axis rig: axis positions, directions, separation, move planning.
+
+Axes (docs/protocol.md): axis 1 swings the camera beam; its signed angle ``view`` puts the
+camera at polar angle ``|view|`` in the swing plane, on azimuth 0 for ``view >= 0`` and
+azimuth 180 for ``view < 0``. Axis 2 is the lamp's polar angle ``theta_i`` and axis 3 its
+azimuth ``phi_i`` relative to the swing plane. With ``phi_i = 0`` a positive ``view`` is on
+the lamp's side of the normal (backward scattering), matching gonio's signed in-plane
+viewing angle. All angles in degrees.
+
+These are pure functions on numbers and numpy arrays; :class:`drivers.rig.Rig` uses them
+to refuse a geometry before any command is sent.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+__all__ = [
+    "AXIS_VIEW",
+    "AXIS_THETA_I",
+    "AXIS_PHI_I",
+    "camera_direction",
+    "unit_vector",
+    "angular_separation",
+    "axis_targets",
+    "check_targets",
+    "plan_moves",
+    "MovePlan",
+    "separation_of_axes",
+]
+
+AXIS_VIEW, AXIS_THETA_I, AXIS_PHI_I = 1, 2, 3
+AXES = (AXIS_VIEW, AXIS_THETA_I, AXIS_PHI_I)
+#: Extra separation required of targets and intermediate target combinations [deg], so
+#: that rounding in the controller's own check cannot refuse a planned move.
+SEPARATION_MARGIN = 0.01
+
+AXIS_NAMES = {AXIS_VIEW: "view (camera swing)", AXIS_THETA_I: "theta_i", AXIS_PHI_I: "phi_i"}
+
+def camera_direction(view):
+    """Camera polar angle and azimuth ``(theta_r, phi_r)`` [deg] of the signed swing angle.
+
+    Examples
+    --------
+    >>> camera_direction(-30.0)
+    (30.0, 180.0)
+    """
+    view = np.asarray(view, dtype=float)
+    theta_r = np.abs(view)
+    phi_r = np.where(view >= 0, 0.0, 180.0)
+    if theta_r.ndim == 0:
+        return float(theta_r), float(phi_r)
+    return theta_r, phi_r
+
+
+def unit_vector(theta, phi) -> np.ndarray:
+    """Unit direction of polar angle ``theta`` and azimuth ``phi`` [deg]; last axis xyz."""
+    t, p = np.radians(theta), np.radians(phi)
+    st = np.sin(t)
+    return np.stack(np.broadcast_arrays(st * np.cos(p), st * np.sin(p), np.cos(t)), axis=-1)
+
+
+def angular_separation(theta_i, phi_i, theta_r, phi_r):
+    """Angle between the lamp and camera directions [deg].
+
+    Computed as ``atan2(|a x b|, a . b)``, accurate also for nearly parallel directions
+    (where ``arccos`` of the dot product loses precision).
+
+    Examples
+    --------
+    >>> round(float(angular_separation(30, 0, 30, 0)), 9)
+    0.0
+    >>> round(float(angular_separation(30, 0, 30, 180)), 9)
+    60.0
+    """
+    a = unit_vector(theta_i, phi_i)
+    b = unit_vector(theta_r, phi_r)
+    cross = np.linalg.norm(np.cross(a, b), axis=-1)
+    dot = np.sum(a * b, axis=-1)
+    return np.degrees(np.arctan2(cross, dot))
+
+
+def separation_of_axes(positions: Mapping[int, float] | np.ndarray):
+    """Separation [deg] for axis positions ``{1: view, 2: theta_i, 3: phi_i}`` (or an
+    array whose last axis holds the three positions)."""
+    if isinstance(positions, Mapping):
+        view, theta_i, phi_i = (positions[a] for a in AXES)
+    else:
+        arr = np.asarray(positions, dtype=float)
+        view, theta_i, phi_i = arr[..., 0], arr[..., 1], arr[..., 2]
+    theta_r, phi_r = camera_direction(view)
+    return angular_separation(theta_i, phi_i, theta_r, phi_r)
+
+
+def axis_targets(theta_i: float, phi_i: float, view: float) -> dict[int, float]:
+    """Axis positions of a measurement geometry: ``{1: view, 2: theta_i, 3: phi_i}`` [deg]."""
+    return {AXIS_VIEW: float(view), AXIS_THETA_I: float(theta_i), AXIS_PHI_I: float(phi_i)}
+
+
+def check_targets(
+    targets: Mapping[int, float],
+    limits: Mapping[int, tuple[float, float]],
+    min_separation: float,
+    margin: float | None = None,
+) -> str | None:
+    """Reason why axis targets are not allowed, or ``None``.
+
+    Checks every target is finite and within its travel limits and the lamp/camera
+    separation at the target is at least ``min_separation + margin`` [deg]. The small
+    margin (default :data:`SEPARATION_MARGIN`, 0.01 deg) keeps geometries exactly at the
+    minimum out: there the controller's own floating-point check may go either way.
+    """
+    margin = SEPARATION_MARGIN if margin is None else margin
+    for axis in AXES:
+        value = targets[axis]
+        low, high = limits[axis]
+        if not np.isfinite(value):
+            return f"{AXIS_NAMES[axis]}={value!r} is not a finite angle"
+        if not low <= value <= high:
+            return (
+                f"{AXIS_NAMES[axis]}={value:g} deg is outside the travel limits of axis {axis}: "
+                f"[{low:g}, {high:g}] deg"
+            )
+    sep = float(separation_of_axes(targets))
+    if sep < min_separation + margin:
+        return (
+            f"camera and lamp would be {sep:.3g} deg apart at theta_i={targets[AXIS_THETA_I]:g}, "
+            f"phi_i={targets[AXIS_PHI_I]:g}, view={targets[AXIS_VIEW]:g}; the minimum "
+            f"separation is {min_separation:g} deg"
+        )
+    return None
+
+
+@dataclass(frozen=True)
+class MovePlan:
+    """Stages of a move; within a stage the axis commands are sent in the listed order.
+
+    The controller checks the camera/lamp separation at the *end point* of each move
+    command, using the targets of all axes (docs/protocol.md, error x29). Every prefix
+    of a stage therefore has to leave a safe combination of targets; the axes of a stage
+    then move together, and the next stage starts when they have stopped.
+
+    Attributes
+    ----------
+    stages : tuple of tuple of (int, float)
+        ``((axis, target), ...)`` per stage [deg].
+    """
+
+    stages: tuple[tuple[tuple[int, float], ...], ...]
+
+
+def _order_ok(start: Mapping[int, float], order: Sequence[int], end: Mapping[int, float],
+              min_separation: float) -> bool:
+    targets = dict(start)
+    for axis in order[:-1]:
+        targets[axis] = end[axis]
+        if float(separation_of_axes(targets)) < min_separation + SEPARATION_MARGIN:
+            return False
+    return True
+
+
+def _one_stage(start, end, min_separation):
+    moving = [a for a in AXES if abs(end[a] - start[a]) > 1e-9]
+    for order in itertools.permutations(moving):
+        if _order_ok(start, order, end, min_separation):
+            return tuple((a, float(end[a])) for a in order)
+    return None
+
+
+def plan_moves(
+    start: Mapping[int, float],
+    end: Mapping[int, float],
+    min_separation: float,
+    limits: Mapping[int, tuple[float, float]] | None = None,
+) -> MovePlan | None:
+    """Plan the move commands from ``start`` to ``end`` axis targets, or ``None``.
+
+    One stage when some order of the axis commands keeps every intermediate combination
+    of targets at least ``min_separation`` [deg] apart; otherwise two stages through a
+    waypoint that differs from ``start`` in one axis (searched on a 15-degree grid inside
+    ``limits``, the shortest detour first). ``end`` itself must already be allowed (see :func:`check_targets`).
+
+    Examples
+    --------
+    >>> plan = plan_moves({1: 30, 2: 50, 3: 0}, {1: 50, 2: 30, 3: 0}, 5.0)
+    >>> len(plan.stages)    # camera and lamp swap sides of each other: via a waypoint
+    2
+    """
+    stage = _one_stage(start, end, min_separation)
+    if stage is not None:
+        return MovePlan((stage,) if stage else ())
+    limits = limits or {AXIS_VIEW: (-90.0, 90.0), AXIS_THETA_I: (0.0, 90.0), AXIS_PHI_I: (-180.0, 180.0)}
+    best, best_cost = None, np.inf
+    for axis in (AXIS_PHI_I, AXIS_THETA_I, AXIS_VIEW):
+        low, high = limits[axis]
+        for value in np.arange(np.ceil(low / 15.0) * 15.0, high + 1e-9, 15.0):
+            cost = abs(float(value) - start[axis])
+            if cost >= best_cost:
+                continue
+            waypoint = dict(start)
+            waypoint[axis] = float(value)
+            if float(separation_of_axes(waypoint)) < min_separation + SEPARATION_MARGIN:
+                continue
+            first = _one_stage(start, waypoint, min_separation)
+            second = _one_stage(waypoint, end, min_separation)
+            if first is not None and second is not None:
+                best, best_cost = MovePlan(tuple(s for s in (first, second) if s)), cost
+    if best is not None:
+        return best
+    return None

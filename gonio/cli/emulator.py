@@ -1,0 +1,119 @@
+"""``gonio emulator``: run the emulated goniometer with a registered reflectance model as sample."""
+from __future__ import annotations
+
+import argparse
+import functools
+import signal
+import threading
+
+import gonio
+
+from . import CLIError
+from .models import parse_model_spec
+
+DEVICES = ("stage", "camera", "lamp")
+
+
+def _port_spec(text: str) -> dict[str, int]:
+    """Parse ``stage=5001,camera=5002,lamp=5003`` or a base port ``5000`` (-> 5000, 5001, 5002)."""
+    text = text.strip()
+    if text.isdigit():
+        base = int(text)
+        return {device: base + k for k, device in enumerate(DEVICES)}
+    ports: dict[str, int] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        device, eq, value = item.partition("=")
+        if not eq or device not in DEVICES or not value.strip().isdigit():
+            raise CLIError(f"--tcp-ports: expected BASE or device=PORT,... with devices {DEVICES}, got {item!r}")
+        ports[device] = int(value)
+    return ports
+
+
+def build_rig(args: argparse.Namespace):
+    """The :class:`drivers.emulator.rig.EmulatedRig` described by the parsed arguments."""
+    from drivers.emulator.rig import EmulatedRig
+
+    name, values = parse_model_spec(args.sample)
+    brdf = functools.partial(gonio.brdf, name, **values)
+    return EmulatedRig(
+        brdf,
+        seed=args.seed,
+        realtime=args.realtime,
+        min_separation_deg=args.min_separation,
+        name=args.name,
+        lamp_warm=args.lamp_warm,
+    )
+
+
+def format_addresses(addresses: dict[str, dict[str, str]]) -> str:
+    """One line per instrument and transport, e.g. ``stage   pty  /dev/pts/3``."""
+    lines = []
+    for device, entry in addresses.items():
+        for kind in ("pty", "tcp", "url"):
+            if kind in entry:
+                lines.append(f"{device:<7} {kind:<4} {entry[kind]}")
+    return "\n".join(lines)
+
+
+def _run(args: argparse.Namespace) -> int:
+    if not (args.pty or args.tcp):
+        raise CLIError("nothing to serve: enable --pty and/or --tcp")
+    rig = build_rig(args)
+    symlinks = None
+    if args.link_dir:
+        symlinks = {device: f"{args.link_dir.rstrip('/')}/gonio-{device}" for device in DEVICES}
+    tcp_ports = _port_spec(args.tcp_ports) if args.tcp_ports else None
+    stop = threading.Event()
+    try:
+        addresses = rig.start(pty=args.pty, tcp=args.tcp, tcp_ports=tcp_ports, symlinks=symlinks)
+    except OSError as error:
+        raise CLIError(f"cannot open the emulator's ports: {error}") from error
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        mode = "real-time" if args.realtime else "fast"
+        print(f"gonio emulator: sample {args.sample}, seed {args.seed}, {mode} mode")
+        print(format_addresses({d: {k: v for k, v in e.items() if k != "url"} for d, e in addresses.items()}))
+        print("serving; press Ctrl-C to stop", flush=True)
+        while not stop.wait(0.2):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        rig.close()
+        print("gonio emulator: stopped", flush=True)
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``gonio emulator``."""
+    parser = subparsers.add_parser(
+        "emulator",
+        help="run the emulated goniometer (stage, camera, lamp) on pseudo-terminals / TCP",
+        description=(
+            "Run the emulated rig with a registered reflectance model as the sample. Each "
+            "instrument (stage: ESP300 dialect, camera and lamp: SCPI; see docs/protocol.md) "
+            "gets a raw pseudo-terminal and/or a TCP port on 127.0.0.1. Serves until "
+            "interrupted."
+        ),
+    )
+    parser.add_argument("--sample", default="lambert", metavar="MODEL[:key=value,...]",
+                        help="sample BRDF, e.g. oren-nayar:sigma=30,rho=0.9 (default lambert)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of every random process (default 0)")
+    parser.add_argument("--realtime", action="store_true",
+                        help="answer with hardware timing (default: fast mode, simulated clock jumps)")
+    parser.add_argument("--min-separation", type=float, default=5.0, metavar="DEG",
+                        help="minimum camera-lamp angle enforced by the stage [deg] (default 5)")
+    parser.add_argument("--pty", action=argparse.BooleanOptionalAction, default=True,
+                        help="serve each instrument on a pseudo-terminal (default on)")
+    parser.add_argument("--tcp", action=argparse.BooleanOptionalAction, default=False,
+                        help="serve each instrument on a TCP port of 127.0.0.1 (default off)")
+    parser.add_argument("--tcp-ports", default=None, metavar="BASE|dev=PORT,...",
+                        help="TCP ports: a base port (stage, camera, lamp = BASE, BASE+1, BASE+2) or "
+                             "stage=...,camera=...,lamp=... (default: free ports)")
+    parser.add_argument("--link-dir", default=None, metavar="DIR",
+                        help="also create symlinks DIR/gonio-stage, DIR/gonio-camera, DIR/gonio-lamp to the ptys")
+    parser.add_argument("--lamp-warm", action="store_true",
+                        help="start with the lamp on and warm (default: off, as at power-on)")
+    parser.add_argument("--name", default="default", help="rig name for gonio-sim:// URLs (default 'default')")
+    parser.set_defaults(func=_run)

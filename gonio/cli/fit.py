@@ -1,0 +1,141 @@
+"""``gonio fit``: fit a registered model to measured data (least squares, then MCMC)."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``gonio fit``."""
+    parser = subparsers.add_parser(
+        "fit",
+        help="fit a reflectance model to measured data (least squares + MCMC)",
+        description=(
+            "Fit a registered model to a CSV of measurements with the columns "
+            "theta_i,phi_i,theta_r,phi_r,value,sigma (angles in degrees). Weighted, bounded least squares, "
+            "then Bayesian sampling with emcee until the chain is 50 autocorrelation times long. The result "
+            "(result.json, chain.npz, summary.txt) is written to a folder next to the data; "
+            "'gonio report FOLDER' turns it into an HTML report."
+        ),
+    )
+    parser.add_argument("data", help="CSV file: theta_i,phi_i,theta_r,phi_r,value,sigma")
+    parser.add_argument("--model", required=True, action="append",
+                        help="registered model name (see 'gonio models'); repeat to compare models")
+    parser.add_argument("--quantity", choices=["brdf", "normalised_radiance", "radiance"],
+                        help="what the values are (default: the file's '# quantity:' line, else brdf)")
+    parser.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                        help="hold a parameter fixed (repeatable, or comma-separated)")
+    parser.add_argument("--prior", action="append", default=[], metavar="NAME=KIND:A:B",
+                        help="prior override: uniform:LO:HI, loguniform:LO:HI or normal:MEAN:SD")
+    parser.add_argument("--option", action="append", default=[], metavar="NAME=VALUE", help="model option")
+    parser.add_argument("--mcmc", action=argparse.BooleanOptionalAction, default=True,
+                        help="sample the posterior with emcee after least squares (default: yes)")
+    parser.add_argument("--jitter", action="store_true",
+                        help="fit an extra noise term added in quadrature to the uncertainties")
+    parser.add_argument("--walkers", type=int, default=32, help="number of emcee walkers (default 32)")
+    parser.add_argument("--max-steps", type=int, default=20000, help="step limit of the chain (default 20000)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--out", help="result folder (default: DATA_STEM.fit-MODEL next to the data)")
+    parser.add_argument("--report", action="store_true", help="also write the HTML report into the result folder")
+    parser.add_argument("--quiet", action="store_true", help="no progress messages")
+    parser.set_defaults(func=_run)
+
+
+def _pairs(items: list[str], what: str) -> dict[str, str]:
+    pairs = {}
+    for item in items:
+        for part in item.split(","):
+            if not part.strip():
+                continue
+            name, sep, value = part.partition("=")
+            if not sep or not name.strip() or not value.strip():
+                from gonio.cli import CLIError
+
+                raise CLIError(f"{what} {part!r}: expected NAME=VALUE")
+            pairs[name.strip()] = value.strip()
+    return pairs
+
+
+def _number(name: str, text: str, what: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        from gonio.cli import CLIError
+
+        raise CLIError(f"{what} {name}={text!r}: the value must be a number") from None
+
+
+def _option_value(text: str) -> Any:
+    lowered = text.lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+class _Progress:
+    """Prints the chain's progress to stderr at most every two seconds."""
+
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+        self.last = 0.0
+
+    def __call__(self, steps: int, max_steps: int, tau: float) -> None:
+        now = time.monotonic()
+        if self.quiet or now - self.last < 2.0:
+            return
+        self.last = now
+        need = f", needs >= {50 * tau:.0f} steps" if tau == tau and tau != float("inf") else ""
+        print(f"  mcmc: step {steps}/{max_steps}, max tau = {tau:.1f}{need}", file=sys.stderr, flush=True)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from gonio import models
+    from gonio.fitting import ConvergenceWarning, Dataset, compare_models, fit, parse_prior
+
+    data_path = Path(args.data)
+    dataset = Dataset.from_csv(data_path, quantity=args.quantity)
+    fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
+    options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
+    if len(args.model) > 1:
+        comparison = compare_models(dataset, [(name, {k: v for k, v in fixed.items() if k in models.get(name).param_names}) for name in args.model])
+        print(comparison.summary())
+        return 0
+    name = args.model[0]
+    model = models.get(name)
+    priors = {}
+    for key, text in _pairs(args.prior, "--prior").items():
+        bounds = model.param(key).bounds if key in model.param_names else (-float("inf"), float("inf"))
+        priors[key] = parse_prior(text, bounds)
+    out = Path(args.out) if args.out else data_path.with_name(f"{data_path.stem}.fit-{name}")
+    if not args.quiet:
+        print(f"fitting {name} to {dataset.n} {dataset.quantity} values from {data_path}", file=sys.stderr)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
+        result = fit(
+            dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=args.jitter, options=options,
+            n_walkers=args.walkers, max_steps=args.max_steps, seed=args.seed, progress=_Progress(args.quiet),
+        )
+    path = result.save(out)
+    print(result.summary())
+    if args.report:
+        from gonio.report.fit_report import write_report
+
+        print(f"report: {write_report(out)}")
+    print(f"result: {path}")
+    if result.converged is False:
+        print("gonio: WARNING: the MCMC chain did NOT converge (step limit reached); "
+              "posterior numbers are unreliable. Increase --max-steps or simplify the model.", file=sys.stderr)
+    for flag in result.flags:
+        print(f"gonio: warning: {flag}", file=sys.stderr)
+    return 0

@@ -1,0 +1,323 @@
+"""Measured reflectance data as the fitting code sees it: :class:`Dataset`.
+
+A dataset is a set of measurements at known geometries, each with a value and its
+one-standard-deviation uncertainty, plus the *quantity* the values are:
+
+``'brdf'``
+    Absolute BRDF f_r [1/sr] (a calibrated instrument).
+``'normalised_radiance'``
+    L_r(theta_r) / L_r(0): the radiance divided by the radiance seen from the normal
+    direction at the same incidence, as Oren & Nayar (1995) plot their measurements
+    (section 5, Figs 16-22).  For a fixed source this equals f_r(theta_r) / f_r(0), so the
+    model prediction is the BRDF at the measured geometry divided by the BRDF at the normal
+    view (theta_r = 0) of the same incidence [-].
+``'radiance'``
+    Relative radiance in arbitrary (but consistent) units: the model prediction is
+    ``scale * f_r * cos(theta_i)`` with a free parameter ``scale`` (irradiance times the
+    camera's gain) [data units sr].
+
+The CSV form has one header line ``theta_i,phi_i,theta_r,phi_r,value,sigma`` (angles in
+degrees), optionally preceded by ``# key: value`` lines (``quantity``, ``label`` and any
+metadata).
+"""
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from gonio.geometry import azimuth_difference, signed_viewing_angle
+
+__all__ = ["Dataset", "QUANTITIES", "CSV_COLUMNS", "QUANTITY_LABELS"]
+
+#: Quantities a dataset can hold, with the unit of the values.
+QUANTITIES = {"brdf": "1/sr", "normalised_radiance": "-", "radiance": "arbitrary units"}
+
+#: Axis labels for plots and reports.
+QUANTITY_LABELS = {
+    "brdf": "BRDF f_r [1/sr]",
+    "normalised_radiance": "normalised radiance L_r / L_r(0) [-]",
+    "radiance": "relative radiance [arb. units]",
+}
+
+#: Columns of the CSV data format, in order.
+CSV_COLUMNS = ("theta_i", "phi_i", "theta_r", "phi_r", "value", "sigma")
+
+_ANGLE_FIELDS = ("theta_i", "phi_i", "theta_r", "phi_r")
+# Two measurements belong to the same incidence when their source angles agree to this
+# tolerance [deg]; a manual source set-up (Oren & Nayar section 5) is repeatable to far
+# better than a tenth of a degree in the recorded value.
+_INCIDENCE_TOLERANCE_DEG = 0.05
+# A viewing direction lies in the plane of incidence when its azimuth differs from the
+# source's by 0 or 180 deg to this tolerance [deg] (or when theta_r = 0).
+_PLANE_TOLERANCE_DEG = 0.5
+
+
+def _as_vector(name: str, value: Any, n: int | None) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"Dataset field {name!r} must be numeric, got {value!r:.80}") from None
+    if array.ndim == 0 and n is not None:
+        array = np.full(n, float(array))
+    if array.ndim != 1:
+        raise ValueError(f"Dataset field {name!r} must be one-dimensional, got shape {array.shape}")
+    if n is not None and array.shape[0] != n:
+        raise ValueError(
+            f"Dataset field {name!r} has {array.shape[0]} entries but 'value' has {n}; "
+            "every field must have one entry per measurement (or be a scalar)"
+        )
+    bad = ~np.isfinite(array)
+    if bad.any():
+        index = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"Dataset field {name!r} entry {index} is {array[index]!r}; NaN and infinite "
+            "values are not allowed (drop the measurement instead)"
+        )
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    """Reflectance measurements at known geometries, with uncertainties.
+
+    Parameters
+    ----------
+    theta_i, phi_i : array_like
+        Source polar angle [deg] in [0, 90] and azimuth [deg], one per measurement (or a
+        scalar shared by all).
+    theta_r, phi_r : array_like
+        Viewing polar angle [deg] in [0, 90] and azimuth [deg].
+    value : array_like
+        Measured values (1-D, at least one), in the unit of ``quantity``.
+    sigma : array_like
+        One-standard-deviation uncertainty of each value (> 0), same unit.
+    quantity : {'brdf', 'normalised_radiance', 'radiance'}
+        What ``value`` holds (see the module docstring for the model prediction of each).
+    label : str
+        Short name of the sample or run, used in reports.
+    metadata : dict
+        Free-form information (instrument, date, protocol...); saved with fit results.
+
+    Raises
+    ------
+    ValueError
+        Naming the field: wrong shape, non-numeric, NaN or infinite entries, polar angles
+        outside [0, 90] deg, uncertainties that are not strictly positive, unknown quantity.
+
+    Examples
+    --------
+    >>> data = Dataset(theta_i=30, phi_i=0, theta_r=[0, 20, 40], phi_r=0,
+    ...                value=[0.30, 0.29, 0.27], sigma=0.01)
+    >>> data.n, data.quantity
+    (3, 'brdf')
+    """
+
+    theta_i: np.ndarray
+    phi_i: np.ndarray
+    theta_r: np.ndarray
+    phi_r: np.ndarray
+    value: np.ndarray
+    sigma: np.ndarray
+    quantity: str = "brdf"
+    label: str = ""
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        value = _as_vector("value", self.value, None)
+        if value.size == 0:
+            raise ValueError("Dataset field 'value' is empty; a dataset needs at least one measurement")
+        n = value.size
+        arrays = {"value": value}
+        for name in (*_ANGLE_FIELDS, "sigma"):
+            arrays[name] = _as_vector(name, getattr(self, name), n)
+        for name in ("theta_i", "theta_r"):
+            outside = (arrays[name] < 0.0) | (arrays[name] > 90.0)
+            if outside.any():
+                index = int(np.flatnonzero(outside)[0])
+                raise ValueError(
+                    f"Dataset field {name!r} entry {index} = {arrays[name][index]:g} deg is "
+                    "outside [0, 90] deg (polar angles are measured from the surface normal)"
+                )
+        not_positive = arrays["sigma"] <= 0.0
+        if not_positive.any():
+            index = int(np.flatnonzero(not_positive)[0])
+            raise ValueError(
+                f"Dataset field 'sigma' entry {index} = {arrays['sigma'][index]:g} must be > 0: "
+                "it is the one-standard-deviation uncertainty of the value"
+            )
+        if self.quantity not in QUANTITIES:
+            raise ValueError(
+                f"Dataset field 'quantity' = {self.quantity!r} is not one of {list(QUANTITIES)}"
+            )
+        for name, array in arrays.items():
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+        object.__setattr__(self, "label", str(self.label))
+        object.__setattr__(self, "metadata", dict(self.metadata))
+
+    # ------------------------------------------------------------------ derived views
+    @property
+    def n(self) -> int:
+        """Number of measurements."""
+        return int(self.value.size)
+
+    @property
+    def unit(self) -> str:
+        """Unit of ``value`` and ``sigma``."""
+        return QUANTITIES[self.quantity]
+
+    @property
+    def geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(theta_i, phi_i, theta_r, phi_r) [deg]."""
+        return self.theta_i, self.phi_i, self.theta_r, self.phi_r
+
+    @property
+    def azimuth_difference(self) -> np.ndarray:
+        """phi_r - phi_i wrapped to (-180, 180] [deg]."""
+        return azimuth_difference(self.phi_i, self.phi_r)
+
+    @property
+    def in_plane(self) -> np.ndarray:
+        """True where the viewer lies in the plane of incidence (or on the normal)."""
+        sin_offset = np.abs(np.sin(np.radians(self.azimuth_difference)))
+        tolerance = math.sin(math.radians(_PLANE_TOLERANCE_DEG))
+        return (sin_offset <= tolerance) | (self.theta_r == 0.0)
+
+    @property
+    def signed_view(self) -> np.ndarray:
+        """Signed in-plane viewing angle [deg], positive on the source side (DESIGN.md)."""
+        return signed_viewing_angle(self.theta_r, self.phi_r, self.phi_i)
+
+    def incidences(self) -> tuple[np.ndarray, np.ndarray]:
+        """Distinct source directions and the index of each measurement's one.
+
+        Returns
+        -------
+        sources : ndarray, shape (k, 2)
+            (theta_i, phi_i) [deg] of each distinct incidence, sorted.
+        index : ndarray of int, shape (n,)
+            Row of ``sources`` for each measurement.
+        """
+        key = np.round(np.column_stack([self.theta_i, np.mod(self.phi_i, 360.0)]) / _INCIDENCE_TOLERANCE_DEG)
+        # Normal incidence has no azimuth: treat every phi_i as the same source there.
+        key[self.theta_i == 0.0, 1] = 0.0
+        _, first, index = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        sources = np.column_stack([self.theta_i[first], self.phi_i[first]])
+        return sources, np.asarray(index).reshape(-1)
+
+    def subset(self, mask: Any) -> "Dataset":
+        """A new dataset with the measurements selected by a boolean mask or index array."""
+        select = np.asarray(mask)
+        return Dataset(
+            *(getattr(self, name)[select] for name in (*_ANGLE_FIELDS, "value", "sigma")),
+            quantity=self.quantity,
+            label=self.label,
+            metadata=self.metadata,
+        )
+
+    # ------------------------------------------------------------------ persistence
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-Python form (lists), for JSON."""
+        out: dict[str, Any] = {name: getattr(self, name).tolist() for name in CSV_COLUMNS}
+        out.update(quantity=self.quantity, label=self.label, metadata=dict(self.metadata))
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Dataset":
+        """Inverse of :meth:`to_dict`."""
+        missing = [name for name in CSV_COLUMNS if name not in data]
+        if missing:
+            raise ValueError(f"dataset record lacks the field(s) {missing}; expected {list(CSV_COLUMNS)}")
+        return cls(
+            *(data[name] for name in CSV_COLUMNS),
+            quantity=data.get("quantity", "brdf"),
+            label=data.get("label", ""),
+            metadata=data.get("metadata", {}),
+        )
+
+    def to_csv(self, path: str | Path) -> Path:
+        """Write the CSV form (``# key: value`` header lines, then the columns)."""
+        path = Path(path)
+        buffer = io.StringIO()
+        buffer.write(f"# quantity: {self.quantity}\n")
+        if self.label:
+            buffer.write(f"# label: {self.label}\n")
+        for key, value in self.metadata.items():
+            buffer.write(f"# {key}: {value}\n")
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(CSV_COLUMNS)
+        for row in zip(*(getattr(self, name) for name in CSV_COLUMNS)):
+            writer.writerow([repr(float(x)) for x in row])
+        path.write_text(buffer.getvalue())
+        return path
+
+    @classmethod
+    def from_csv(cls, path: str | Path, quantity: str | None = None, label: str | None = None) -> "Dataset":
+        """Read a CSV file with the columns ``theta_i,phi_i,theta_r,phi_r,value,sigma``.
+
+        Parameters
+        ----------
+        path : path
+            The file.  Lines starting with ``#`` before the header may hold ``key: value``
+            pairs: ``quantity`` and ``label`` set those fields, others go to ``metadata``.
+            Extra columns are ignored.
+        quantity, label : str, optional
+            Override the values given in the file.
+
+        Raises
+        ------
+        FileNotFoundError
+            The file does not exist.
+        ValueError
+            Naming the file, the line and the column that could not be read.
+        """
+        path = Path(path)
+        text = path.read_text()
+        header: dict[str, str] = {}
+        lines = text.splitlines()
+        start = 0
+        while start < len(lines) and (lines[start].startswith("#") or not lines[start].strip()):
+            comment = lines[start].lstrip("#").strip()
+            if ":" in comment:
+                key, _, value = comment.partition(":")
+                header[key.strip()] = value.strip()
+            start += 1
+        if start == len(lines):
+            raise ValueError(f"{path}: no header line; expected the columns {','.join(CSV_COLUMNS)}")
+        reader = csv.reader(lines[start:])
+        columns = [c.strip() for c in next(reader)]
+        missing = [c for c in CSV_COLUMNS if c not in columns]
+        if missing:
+            raise ValueError(
+                f"{path}: header lacks the column(s) {missing}; expected {','.join(CSV_COLUMNS)}"
+            )
+        where = {c: columns.index(c) for c in CSV_COLUMNS}
+        table: dict[str, list[float]] = {c: [] for c in CSV_COLUMNS}
+        for line_number, row in enumerate(reader, start=start + 2):
+            if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
+                continue
+            for column in CSV_COLUMNS:
+                try:
+                    table[column].append(float(row[where[column]]))
+                except (IndexError, ValueError):
+                    cell = row[where[column]] if where[column] < len(row) else "<missing>"
+                    raise ValueError(
+                        f"{path}, line {line_number}: column {column!r} = {cell!r} is not a number"
+                    ) from None
+        quantity = quantity or header.pop("quantity", "brdf")
+        header.pop("quantity", None)
+        label = label if label is not None else header.pop("label", path.stem)
+        header.pop("label", None)
+        try:
+            return cls(*(table[c] for c in CSV_COLUMNS), quantity=quantity, label=label, metadata=header)
+        except ValueError as error:
+            raise ValueError(f"{path}: {error}") from None
+
+    def __repr__(self) -> str:
+        return f"<Dataset {self.label!r}: {self.n} {self.quantity} values>"

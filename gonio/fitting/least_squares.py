@@ -1,0 +1,403 @@
+"""Weighted, bounded least squares with covariance and degeneracy diagnostics.
+
+:func:`fit_least_squares` minimises chi^2 = sum(((model - value) / sigma)^2) with
+:func:`scipy.optimize.least_squares` (trust-region reflective, bounded by the parameters'
+physical ranges), from several starting points so that a local minimum is not mistaken
+for the answer.  The covariance of the free parameters is (J^T J)^-1 from the Jacobian of
+the weighted residuals at the optimum; it is *not* rescaled by the reduced chi-square,
+since the uncertainties are taken as measured (compare ``redchi`` with 1 to judge them;
+use the ``jitter`` parameter of the Bayesian fit when they are too small).
+
+Diagnostics, all reported as plain-language warnings in the result:
+
+* **insensitive** parameters: the data do not change when the parameter changes (e.g.
+  ``rho`` of a Lambertian sample fitted to normalised radiance, where it cancels; the
+  Oren-Nayar ``sigma`` at 0, where the BRDF is stationary in sigma);
+* **degenerate** combinations: the Jacobian has a (near-)null direction (``rho`` and the
+  free ``scale`` of relative radiance, which enter only as their product);
+* parameters **at a bound** of their physical range;
+* parameters **not constrained**: standard error larger than the physical range.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from scipy import optimize
+
+from .problem import FitProblem
+
+__all__ = ["LeastSquaresResult", "fit_least_squares", "jacobian_diagnostics"]
+
+# A singular value of the column-scaled Jacobian below this fraction of the largest one is
+# a degenerate direction.  Two-point finite differences are accurate to ~1e-8 relative, so
+# an exact degeneracy shows up below ~1e-7; genuine but weak constraints (strong
+# correlations) stay well above 1e-6.
+_DEGENERATE_RCOND = 1e-6
+# A parameter takes part in a degenerate direction when its component in the null vector
+# exceeds this (the vector has unit length; 0.1 leaves out round-off contributions).
+_NULL_COMPONENT = 0.1
+# Relative distance to a bound (fraction of the range, or of |value| for infinite ranges)
+# below which a solution counts as "at the bound".
+_AT_BOUND = 1e-6
+
+
+@dataclass
+class LeastSquaresResult:
+    """Outcome of :func:`fit_least_squares`.
+
+    Attributes
+    ----------
+    values : dict
+        Best-fit value of every parameter (fixed ones included).
+    free : tuple of str
+        Names of the fitted parameters (order of ``covariance``).
+    stderr : dict
+        Standard error of each free parameter (NaN where undetermined).
+    covariance, correlation : ndarray
+        Of the free parameters (NaN rows for undetermined ones).
+    chi2, dof, redchi : float
+        Chi-square, degrees of freedom (n - free), reduced chi-square.
+    log_likelihood : float
+        Maximum Gaussian log-likelihood (jitter included when fitted).
+    success : bool
+        Whether the optimiser reported convergence.
+    message : str
+        The optimiser's message.
+    nfev : int
+        Number of residual evaluations (all starts).
+    at_bound : dict
+        ``name -> 'lower' | 'upper'`` for parameters at a physical bound.
+    insensitive : list of str
+        Parameters the data do not depend on.
+    degenerate : list of list of str
+        Groups of parameters that are degenerate with each other.
+    warnings : list of str
+        Plain-language diagnostics.
+    """
+
+    values: dict[str, float]
+    free: tuple[str, ...]
+    stderr: dict[str, float]
+    covariance: np.ndarray
+    correlation: np.ndarray
+    chi2: float
+    dof: int
+    redchi: float
+    log_likelihood: float
+    success: bool
+    message: str
+    nfev: int
+    at_bound: dict[str, str] = field(default_factory=dict)
+    insensitive: list[str] = field(default_factory=list)
+    degenerate: list[list[str]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (NaN written as null by the caller)."""
+        return {
+            "values": self.values,
+            "free": list(self.free),
+            "stderr": self.stderr,
+            "covariance": self.covariance.tolist(),
+            "correlation": self.correlation.tolist(),
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "redchi": self.redchi,
+            "log_likelihood": self.log_likelihood,
+            "success": self.success,
+            "message": self.message,
+            "nfev": self.nfev,
+            "at_bound": self.at_bound,
+            "insensitive": self.insensitive,
+            "degenerate": self.degenerate,
+            "warnings": self.warnings,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "LeastSquaresResult":
+        """Inverse of :meth:`to_dict`."""
+        kwargs = dict(data)
+        kwargs["free"] = tuple(kwargs["free"])
+        for key in ("covariance", "correlation"):
+            kwargs[key] = np.array(
+                [[np.nan if x is None else x for x in row] for row in kwargs[key]], dtype=float
+            ).reshape(len(kwargs["free"]), len(kwargs["free"]))
+        kwargs["stderr"] = {k: (math.nan if v is None else v) for k, v in kwargs["stderr"].items()}
+        return cls(**kwargs)
+
+
+def _optimiser_bounds(problem: FitProblem, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    lower, upper = [], []
+    for name in names:
+        spec = problem.spec(name)
+        lo, hi = spec.bounds
+        width = hi - lo if math.isfinite(hi - lo) else 1.0
+        # Open bounds are excluded from the physical range: stay a hair inside them.
+        lower.append(lo + 1e-9 * width if spec.open_lower and math.isfinite(lo) else lo)
+        upper.append(hi - 1e-9 * width if spec.open_upper and math.isfinite(hi) else hi)
+    return np.array(lower), np.array(upper)
+
+
+def _characteristic_scale(problem: FitProblem, name: str, value: float) -> float:
+    lo, hi = problem.spec(name).bounds
+    if math.isfinite(hi - lo):
+        return hi - lo
+    return max(abs(value), 1e-12)
+
+
+def jacobian_diagnostics(
+    jacobian: np.ndarray, names: Sequence[str], scales: Sequence[float]
+) -> tuple[np.ndarray, list[str], list[list[str]]]:
+    """Covariance, insensitive parameters and degenerate groups from a weighted Jacobian.
+
+    Parameters
+    ----------
+    jacobian : ndarray, shape (n, k)
+        d(weighted residual)/d(parameter).
+    names : sequence of str
+        Parameter names (columns).
+    scales : sequence of float
+        Characteristic scale of each parameter (its physical range), used to compare
+        columns on an equal footing.
+
+    Returns
+    -------
+    covariance : ndarray, shape (k, k)
+        (J^T J)^-1 on the well-determined subspace; NaN rows/columns for parameters that
+        are insensitive or part of a degenerate group.
+    insensitive : list of str
+    degenerate : list of list of str
+    """
+    scales = np.asarray(scales, float)
+    scaled = jacobian * scales
+    norms = np.linalg.norm(scaled, axis=0)
+    largest = float(norms.max()) if norms.size else 0.0
+    insensitive_mask = norms <= _DEGENERATE_RCOND * largest if largest > 0 else np.ones(len(names), bool)
+    insensitive = [n for n, bad in zip(names, insensitive_mask) if bad]
+    keep = ~insensitive_mask
+    covariance = np.full((len(names), len(names)), np.nan)
+    degenerate: list[list[str]] = []
+    undetermined = insensitive_mask.copy()
+    if keep.any():
+        sub = scaled[:, keep]
+        _, singular, vt = np.linalg.svd(sub, full_matrices=False)
+        null = singular <= _DEGENERATE_RCOND * singular[0]
+        kept_names = [n for n, k in zip(names, keep) if k]
+        kept_index = np.flatnonzero(keep)
+        for vector in vt[null]:
+            group = [kept_names[j] for j in np.flatnonzero(np.abs(vector) > _NULL_COMPONENT)]
+            if group:
+                degenerate.append(group)
+                undetermined[kept_index[np.abs(vector) > _NULL_COMPONENT]] = True
+        inverse = (vt[~null].T / singular[~null] ** 2) @ vt[~null]
+        scaled_cov = inverse * np.outer(scales[keep], scales[keep])  # J = J_scaled / s
+        covariance[np.ix_(kept_index, kept_index)] = scaled_cov
+    covariance[undetermined, :] = np.nan
+    covariance[:, undetermined] = np.nan
+    return covariance, insensitive, degenerate
+
+
+def _correlation(covariance: np.ndarray) -> np.ndarray:
+    sd = np.sqrt(np.abs(np.diag(covariance)))
+    with np.errstate(invalid="ignore", divide="ignore"):  # NaN rows of undetermined parameters
+        return covariance / np.outer(sd, sd)
+
+
+def _start_points(problem: FitProblem, start: Mapping[str, float] | None, n_starts: int, rng) -> list[np.ndarray]:
+    names = [n for n in problem.free if n not in ("jitter", "scale")]
+    lower, upper = _optimiser_bounds(problem, names)
+    first = []
+    for name, lo, hi in zip(names, lower, upper):
+        value = float((start or {}).get(name, problem.spec(name).default))
+        width = hi - lo if math.isfinite(hi - lo) else max(abs(value), 1.0)
+        # least_squares needs a strictly feasible start: keep 1e-3 of the range inside.
+        first.append(min(max(value, lo + 1e-3 * width), hi - 1e-3 * width))
+    points = [np.array(first)]
+    for _ in range(max(n_starts - 1, 0)):
+        point = []
+        for name, lo, hi, centre in zip(names, lower, upper, first):
+            if math.isfinite(lo) and math.isfinite(hi):
+                point.append(rng.uniform(lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo)))
+            else:
+                point.append(centre * math.exp(rng.normal(0.0, 1.0)) if centre > 0 else centre + rng.normal())
+        points.append(np.array(point))
+    return [_with_nuisances(problem, names, p, start) for p in points]
+
+
+def _with_nuisances(problem: FitProblem, names, point, start) -> np.ndarray:
+    values = dict(problem.fixed)
+    values.update(zip(names, point))
+    if "scale" in problem.free:
+        given = (start or {}).get("scale")
+        values["scale"] = float(given) if given is not None else problem.optimal_scale(values)
+    if "jitter" in problem.free:
+        values["jitter"] = 0.0
+    return np.array([values[n] for n in problem.free])
+
+
+def _best_jitter(problem: FitProblem, vector: np.ndarray) -> float:
+    """Maximum-likelihood jitter with the other parameters held at ``vector``."""
+    j = problem.free.index("jitter")
+    upper = problem.spec("jitter").bounds[1]
+
+    def negative_log_likelihood(jitter: float) -> float:
+        trial = vector.copy()
+        trial[j] = jitter
+        return -problem.log_likelihood(trial)
+
+    found = optimize.minimize_scalar(negative_log_likelihood, bounds=(0.0, upper), method="bounded")
+    return float(found.x) if negative_log_likelihood(found.x) < negative_log_likelihood(0.0) else 0.0
+
+
+def fit_least_squares(
+    problem: FitProblem,
+    start: Mapping[str, float] | None = None,
+    n_starts: int = 6,
+    seed: int | None = 0,
+) -> LeastSquaresResult:
+    """Weighted least-squares fit within the physical bounds.
+
+    Parameters
+    ----------
+    problem : FitProblem
+        Model, data and fixed parameters.
+    start : mapping, optional
+        Starting values (default: the parameters' defaults).
+    n_starts : int
+        Number of starting points: ``start`` plus ``n_starts - 1`` drawn uniformly within the
+        bounds (log-normally around the start for unbounded parameters).  The lowest
+        chi-square wins.
+    seed : int, optional
+        Seed of the random starting points.
+
+    Returns
+    -------
+    LeastSquaresResult
+
+    Examples
+    --------
+    >>> import numpy as np, gonio
+    >>> from gonio.fitting import Dataset, FitProblem
+    >>> tr = np.arange(0, 80, 10.0)
+    >>> truth = gonio.brdf("minnaert", 30, 0, tr, 0, rho=0.6, k=0.7)
+    >>> data = Dataset(30, 0, tr, 0, truth, 0.001)
+    >>> fit = fit_least_squares(FitProblem("minnaert", data))
+    >>> round(fit.values["k"], 3), round(fit.values["rho"], 3)
+    (0.7, 0.6)
+    """
+    rng = np.random.default_rng(seed)
+    free = problem.free
+    optimised = [n for n in free if n != "jitter"]
+    lower, upper = _optimiser_bounds(problem, optimised)
+    index = [free.index(n) for n in optimised]
+    best = None
+    nfev = 0
+    for point in _start_points(problem, start, n_starts, rng):
+        template = point.copy()
+
+        def residuals(x: np.ndarray) -> np.ndarray:
+            vector = template.copy()
+            vector[index] = x
+            r = problem.residuals(vector)
+            # Undefined predictions (normalised data of a black sample) are pushed away
+            # from with a large finite residual; least_squares cannot take NaN.
+            return np.where(np.isfinite(r), r, 1e10)
+
+        x0 = np.clip(point[index], lower, upper)
+        if not np.all(np.isfinite(residuals(x0))):
+            continue
+        found = optimize.least_squares(residuals, x0, bounds=(lower, upper), x_scale="jac", method="trf")
+        nfev += int(found.nfev)
+        if best is None or found.cost < best[0].cost:
+            best = (found, template)
+    if best is None:  # pragma: no cover - every start invalid
+        raise ValueError(f"model {problem.model.name!r}: no valid starting point for the least-squares fit")
+    found, template = best
+    vector = template.copy()
+    vector[index] = found.x
+    if "jitter" in free:
+        vector[free.index("jitter")] = _best_jitter(problem, vector)
+    values = problem.values(vector)
+
+    scales = [_characteristic_scale(problem, n, values[n]) for n in optimised]
+    covariance_opt, insensitive, degenerate = jacobian_diagnostics(found.jac, optimised, scales)
+    covariance = np.full((len(free), len(free)), np.nan)
+    covariance[np.ix_(index, index)] = covariance_opt
+    stderr = {n: float(math.sqrt(covariance[i, i])) if np.isfinite(covariance[i, i]) else math.nan for i, n in enumerate(free)}
+
+    at_bound: dict[str, str] = {}
+    for n in optimised:
+        lo, hi = problem.spec(n).bounds
+        scale = _characteristic_scale(problem, n, values[n])
+        if math.isfinite(lo) and values[n] - lo <= _AT_BOUND * scale:
+            at_bound[n] = "lower"
+        elif math.isfinite(hi) and hi - values[n] <= _AT_BOUND * scale:
+            at_bound[n] = "upper"
+
+    chi2 = problem.chi_square(values)
+    dof = problem.dataset.n - len(free)
+    warnings = _describe(problem, values, stderr, at_bound, insensitive, degenerate, dof)
+    return LeastSquaresResult(
+        values=values,
+        free=free,
+        stderr=stderr,
+        covariance=covariance,
+        correlation=_correlation(covariance),
+        chi2=chi2,
+        dof=dof,
+        redchi=chi2 / dof if dof > 0 else math.nan,
+        log_likelihood=problem.log_likelihood(vector),
+        success=bool(found.success),
+        message=str(found.message),
+        nfev=nfev,
+        at_bound=at_bound,
+        insensitive=insensitive,
+        degenerate=degenerate,
+        warnings=warnings,
+    )
+
+
+def _with_unit(value: str, unit: str) -> str:
+    """``value unit``, leaving out the dimensionless unit '-'."""
+    return value if unit in ("-", "") else f"{value} {unit}"
+
+
+def _describe(problem, values, stderr, at_bound, insensitive, degenerate, dof) -> list[str]:
+    quantity = problem.dataset.quantity
+    notes = []
+    for name in insensitive:
+        why = ""
+        if quantity == "normalised_radiance" and name in problem.model.linear_in:
+            why = " (normalised radiance divides out the overall level, so an albedo-like factor cancels)"
+        notes.append(
+            f"{name}: the data do not depend on this parameter at the best fit{why}; "
+            f"fix it (--fix {name}=VALUE) or measure a quantity that constrains it"
+        )
+    for group in degenerate:
+        why = ""
+        if "scale" in group:
+            why = " (relative radiance has a free scale, and an albedo-like factor only multiplies it)"
+        notes.append(
+            f"{' and '.join(group)} are degenerate: only a combination of them is determined by the "
+            f"data{why}; fix all but one of them"
+        )
+    for name, side in at_bound.items():
+        lo, hi = problem.spec(name).bounds
+        notes.append(
+            f"{name} = {values[name]:g} lies at the {side} bound of its physical range "
+            f"{_with_unit(f'[{lo:g}, {hi:g}]', problem.spec(name).unit)}; its uncertainty is one-sided "
+            "(quote a limit, see the posterior percentiles)"
+        )
+    for name, error in stderr.items():
+        lo, hi = problem.spec(name).bounds
+        if math.isfinite(error) and math.isfinite(hi - lo) and error > (hi - lo):
+            notes.append(
+                f"{name} is not constrained by the data: its standard error {error:.3g} exceeds "
+                f"its physical range [{lo:g}, {hi:g}] (low signal or too few geometries)"
+            )
+    if dof <= 0:
+        notes.append(f"{problem.dataset.n} measurements for {len(problem.free)} free parameters: no degrees of freedom left")
+    return notes

@@ -1,0 +1,331 @@
+"""Bayesian fit with the affine-invariant ensemble sampler of emcee.
+
+Posterior = prior x likelihood.  Priors are proper (:mod:`gonio.fitting.priors`); the
+likelihood is Gaussian with the measurement uncertainties (and the optional ``jitter``
+added in quadrature, :mod:`gonio.fitting.problem`).  The model is evaluated through its
+fixed-geometry fast path (``Model.at``), built once by :class:`FitProblem`.
+
+Convergence follows the emcee documentation (Foreman-Mackey et al. 2013; emcee
+"Autocorrelation analysis & convergence" tutorial): every ``check_every`` steps the
+integrated autocorrelation time tau of each parameter is estimated; the run stops when the
+chain is at least ``tau_multiple`` (default 50) times the largest tau long *and* the tau
+estimate changed by less than ``tau_rtol`` since the previous check.  If ``max_steps`` is
+reached first the result is marked not converged and a :class:`ConvergenceWarning` is
+issued: its numbers must not be trusted without a longer run.  The burn-in discarded is
+2 max(tau) steps and the samples are thinned by max(1, min(tau)/2), as that tutorial
+recommends.  The effective sample size of a parameter is
+n_walkers (n_steps - burn_in) / tau.
+
+References
+----------
+D. Foreman-Mackey, D. W. Hogg, D. Lang, J. Goodman, "emcee: The MCMC Hammer",
+PASP 125, 306 (2013); https://emcee.readthedocs.io/en/stable/tutorials/autocorr/
+"""
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+import emcee
+import numpy as np
+
+from .least_squares import LeastSquaresResult
+from .priors import Prior, default_prior
+from .problem import FitProblem
+
+__all__ = ["ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "LogPosterior"]
+
+
+class ConvergenceWarning(UserWarning):
+    """The chain reached its step limit before the autocorrelation criterion was met."""
+
+
+def resolve_priors(
+    problem: FitProblem, reference: Mapping[str, float], overrides: Mapping[str, Prior] | None = None
+) -> dict[str, Prior]:
+    """The prior of every free parameter: the user's where given, else the default.
+
+    Raises
+    ------
+    ValueError
+        A prior is given for a parameter that is not free.
+    """
+    overrides = dict(overrides or {})
+    unknown = [name for name in overrides if name not in problem.free]
+    if unknown:
+        raise ValueError(
+            f"prior given for {unknown[0]!r}, which is not a free parameter; free parameters are {list(problem.free)}"
+        )
+    return {
+        name: overrides.get(name) or default_prior(name, problem.spec(name).bounds, reference.get(name, math.nan))
+        for name in problem.free
+    }
+
+
+class LogPosterior:
+    """log prior + log likelihood of a parameter vector, timing the model evaluations.
+
+    The physical range is enforced in addition to the prior's support, so that the
+    model is never called outside it.
+    """
+
+    def __init__(self, problem: FitProblem, priors: Mapping[str, Prior]):
+        self.problem = problem
+        self.priors = [priors[name] for name in problem.free]
+        self.specs = [problem.spec(name) for name in problem.free]
+        self.model_seconds = 0.0
+        self.calls = 0
+
+    def log_prior(self, vector) -> float:
+        total = 0.0
+        for x, prior, spec in zip(vector, self.priors, self.specs):
+            x = float(x)
+            if not spec.contains(x):
+                return -math.inf
+            total += prior.logpdf(x)
+            if total == -math.inf:
+                return -math.inf
+        return total
+
+    def __call__(self, vector) -> float:
+        prior = self.log_prior(vector)
+        if prior == -math.inf:
+            return -math.inf
+        start = time.perf_counter()
+        likelihood = self.problem.log_likelihood(vector)
+        self.model_seconds += time.perf_counter() - start
+        self.calls += 1
+        return prior + likelihood
+
+
+@dataclass
+class McmcResult:
+    """Chain and convergence diagnostics of :func:`sample_posterior`.
+
+    Attributes
+    ----------
+    free : tuple of str
+        Parameter names (last axis of ``chain``).
+    chain : ndarray, shape (n_steps, n_walkers, n_free)
+        Every position of every walker (burn-in included).
+    log_prob : ndarray, shape (n_steps, n_walkers)
+        Log posterior of each position.
+    tau : ndarray
+        Integrated autocorrelation time of each parameter [steps].
+    acceptance_fraction : ndarray
+        Per walker.
+    burn_in, thin : int
+        Steps discarded at the start, and thinning of the kept samples.
+    converged : bool
+        Whether the autocorrelation criterion was met before ``max_steps``.
+    tau_multiple, tau_rtol : float
+        The criterion: chain length >= tau_multiple max(tau), relative change of tau < tau_rtol.
+    max_steps : int
+        Step limit.
+    wall_seconds, model_seconds : float
+        Total sampling time and the part spent in the likelihood (model evaluation).
+    evaluations : int
+        Likelihood evaluations (inside the prior support).
+    tau_history : list of (int, float)
+        (steps, max tau) at each check.
+    """
+
+    free: tuple[str, ...]
+    chain: np.ndarray
+    log_prob: np.ndarray
+    tau: np.ndarray
+    acceptance_fraction: np.ndarray
+    burn_in: int
+    thin: int
+    converged: bool
+    tau_multiple: float
+    tau_rtol: float
+    max_steps: int
+    wall_seconds: float
+    model_seconds: float
+    evaluations: int
+    tau_history: list[tuple[int, float]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.chain.shape[0])
+
+    @property
+    def n_walkers(self) -> int:
+        return int(self.chain.shape[1])
+
+    @property
+    def ess(self) -> np.ndarray:
+        """Effective sample size of each parameter."""
+        kept = max(self.n_steps - self.burn_in, 0)
+        with np.errstate(divide="ignore", invalid="ignore"):  # tau may be NaN for a failed estimate
+            return self.n_walkers * kept / self.tau
+
+    def samples(self) -> np.ndarray:
+        """Posterior samples after burn-in and thinning, shape (n, n_free)."""
+        return self.chain[self.burn_in :: self.thin].reshape(-1, len(self.free))
+
+    def sample_log_prob(self) -> np.ndarray:
+        """Log posterior of :meth:`samples`."""
+        return self.log_prob[self.burn_in :: self.thin].reshape(-1)
+
+
+def _initial_walkers(
+    posterior: LogPosterior, centre: np.ndarray, spread: np.ndarray, n_walkers: int, rng: np.random.Generator
+) -> np.ndarray:
+    walkers = np.empty((n_walkers, centre.size))
+    filled = 0
+    for _ in range(200):
+        trial = centre + spread * rng.standard_normal(centre.size)
+        if math.isfinite(posterior(trial)):
+            walkers[filled] = trial
+            filled += 1
+            if filled == n_walkers:
+                return walkers
+    # The ball around the optimum is mostly outside the support: draw from the priors.
+    while filled < n_walkers:
+        trial = np.array([p.sample(rng, 1)[0] for p in posterior.priors])
+        if math.isfinite(posterior(trial)):
+            walkers[filled] = trial
+            filled += 1
+    return walkers
+
+
+def sample_posterior(
+    problem: FitProblem,
+    start: LeastSquaresResult,
+    priors: Mapping[str, Prior] | None = None,
+    n_walkers: int = 32,
+    max_steps: int = 20000,
+    tau_multiple: float = 50.0,
+    tau_rtol: float = 0.05,
+    check_every: int = 100,
+    seed: int | None = 0,
+    progress: Callable[[int, int, float], None] | None = None,
+) -> tuple[McmcResult, dict[str, Prior]]:
+    """Sample the posterior with emcee until the autocorrelation criterion holds.
+
+    Parameters
+    ----------
+    problem : FitProblem
+        Model, data, fixed parameters.
+    start : LeastSquaresResult
+        The walkers start in a small Gaussian ball around its optimum (width: a tenth of the
+        standard error, or 1e-3 of the prior width where the error is undetermined).
+    priors : mapping, optional
+        Overrides of the default priors (module :mod:`gonio.fitting.priors`).
+    n_walkers : int
+        Ensemble size (at least twice the number of free parameters; emcee requirement).
+    max_steps : int
+        Step limit; reaching it marks the result not converged (loud warning).
+    tau_multiple, tau_rtol : float
+        Convergence criterion (module docstring).  Values below 50 are for quick tests.
+    check_every : int
+        Steps between autocorrelation estimates and progress reports.
+    seed : int, optional
+        Seed of the walkers' start and of the sampler.
+    progress : callable, optional
+        ``progress(steps, max_steps, max_tau)`` after every check.
+
+    Returns
+    -------
+    McmcResult, dict
+        The chain with diagnostics, and the priors used.
+    """
+    ndim = problem.ndim
+    if n_walkers < 2 * ndim:
+        raise ValueError(f"n_walkers = {n_walkers} must be at least 2 x {ndim} free parameters")
+    if max_steps < check_every:
+        raise ValueError(f"max_steps = {max_steps} must be at least check_every = {check_every}")
+    priors = resolve_priors(problem, start.values, priors)
+    posterior = LogPosterior(problem, priors)
+    rng = np.random.default_rng(seed)
+    centre = np.array([start.values[name] for name in problem.free])
+    spread = []
+    for name, value in zip(problem.free, centre):
+        error = start.stderr.get(name, math.nan)
+        width = priors[name].width()
+        spread.append(0.1 * error if math.isfinite(error) and error > 0 else 1e-3 * width)
+        # Keep the ball clear of a bound the optimum sits on, so walkers start inside.
+        lo, hi = problem.spec(name).bounds
+        centre[problem.free.index(name)] = min(max(value, lo + spread[-1]), hi - spread[-1]) if math.isfinite(hi - lo) else value
+    walkers = _initial_walkers(posterior, centre, np.array(spread), n_walkers, rng)
+
+    sampler = emcee.EnsembleSampler(n_walkers, ndim, posterior)
+    # emcee draws its moves from a legacy RandomState carried by the State object.
+    state = emcee.State(walkers, random_state=np.random.RandomState(int(rng.integers(2**31))).get_state())
+    posterior.model_seconds = 0.0
+    posterior.calls = 0
+    history: list[tuple[int, float]] = []
+    previous = np.full(ndim, np.inf)
+    converged = False
+    steps = 0
+    began = time.perf_counter()
+    tau = np.full(ndim, np.nan)
+    while steps < max_steps:
+        n = min(check_every, max_steps - steps)
+        state = sampler.run_mcmc(state, n, progress=False)
+        steps += n
+        tau = np.asarray(sampler.get_autocorr_time(tol=0), float)
+        largest = float(np.max(tau)) if np.all(np.isfinite(tau)) else math.inf
+        history.append((steps, largest))
+        if progress is not None:
+            progress(steps, max_steps, largest)
+        stable = bool(np.all(np.abs(previous - tau) < tau_rtol * tau))
+        if math.isfinite(largest) and steps >= tau_multiple * largest and stable:
+            converged = True
+            break
+        previous = tau
+    wall = time.perf_counter() - began
+
+    chain = sampler.get_chain()
+    log_prob = sampler.get_log_prob()
+    notes = []
+    if np.all(np.isfinite(tau)):
+        burn_in = min(int(math.ceil(2.0 * tau.max())), steps // 2)
+        thin = max(1, int(0.5 * tau.min()))
+    else:
+        burn_in, thin = steps // 2, 1
+    acceptance = np.asarray(sampler.acceptance_fraction, float)
+    if not converged:
+        largest = float(np.nanmax(tau)) if np.any(np.isfinite(tau)) else math.nan
+        message = (
+            f"CHAIN NOT CONVERGED: {steps} steps reached the limit max_steps = {max_steps} but the "
+            f"criterion needs {tau_multiple:g} x tau = {tau_multiple * largest:.0f} steps with a stable tau "
+            f"(tau = {largest:.1f}); the posterior numbers are unreliable. Run longer (--max-steps), "
+            "fix degenerate parameters, or simplify the model."
+        )
+        notes.append(message)
+        warnings.warn(message, ConvergenceWarning, stacklevel=2)
+    mean_acceptance = float(acceptance.mean())
+    if not 0.1 <= mean_acceptance <= 0.9:
+        notes.append(
+            f"mean acceptance fraction {mean_acceptance:.2f} is outside [0.1, 0.9]: the sampler "
+            "moves poorly (multi-modal or badly scaled posterior)"
+        )
+    stuck = int(np.sum(acceptance < 0.2 * mean_acceptance))
+    if stuck:
+        notes.append(f"{stuck} of {n_walkers} walkers accepted far fewer moves than the rest (stuck walkers)")
+    result = McmcResult(
+        free=problem.free,
+        chain=chain,
+        log_prob=log_prob,
+        tau=tau,
+        acceptance_fraction=acceptance,
+        burn_in=burn_in,
+        thin=thin,
+        converged=converged,
+        tau_multiple=float(tau_multiple),
+        tau_rtol=float(tau_rtol),
+        max_steps=int(max_steps),
+        wall_seconds=wall,
+        model_seconds=posterior.model_seconds,
+        evaluations=posterior.calls,
+        tau_history=history,
+        warnings=notes,
+    )
+    return result, priors

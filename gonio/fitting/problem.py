@@ -1,0 +1,245 @@
+"""The fit problem: a registered model, a dataset, fixed parameters and the likelihood.
+
+:class:`FitProblem` owns everything the least-squares fit and the sampler share: the
+parameter specifications (names, units, bounds from ``gonio.models.get(name).params``, plus
+the nuisance parameters ``scale`` and ``jitter`` when they apply), which parameters are fixed,
+the model prediction of the measured quantity (through the fixed-geometry fast path
+:meth:`gonio.models.Model.at`), the weighted residuals and the Gaussian log-likelihood.
+
+Nuisance parameters
+-------------------
+``scale`` [data units sr]
+    Only for ``quantity='radiance'`` (relative radiance): prediction = scale f_r cos(theta_i).
+``jitter`` [data units]
+    Optional extra noise, added in quadrature to every measurement's uncertainty:
+    sigma_tot^2 = sigma^2 + jitter^2.  It absorbs scatter the quoted uncertainties miss
+    (speckle, sample inhomogeneity, model error).  Its physical range is taken as
+    [0, 10 (max|value| + max sigma)]: scatter ten times the signal would make the data
+    meaningless, and a finite range gives it a proper uniform prior.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+from gonio import models
+from gonio.models import Model, Param
+
+from .dataset import Dataset
+
+__all__ = ["FitProblem", "combine_prediction", "predict_quantity"]
+
+_SCALE_DESCRIPTION = "radiance per unit BRDF and unit cos(theta_i): irradiance times detector gain"
+_JITTER_DESCRIPTION = "extra noise added in quadrature to the measurement uncertainties"
+
+
+def combine_prediction(
+    quantity: str, brdf: np.ndarray, brdf_normal_view: np.ndarray | None, cos_theta_i: np.ndarray, scale: float
+) -> np.ndarray:
+    """The measured quantity predicted from model BRDF values (one formula, two callers).
+
+    Parameters
+    ----------
+    quantity : {'brdf', 'normalised_radiance', 'radiance'}
+        See :mod:`gonio.fitting.dataset`.
+    brdf : ndarray
+        Model BRDF at the measurement geometry [1/sr].
+    brdf_normal_view : ndarray or None
+        Model BRDF at the normal view (theta_r = 0) of the same incidence [1/sr]; needed
+        for ``normalised_radiance``.
+    cos_theta_i : ndarray
+        Cosine of the incidence angle [-] (for ``radiance``).
+    scale : float
+        Free scale of relative radiance [data units sr].
+
+    Returns
+    -------
+    ndarray
+        Predicted values.  For normalised radiance where the normal-view BRDF is 0 (a
+        black sample) the ratio is undefined and NaN is returned (no warning).
+
+    Notes
+    -----
+    Normalised radiance L_r(theta_r)/L_r(0) for a fixed source equals f_r(theta_r)/f_r(0)
+    because L_r = f_r E_0 cos(theta_i) (Oren & Nayar 1995, section 5, discussion of
+    Fig 16); the factor E_0 cos(theta_i) cancels.
+    """
+    if quantity == "brdf":
+        return brdf
+    if quantity == "radiance":
+        return scale * brdf * cos_theta_i
+    out = np.full(np.shape(brdf), np.nan)
+    np.divide(brdf, brdf_normal_view, out=out, where=brdf_normal_view > 0)
+    return out
+
+
+def predict_quantity(
+    model: str | Model,
+    quantity: str,
+    theta_i: Any,
+    phi_i: Any,
+    theta_r: Any,
+    phi_r: Any,
+    values: Mapping[str, float],
+    options: Mapping[str, Any] | None = None,
+) -> np.ndarray:
+    """Predicted measured quantity at arbitrary geometries [deg] (plots, reports).
+
+    ``values`` holds the model parameters and, for relative radiance, ``scale``; other keys
+    (``jitter``) are ignored.
+    """
+    model = models.get(model) if isinstance(model, str) else model
+    params = {k: v for k, v in values.items() if k in model.param_names}
+    ti, pi_, tr, pr = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))
+    brdf = model(ti, pi_, tr, pr, **params, **dict(options or {}))
+    normal = model(ti, pi_, np.zeros_like(tr), pi_, **params, **dict(options or {})) if quantity == "normalised_radiance" else None
+    return combine_prediction(quantity, brdf, normal, np.cos(np.radians(ti)), float(values.get("scale", 1.0)))
+
+
+class FitProblem:
+    """A model, a dataset, fixed parameters: prediction, residuals, log-likelihood.
+
+    Parameters
+    ----------
+    model : str or Model
+        Registered model name or model.
+    dataset : Dataset
+        The measurements.
+    fixed : mapping, optional
+        Parameter values held fixed (any subset of the model parameters and nuisances).
+    options : mapping, optional
+        Discrete model options (see ``Model.options``).
+    jitter : bool
+        Add the free extra-noise parameter ``jitter`` (module docstring).
+
+    Raises
+    ------
+    ValueError
+        Unknown parameter names, fixed values outside their physical range, or nothing
+        left to fit.
+
+    Examples
+    --------
+    >>> from gonio.fitting import Dataset
+    >>> data = Dataset(30, 0, [0, 30, 60], 0, [0.25, 0.26, 0.25], 0.01)
+    >>> problem = FitProblem("lambert", data)
+    >>> problem.free
+    ('rho',)
+    """
+
+    def __init__(
+        self,
+        model: str | Model,
+        dataset: Dataset,
+        fixed: Mapping[str, Any] | None = None,
+        options: Mapping[str, Any] | None = None,
+        jitter: bool = False,
+    ) -> None:
+        self.model = models.get(model) if isinstance(model, str) else model
+        self.dataset = dataset
+        self.options = dict(options or {})
+        self.jitter = bool(jitter)
+        specs = list(self.model.params)
+        if dataset.quantity == "radiance":
+            specs.append(Param("scale", "arb. units sr", 1.0, (0.0, math.inf), _SCALE_DESCRIPTION, open_lower=True))
+        if self.jitter:
+            upper = 10.0 * (float(np.max(np.abs(dataset.value))) + float(np.max(dataset.sigma)))
+            specs.append(Param("jitter", "arb. units" if dataset.unit.startswith("arb") else dataset.unit, 0.0, (0.0, upper), _JITTER_DESCRIPTION))
+        self.specs: tuple[Param, ...] = tuple(specs)
+        self._spec = {p.name: p for p in self.specs}
+        self.fixed: dict[str, float] = {}
+        for name, value in dict(fixed or {}).items():
+            if name not in self._spec:
+                raise ValueError(
+                    f"cannot fix {name!r}: model {self.model.name!r} fitted to {dataset.quantity} data "
+                    f"has the parameters {list(self._spec)}"
+                )
+            self.fixed[name] = self._spec[name].check(value, self.model.name)
+        self.free: tuple[str, ...] = tuple(p.name for p in self.specs if p.name not in self.fixed)
+        if not self.free:
+            raise ValueError(f"every parameter of {self.model.name!r} is fixed; nothing to fit")
+        _, self.options = self.model.resolve(self.options)
+        self._fast = self.model.at(*dataset.geometry, **self.options)
+        self._normal_index = None
+        if dataset.quantity == "normalised_radiance":
+            sources, index = dataset.incidences()
+            self._fast_normal = self.model.at(sources[:, 0], sources[:, 1], 0.0, sources[:, 1], **self.options)
+            self._normal_index = index
+        self._cos_i = np.cos(np.radians(dataset.theta_i))
+        self._model_names = set(self.model.param_names)
+        #: Number of model evaluations so far (for benchmarks).
+        self.evaluations = 0
+
+    # ------------------------------------------------------------------ parameters
+    def spec(self, name: str) -> Param:
+        """The :class:`~gonio.models.Param` of a fit parameter."""
+        return self._spec[name]
+
+    @property
+    def ndim(self) -> int:
+        """Number of free parameters."""
+        return len(self.free)
+
+    def values(self, vector: Any) -> dict[str, float]:
+        """All parameter values: ``vector`` for the free ones plus the fixed ones."""
+        out = dict(self.fixed)
+        out.update(zip(self.free, (float(x) for x in vector)))
+        return {p.name: out.get(p.name, p.default) for p in self.specs}
+
+    def in_bounds(self, vector: Any) -> bool:
+        """True when every free value lies inside its physical range."""
+        return all(self._spec[n].contains(float(x)) for n, x in zip(self.free, vector))
+
+    # ------------------------------------------------------------------ model
+    def predict(self, values: Mapping[str, float]) -> np.ndarray:
+        """Predicted measured values at the dataset's geometries (fast path)."""
+        self.evaluations += 1
+        params = {k: v for k, v in values.items() if k in self._model_names}
+        brdf = self._fast(**params)
+        normal = None
+        if self._normal_index is not None:
+            normal = self._fast_normal(**params)[self._normal_index]
+        return combine_prediction(self.dataset.quantity, brdf, normal, self._cos_i, values.get("scale", 1.0))
+
+    def total_sigma(self, values: Mapping[str, float]) -> np.ndarray:
+        """Measurement uncertainty with the jitter added in quadrature."""
+        jitter = values.get("jitter", 0.0)
+        if jitter == 0.0:
+            return self.dataset.sigma
+        return np.sqrt(self.dataset.sigma**2 + jitter**2)
+
+    def residuals(self, vector: Any) -> np.ndarray:
+        """Weighted residuals (prediction - value) / sigma (jitter not included)."""
+        values = self.values(vector)
+        return (self.predict(values) - self.dataset.value) / self.dataset.sigma
+
+    def log_likelihood(self, vector: Any) -> float:
+        """Gaussian log-likelihood of the data (with jitter when it is a parameter).
+
+        ``-inf`` when the prediction is undefined (normalised data of a black sample).
+        """
+        values = self.values(vector)
+        predicted = self.predict(values)
+        sigma = self.total_sigma(values)
+        z = (predicted - self.dataset.value) / sigma
+        chi2 = float(np.dot(z, z))
+        if not math.isfinite(chi2):
+            return -math.inf
+        return -0.5 * chi2 - float(np.sum(np.log(sigma))) - 0.5 * z.size * math.log(2.0 * math.pi)
+
+    def chi_square(self, values: Mapping[str, float]) -> float:
+        """Sum of squared weighted residuals with the measurement uncertainties only."""
+        z = (self.predict(values) - self.dataset.value) / self.dataset.sigma
+        return float(np.dot(z, z))
+
+    def optimal_scale(self, values: Mapping[str, float]) -> float:
+        """Weighted linear least-squares ``scale`` for the other values (radiance data)."""
+        trial = dict(values, scale=1.0)
+        shape = self.predict(trial)
+        w = 1.0 / self.dataset.sigma**2
+        denominator = float(np.sum(w * shape * shape))
+        if denominator <= 0 or not math.isfinite(denominator):
+            return 1.0
+        return max(float(np.sum(w * shape * self.dataset.value)) / denominator, 1e-300)

@@ -1,0 +1,509 @@
+"""Fit results: posterior summaries, flags, JSON persistence and a plain-text report.
+
+A :class:`FitResult` bundles the dataset, the least-squares result, the MCMC chain (when
+sampled) and the numbers computed from them:
+
+* posterior median, 16/84 and 2.5/97.5 percentiles, MAP (highest posterior density among
+  the least-squares optimum and every chain position), correlation matrix;
+* flags for parameters piled at a bound of their range, strongly correlated pairs,
+  degenerate or insensitive parameters, a chain that did not converge;
+* chi-square and reduced chi-square, AIC and BIC.
+
+It is saved as ``result.json`` (everything but the chain) plus ``chain.npz`` (chain and log
+posterior) in one folder, and read back with :meth:`FitResult.load`.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+import gonio
+from gonio import models
+
+from .dataset import Dataset
+from .least_squares import LeastSquaresResult, _with_unit
+from .mcmc import LogPosterior, McmcResult
+from .priors import Prior, prior_from_dict
+from .problem import FitProblem, predict_quantity
+from .selection import information_criteria
+
+__all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE"]
+
+RESULT_FILE = "result.json"
+CHAIN_FILE = "chain.npz"
+
+# A posterior is "piled at a bound" when its 95 % interval reaches to within 5 % of its own
+# width of the bound: the data are then consistent with the bound value itself.  For a
+# Gaussian posterior centred mu away from the bound with standard deviation s this flags
+# mu < 2.2 s; a half-normal against the bound gives 0.014 < 0.05.
+_PILE_FRACTION = 0.05
+# Pairs with |correlation| above this are reported as nearly degenerate.
+_STRONG_CORRELATION = 0.95
+# The plain-text summary lists correlations above this (as lmfit does, at 0.1).
+_REPORTED_CORRELATION = 0.1
+
+
+def _clean(value: Any) -> Any:
+    """JSON-safe copy: NaN/inf -> None, numpy -> Python."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _clean(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def _nan(value: Any) -> float:
+    return math.nan if value is None else float(value)
+
+
+@dataclass
+class FitResult:
+    """Everything a fit produced (see the module docstring).
+
+    Attributes
+    ----------
+    model : str
+        Registered model name.
+    dataset : Dataset
+    fixed : dict
+        Fixed parameter values.
+    free : tuple of str
+        Fitted parameters.
+    options : dict
+        Model options used.
+    least_squares : LeastSquaresResult
+    mcmc : McmcResult or None
+    priors : dict of Prior
+    jitter : bool
+        Whether the extra-noise parameter was fitted.
+    posterior : dict
+        ``median``, ``p16``, ``p84``, ``p2_5``, ``p97_5``, ``map`` (dicts by name),
+        ``correlation`` (matrix over ``free``), ``tau``, ``ess`` (dicts by name),
+        ``acceptance_fraction`` (mean) and the run's bookkeeping; empty without MCMC.
+    flags : list of str
+        Every warning, least squares and MCMC.
+    """
+
+    model: str
+    dataset: Dataset
+    fixed: dict[str, float]
+    free: tuple[str, ...]
+    options: dict[str, Any]
+    least_squares: LeastSquaresResult
+    mcmc: McmcResult | None = None
+    priors: dict[str, Prior] = field(default_factory=dict)
+    jitter: bool = False
+    posterior: dict[str, Any] = field(default_factory=dict)
+    flags: list[str] = field(default_factory=list)
+    created: str = ""
+    gonio_version: str = ""
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def build(
+        cls,
+        problem: FitProblem,
+        least_squares: LeastSquaresResult,
+        mcmc: McmcResult | None = None,
+        priors: Mapping[str, Prior] | None = None,
+    ) -> "FitResult":
+        """Assemble a result and compute the posterior summaries and flags."""
+        result = cls(
+            model=problem.model.name,
+            dataset=problem.dataset,
+            fixed=dict(problem.fixed),
+            free=problem.free,
+            options=dict(problem.options),
+            least_squares=least_squares,
+            mcmc=mcmc,
+            priors=dict(priors or {}),
+            jitter=problem.jitter,
+            created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            gonio_version=gonio.__version__,
+        )
+        result.flags = list(least_squares.warnings)
+        if mcmc is not None:
+            result.posterior = _summarise(problem, least_squares, mcmc, result.priors)
+            result.flags += mcmc.warnings + _posterior_flags(problem, result.posterior)
+        return result
+
+    # ------------------------------------------------------------------ access
+    @property
+    def specs(self) -> dict[str, models.Param]:
+        """Parameter specifications (model parameters and nuisances), by name."""
+        problem = self.problem()
+        return {p.name: p for p in problem.specs}
+
+    def problem(self) -> FitProblem:
+        """Rebuild the :class:`FitProblem` of this fit."""
+        return FitProblem(self.model, self.dataset, self.fixed, self.options, self.jitter)
+
+    @property
+    def converged(self) -> bool | None:
+        """Whether the chain converged (None without MCMC)."""
+        return None if self.mcmc is None else self.mcmc.converged
+
+    def best_values(self) -> dict[str, float]:
+        """Posterior medians when sampled, else the least-squares values (fixed included)."""
+        values = dict(self.least_squares.values)
+        if self.posterior:
+            values.update(self.posterior["median"])
+        return values
+
+    def samples(self) -> np.ndarray:
+        """Posterior samples (n, len(free)); empty without MCMC."""
+        if self.mcmc is None:
+            return np.empty((0, len(self.free)))
+        return self.mcmc.samples()
+
+    def predict(self, theta_i, phi_i, theta_r, phi_r, values: Mapping[str, float] | None = None) -> np.ndarray:
+        """The fitted quantity at arbitrary geometries [deg] (best values by default)."""
+        values = dict(self.best_values() if values is None else values)
+        return predict_quantity(self.model, self.dataset.quantity, theta_i, phi_i, theta_r, phi_r, values, self.options)
+
+    def posterior_predictive(
+        self, theta_i, phi_i, theta_r, phi_r, n_draws: int = 200, seed: int = 0, percentiles=(2.5, 16, 50, 84, 97.5)
+    ) -> np.ndarray:
+        """Percentiles of the model prediction over posterior draws (the model band).
+
+        Returns an array of shape ``(len(percentiles),) + broadcast shape``.  Without a
+        chain, the least-squares prediction repeated.
+        """
+        samples = self.samples()
+        if samples.shape[0] == 0:
+            one = self.predict(theta_i, phi_i, theta_r, phi_r)
+            return np.repeat(one[None], len(percentiles), axis=0)
+        rng = np.random.default_rng(seed)
+        rows = rng.choice(samples.shape[0], size=min(n_draws, samples.shape[0]), replace=False)
+        base = dict(self.least_squares.values)
+        draws = []
+        for row in samples[rows]:
+            values = dict(base, **dict(zip(self.free, row)))
+            draws.append(self.predict(theta_i, phi_i, theta_r, phi_r, values))
+        return np.nanpercentile(np.array(draws), percentiles, axis=0)
+
+    def information(self) -> dict[str, float]:
+        """AIC, AICc and BIC of the maximum-likelihood fit (:mod:`gonio.fitting.selection`)."""
+        return information_criteria(self.least_squares.log_likelihood, len(self.free), self.dataset.n)
+
+    # ------------------------------------------------------------------ persistence
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form of everything but the chain."""
+        problem = self.problem()
+        out: dict[str, Any] = {
+            "format": "gonio-fit-result",
+            "format_version": 1,
+            "gonio_version": self.gonio_version,
+            "created": self.created,
+            "model": self.model,
+            "model_reference": problem.model.reference,
+            "quantity": self.dataset.quantity,
+            "parameters": [
+                {
+                    "name": p.name,
+                    "unit": p.unit,
+                    "bounds": list(p.bounds),
+                    "description": p.description,
+                    "fixed": self.fixed.get(p.name),
+                }
+                for p in problem.specs
+            ],
+            "fixed": self.fixed,
+            "free": list(self.free),
+            "options": self.options,
+            "jitter": self.jitter,
+            "priors": {name: prior.to_dict() for name, prior in self.priors.items()},
+            "least_squares": self.least_squares.to_dict(),
+            "information_criteria": self.information(),
+            "posterior": self.posterior,
+            "flags": self.flags,
+            "dataset": self.dataset.to_dict(),
+        }
+        if self.mcmc is not None:
+            m = self.mcmc
+            out["mcmc"] = {
+                "n_walkers": m.n_walkers,
+                "n_steps": m.n_steps,
+                "burn_in": m.burn_in,
+                "thin": m.thin,
+                "converged": m.converged,
+                "tau": m.tau.tolist(),
+                "acceptance_fraction": m.acceptance_fraction.tolist(),
+                "tau_multiple": m.tau_multiple,
+                "tau_rtol": m.tau_rtol,
+                "max_steps": m.max_steps,
+                "wall_seconds": m.wall_seconds,
+                "model_seconds": m.model_seconds,
+                "evaluations": m.evaluations,
+                "tau_history": [list(h) for h in m.tau_history],
+                "warnings": m.warnings,
+                "chain_file": CHAIN_FILE,
+            }
+        return _clean(out)
+
+    def save(self, directory: str | Path) -> Path:
+        """Write ``result.json``, ``chain.npz`` (with MCMC) and ``summary.txt`` into a folder.
+
+        Returns the path of ``result.json``.
+        """
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        path = directory / RESULT_FILE
+        path.write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False))
+        if self.mcmc is not None:
+            np.savez_compressed(directory / CHAIN_FILE, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob)
+        (directory / "summary.txt").write_text(self.summary() + "\n")
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "FitResult":
+        """Read a result saved by :meth:`save` (a folder or its ``result.json``).
+
+        Raises
+        ------
+        FileNotFoundError, ValueError
+            Missing file, or a file that is not a gonio fit result (naming the field).
+        """
+        path = Path(path)
+        if path.is_dir():
+            path = path / RESULT_FILE
+        data = json.loads(path.read_text())
+        if data.get("format") != "gonio-fit-result":
+            raise ValueError(f"{path}: field 'format' is {data.get('format')!r}, expected 'gonio-fit-result'")
+        mcmc = None
+        if "mcmc" in data:
+            chain_path = path.parent / data["mcmc"]["chain_file"]
+            with np.load(chain_path) as arrays:
+                chain, log_prob = arrays["chain"], arrays["log_prob"]
+            m = data["mcmc"]
+            mcmc = McmcResult(
+                free=tuple(data["free"]),
+                chain=chain,
+                log_prob=log_prob,
+                tau=np.array([_nan(t) for t in m["tau"]]),
+                acceptance_fraction=np.array(m["acceptance_fraction"], float),
+                burn_in=int(m["burn_in"]),
+                thin=int(m["thin"]),
+                converged=bool(m["converged"]),
+                tau_multiple=float(m["tau_multiple"]),
+                tau_rtol=float(m["tau_rtol"]),
+                max_steps=int(m["max_steps"]),
+                wall_seconds=float(m["wall_seconds"]),
+                model_seconds=float(m["model_seconds"]),
+                evaluations=int(m["evaluations"]),
+                tau_history=[(int(s), _nan(t)) for s, t in m["tau_history"]],
+                warnings=list(m["warnings"]),
+            )
+        posterior = data["posterior"]
+        for key, value in list(posterior.items()):
+            if isinstance(value, dict):
+                posterior[key] = {k: _nan(v) for k, v in value.items()}
+            elif key == "correlation":
+                posterior[key] = [[_nan(x) for x in row] for row in value]
+        ls = dict(data["least_squares"])
+        ls["values"] = {k: _nan(v) for k, v in ls["values"].items()}
+        for key in ("chi2", "redchi", "log_likelihood"):
+            ls[key] = _nan(ls[key])
+        return cls(
+            model=data["model"],
+            dataset=Dataset.from_dict(data["dataset"]),
+            fixed={k: float(v) for k, v in data["fixed"].items()},
+            free=tuple(data["free"]),
+            options=dict(data["options"]),
+            least_squares=LeastSquaresResult.from_dict(ls),
+            mcmc=mcmc,
+            priors={k: prior_from_dict(v) for k, v in data["priors"].items()},
+            jitter=bool(data["jitter"]),
+            posterior=posterior,
+            flags=list(data["flags"]),
+            created=data.get("created", ""),
+            gonio_version=data.get("gonio_version", ""),
+        )
+
+    # ------------------------------------------------------------------ text
+    def parameter_rows(self) -> list[dict[str, Any]]:
+        """One dict per parameter (fixed included) with every number of the summary."""
+        rows = []
+        specs = self.specs
+        ls = self.least_squares
+        post = self.posterior
+        for name, spec in specs.items():
+            row: dict[str, Any] = {"name": name, "unit": spec.unit, "bounds": spec.bounds, "fixed": name in self.fixed}
+            row["value"] = self.fixed.get(name, ls.values.get(name))
+            row["stderr"] = ls.stderr.get(name, math.nan)
+            if post and name in post["median"]:
+                for key in ("median", "p16", "p84", "p2_5", "p97_5", "map", "tau", "ess"):
+                    row[key] = post[key][name]
+            row["prior"] = str(self.priors[name]) if name in self.priors else ""
+            rows.append(row)
+        return rows
+
+    def summary(self) -> str:
+        """A plain-text fit report in the style of lmfit's ``fit_report``."""
+        return _summary_text(self)
+
+
+# ---------------------------------------------------------------------- computations
+def _summarise(
+    problem: FitProblem, ls: LeastSquaresResult, mcmc: McmcResult, priors: Mapping[str, Prior]
+) -> dict[str, Any]:
+    samples = mcmc.samples()
+    log_prob = mcmc.sample_log_prob()
+    names = problem.free
+    q = np.percentile(samples, [2.5, 16, 50, 84, 97.5], axis=0)
+    everything = mcmc.chain.reshape(-1, len(names))
+    all_log_prob = mcmc.log_prob.reshape(-1)
+    best = int(np.argmax(all_log_prob))
+    map_vector = everything[best]
+    map_log_prob = float(all_log_prob[best])
+    # The least-squares optimum is the MAP itself for flat priors: keep whichever is higher.
+    ls_vector = np.array([ls.values[n] for n in names])
+    ls_log_prob = LogPosterior(problem, priors)(ls_vector) if len(priors) == len(names) else -math.inf
+    if ls_log_prob > map_log_prob:
+        map_vector, map_log_prob = ls_vector, ls_log_prob
+    if samples.shape[0] > 1 and len(names) > 1:
+        with np.errstate(invalid="ignore", divide="ignore"):  # a constant column gives NaN
+            correlation = np.corrcoef(samples, rowvar=False)
+    else:
+        correlation = np.ones((len(names), len(names)))
+    ess = mcmc.ess
+    return {
+        "median": dict(zip(names, q[2].tolist())),
+        "p16": dict(zip(names, q[1].tolist())),
+        "p84": dict(zip(names, q[3].tolist())),
+        "p2_5": dict(zip(names, q[0].tolist())),
+        "p97_5": dict(zip(names, q[4].tolist())),
+        "map": dict(zip(names, map_vector.tolist())),
+        "map_log_posterior": map_log_prob,
+        "correlation": np.atleast_2d(correlation).tolist(),
+        "tau": dict(zip(names, mcmc.tau.tolist())),
+        "ess": dict(zip(names, ess.tolist())),
+        "acceptance_fraction": float(mcmc.acceptance_fraction.mean()),
+        "n_samples": int(samples.shape[0]),
+        "median_log_posterior": float(np.median(log_prob)) if log_prob.size else math.nan,
+    }
+
+
+def _posterior_flags(problem: FitProblem, posterior: Mapping[str, Any]) -> list[str]:
+    notes = []
+    for name in problem.free:
+        lo, hi = problem.spec(name).bounds
+        low, high = posterior["p2_5"][name], posterior["p97_5"][name]
+        width = high - low
+        unit = problem.spec(name).unit
+        if math.isfinite(lo) and low - lo < _PILE_FRACTION * width:
+            notes.append(
+                f"{name}: the posterior piles up at the lower bound {_with_unit(f'{lo:g}', unit)}; quote the upper "
+                f"limit {name} < {_with_unit(format(posterior['p97_5'][name], '.3g'), unit)} (97.5 %) rather than "
+                "median +/- error"
+            )
+        elif math.isfinite(hi) and hi - high < _PILE_FRACTION * width:
+            notes.append(
+                f"{name}: the posterior piles up at the upper bound {_with_unit(f'{hi:g}', unit)}; quote the lower "
+                f"limit {name} > {_with_unit(format(posterior['p2_5'][name], '.3g'), unit)} (2.5 %) rather than "
+                "median +/- error"
+            )
+    correlation = np.asarray(posterior["correlation"], float)
+    names = problem.free
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            r = correlation[i, j]
+            if math.isfinite(r) and abs(r) > _STRONG_CORRELATION:
+                notes.append(
+                    f"{names[i]} and {names[j]} are strongly correlated in the posterior (r = {r:+.3f}): "
+                    "the data constrain mainly a combination of them"
+                )
+    return notes
+
+
+# ---------------------------------------------------------------------- summary text
+def _fmt(x: Any, digits: int = 5) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "n/a"
+    return f"{x:.{digits}g}"
+
+
+def _summary_text(result: FitResult) -> str:
+    ls = result.least_squares
+    data = result.dataset
+    model = models.get(result.model)
+    info = result.information()
+    lines = ["[[Model]]", f"    {result.model}: {model.description}", f"    reference: {model.reference}"]
+    if result.options:
+        lines.append("    options: " + ", ".join(f"{k}={v}" for k, v in result.options.items()))
+    lines += [
+        "[[Data]]",
+        f"    label              = {data.label or '(none)'}",
+        f"    quantity           = {data.quantity} [{data.unit}]",
+        f"    incidences         = {len(data.incidences()[0])}",
+        "[[Fit Statistics]]",
+        "    # fitting method   = least_squares (trf, bounded)" + (" + emcee" if result.mcmc else ""),
+        f"    # function evals   = {ls.nfev}",
+        f"    # data points      = {data.n}",
+        f"    # variables        = {len(result.free)}",
+        f"    chi-square         = {_fmt(ls.chi2)}",
+        f"    reduced chi-square = {_fmt(ls.redchi)}",
+        f"    Akaike info crit   = {_fmt(info['aic'])}",
+        f"    Bayesian info crit = {_fmt(info['bic'])}",
+        "[[Variables]]",
+    ]
+    rows = result.parameter_rows()
+    width = max(len(r["name"]) for r in rows) + 1
+    for r in rows:
+        label = f"    {r['name'] + ':':<{width}}"
+        if r["fixed"]:
+            lines.append(f"{label} {_fmt(r['value'], 6):>11} (fixed) [{r['unit']}]")
+            continue
+        error = r["stderr"]
+        relative = f" ({100 * abs(error / r['value']):.2f}%)" if math.isfinite(error) and r["value"] else ""
+        error_text = f"+/- {_fmt(error, 4)}" if math.isfinite(error) else "+/- (undetermined)"
+        lo, hi = r["bounds"]
+        lines.append(f"{label} {_fmt(r['value'], 6):>11} {error_text}{relative} [{r['unit']}] range [{lo:g}, {hi:g}]")
+    if result.posterior and result.mcmc is not None:
+        m = result.mcmc
+        status = (
+            f"converged: length >= {m.tau_multiple:g} tau"
+            if m.converged
+            else "!!! NOT CONVERGED: step limit reached, numbers unreliable !!!"
+        )
+        lines += [
+            f"[[Posterior]] (emcee: {m.n_walkers} walkers x {m.n_steps} steps, burn-in {m.burn_in}, thin {m.thin}; {status})",
+            f"    mean acceptance fraction = {result.posterior['acceptance_fraction']:.3f}; "
+            f"samples kept = {result.posterior['n_samples']}",
+            f"    {'name':<{width}} {'median':>10} {'-1sig':>9} {'+1sig':>9} {'2.5%':>10} {'97.5%':>10} {'MAP':>10} {'tau':>7} {'ESS':>8}  prior",
+        ]
+        for r in rows:
+            if r["fixed"] or "median" not in r:
+                continue
+            lines.append(
+                f"    {r['name']:<{width}} {_fmt(r['median']):>10} {_fmt(r['median'] - r['p16'], 3):>9} "
+                f"{_fmt(r['p84'] - r['median'], 3):>9} {_fmt(r['p2_5']):>10} {_fmt(r['p97_5']):>10} "
+                f"{_fmt(r['map']):>10} {_fmt(r['tau'], 3):>7} {_fmt(r['ess'], 4):>8}  {r['prior']}"
+            )
+    correlations = []
+    matrix = np.asarray(result.posterior["correlation"], float) if result.posterior else ls.correlation
+    for i in range(len(result.free)):
+        for j in range(i + 1, len(result.free)):
+            r = matrix[i, j]
+            if math.isfinite(r) and abs(r) > _REPORTED_CORRELATION:
+                correlations.append((abs(r), f"    C({result.free[i]}, {result.free[j]}) = {r:+.4f}"))
+    source = "posterior" if result.posterior else "least squares"
+    lines.append(f"[[Correlations]] ({source}; unreported correlations are < {_REPORTED_CORRELATION:.3f})")
+    lines += [text for _, text in sorted(correlations, reverse=True)] or ["    (none)"]
+    lines.append("[[Warnings]]")
+    lines += [f"    ! {flag}" for flag in result.flags] or ["    (none)"]
+    return "\n".join(lines)

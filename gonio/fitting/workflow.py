@@ -1,0 +1,83 @@
+"""One call from data to a complete fit result: :func:`fit`."""
+from __future__ import annotations
+
+from typing import Any, Callable, Mapping
+
+from gonio.models import Model
+
+from .dataset import Dataset
+from .least_squares import fit_least_squares
+from .mcmc import resolve_priors, sample_posterior
+from .priors import Prior
+from .problem import FitProblem
+from .results import FitResult
+
+__all__ = ["fit"]
+
+
+def fit(
+    dataset: Dataset,
+    model: str | Model,
+    fixed: Mapping[str, float] | None = None,
+    priors: Mapping[str, Prior] | None = None,
+    mcmc: bool = True,
+    jitter: bool = False,
+    options: Mapping[str, Any] | None = None,
+    start: Mapping[str, float] | None = None,
+    n_walkers: int = 32,
+    max_steps: int = 20000,
+    tau_multiple: float = 50.0,
+    seed: int | None = 0,
+    progress: Callable[[int, int, float], None] | None = None,
+) -> FitResult:
+    """Fit a registered model to a dataset: least squares, then (optionally) MCMC.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The measurements (:class:`gonio.fitting.Dataset`).
+    model : str or Model
+        Registered model name (``gonio.models.available()``).
+    fixed : mapping, optional
+        Parameters held fixed, by name (model parameters, ``scale``, ``jitter``).
+    priors : mapping of Prior, optional
+        Overrides of the default priors (uniform over the physical bounds).
+    mcmc : bool
+        Sample the posterior with emcee after the least-squares fit.
+    jitter : bool
+        Fit an extra noise term added in quadrature to the uncertainties.
+    options : mapping, optional
+        Discrete model options.
+    start : mapping, optional
+        Least-squares starting values.
+    n_walkers, max_steps, tau_multiple, seed, progress
+        Passed to :func:`gonio.fitting.mcmc.sample_posterior`.
+
+    Returns
+    -------
+    FitResult
+
+    Examples
+    --------
+    >>> import numpy as np, gonio
+    >>> tr = np.arange(0.0, 80.0, 10.0)
+    >>> data = Dataset(45, 0, tr, 0, gonio.brdf("lambert", 45, 0, tr, 0, rho=0.5), 0.005)
+    >>> result = fit(data, "lambert", mcmc=False)
+    >>> round(result.best_values()["rho"], 3)
+    0.5
+    """
+    problem = FitProblem(model, dataset, fixed, options, jitter)
+    least_squares = fit_least_squares(problem, start=start, seed=seed)
+    if not mcmc:
+        return FitResult.build(problem, least_squares, None, resolve_priors(problem, least_squares.values, priors))
+    chain, used_priors = sample_posterior(
+        problem,
+        least_squares,
+        priors=priors,
+        n_walkers=n_walkers,
+        max_steps=max_steps,
+        tau_multiple=tau_multiple,
+        seed=seed,
+        progress=progress,
+    )
+    return FitResult.build(problem, least_squares, chain, used_priors)

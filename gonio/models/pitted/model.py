@@ -1,0 +1,253 @@
+"""The registered ``pitted`` model: a plane partly covered by spherical pits.
+
+A fraction ``coverage`` of the plane is covered by spherical pits of aperture ``psi``
+(Koenderink et al. 1999, section 1.5 and Fig 2); the pits and the flat rest are
+Lambertian with albedo ``rho`` at the micro scale.  The pit diameter does not enter the
+BRDF (section 5).  The BRDF separates as
+
+    f = (1 - coverage) rho/pi + coverage (rho F1(geometry, psi) + F2(rho, psi))
+
+with ``F1`` the single-scattering factor (eq 14-15; :mod:`.quadrature`) and ``F2`` the
+interreflection term, the diffuse radiance of eq 12 per unit plane irradiance, which does
+not depend on the directions at all.  :func:`pitted_terms` exposes this split.
+
+References
+----------
+J. J. Koenderink, A. J. van Doorn, K. J. Dana, S. K. Nayar, "Bidirectional reflection
+distribution function of thoroughly pitted surfaces", IJCV 31(2/3), 1999.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .._core import Model, Param, register
+from .quadrature import DEFAULT_ORDER, single_scattering_factor
+from .validation import check_pit_parameters
+
+__all__ = ["PitTerms", "pitted_terms", "pitted_brdf", "aperture_mixture_brdf", "PITTED"]
+
+
+@dataclass(frozen=True)
+class PitTerms:
+    """The rho-separated parts of the pit BRDF at fixed geometry and aperture.
+
+    Attributes
+    ----------
+    single_scattering : numpy.ndarray
+        F1 [1/sr]: single-scattering BRDF of one pit per unit micro-albedo.
+    interreflection_scale : float
+        ``sin^2(psi) / (4 pi)`` [1/sr].
+    interreflection_sin2_half : float
+        ``sin^2(psi / 2)`` [-].
+
+    Notes
+    -----
+    The pit BRDF is ``rho F1 + interreflection_scale rho^2 / (1 - rho
+    interreflection_sin2_half)`` (eq 12 for the second term); the pitted surface adds
+    ``(1 - coverage) rho/pi`` for the flat part.  Tabulating ``single_scattering`` over
+    geometry and psi is all a fast version needs.
+    """
+
+    single_scattering: np.ndarray
+    interreflection_scale: float
+    interreflection_sin2_half: float
+
+    def pit_brdf(self, rho: float) -> np.ndarray:
+        """BRDF of a fully pitted surface [1/sr] for micro-albedo ``rho``."""
+        return rho * self.single_scattering + self.interreflection_scale * rho**2 / (
+            1.0 - rho * self.interreflection_sin2_half
+        )
+
+    def brdf(self, rho: float, coverage: float) -> np.ndarray:
+        """BRDF of the pitted surface [1/sr]."""
+        return (1.0 - coverage) * rho / np.pi + coverage * self.pit_brdf(rho)
+
+
+def _terms_rad(ti, pi_, tr, pr, psi_deg: float, order: int = DEFAULT_ORDER) -> PitTerms:
+    psi = np.radians(psi_deg)
+    factor = single_scattering_factor(ti, tr, pr - pi_, psi, order)
+    return PitTerms(factor, float(np.sin(psi) ** 2 / (4.0 * np.pi)), float(np.sin(psi / 2.0) ** 2))
+
+
+def pitted_terms(
+    theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike, phi_r: ArrayLike, psi: float,
+    order: int = DEFAULT_ORDER,
+) -> PitTerms:
+    """The split of the pit BRDF into geometry-and-aperture factors (see :class:`PitTerms`).
+
+    Parameters
+    ----------
+    theta_i, phi_i : array_like
+        Source direction [deg], theta_i in [0, 90].
+    theta_r, phi_r : array_like
+        Viewing direction [deg], theta_r in [0, 90].
+    psi : float
+        Aperture [deg], 0 < psi <= 90.
+    order : int
+        Quadrature nodes per panel (:mod:`.quadrature`).
+
+    Returns
+    -------
+    PitTerms
+
+    Notes
+    -----
+    Eq 12 and eq 14-15 of Koenderink et al. (1999).
+
+    Examples
+    --------
+    >>> terms = pitted_terms(0.0, 0.0, 0.0, 0.0, psi=90.0)
+    >>> round(float(terms.pit_brdf(1.0)), 6)   # 2/(3 pi) + 1/(2 pi), eq 26 + 29
+    0.371362
+    """
+    check_pit_parameters(rho=0.0, psi=psi, coverage=0.0)
+    ti, pi_, tr, pr = (np.radians(np.asarray(a, float)) for a in np.broadcast_arrays(theta_i, phi_i, theta_r, phi_r))
+    return _terms_rad(ti, pi_, tr, pr, float(psi), order)
+
+
+def _prepare(ti, pi_, tr, pr) -> Callable[..., np.ndarray]:
+    """Geometry [rad] -> f(rho, psi, coverage); F1 is cached per aperture."""
+    cache: dict[float, PitTerms] = {}
+
+    def evaluate(rho: float, psi: float, coverage: float) -> np.ndarray:
+        if psi not in cache:
+            if len(cache) > 8:
+                cache.clear()
+            cache[psi] = _terms_rad(ti, pi_, tr, pr, psi)
+        return cache[psi].brdf(rho, coverage)
+
+    return evaluate
+
+
+def pitted_brdf(theta_i, phi_i, theta_r, phi_r, rho: float, psi: float, coverage: float) -> np.ndarray:
+    """BRDF of a plane partly covered by spherical pits [1/sr] (angles in radians).
+
+    Parameters
+    ----------
+    theta_i, phi_i, theta_r, phi_r : array_like
+        Source and viewing directions [rad], above the horizon.
+    rho : float
+        Micro-scale Lambertian albedo [-].
+    psi : float
+        Pit aperture [deg], 0 < psi <= 90 (90: hemispherical pits).
+    coverage : float
+        Fraction of the plane covered by pit orifices [-].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(1 - coverage) rho/pi + coverage (rho F1 + F2)`` [1/sr].
+
+    Notes
+    -----
+    Koenderink et al. (1999): F1 is eq 15 with the Lambertian micro-radiance (eq 5)
+    evaluated by the deterministic quadrature of :mod:`.quadrature` (for psi = 90 deg it
+    equals eq 21 and, in the plane of incidence, eq 26-28); F2 is eq 12 (= D of eq 29
+    for the hemisphere).  Deterministic: a registered BRDF must be a function, so the
+    Monte Carlo method of section 4.1 (:mod:`.shallow`) is only used to check it.
+
+    * Reciprocal: F1 is symmetric in source and viewer (the lit and visible conditions
+      are the same test) and F2 is constant, so the model obeys Helmholtz reciprocity
+      exactly (tested).
+    * Energy: the directional-hemispherical reflectance is
+      ``(1 - coverage) rho + coverage rho cos^2(psi/2) / (1 - rho sin^2(psi/2))`` for
+      every incidence (derived from eq 9-10), <= 1, and 1 for rho = 1 (tested).
+    * At exactly grazing incidence or view the formula is 0/0; it is evaluated
+      ``GRAZING_MARGIN`` = 1e-7 rad inside the hemisphere.  The limit is finite except
+      towards grazing retro-reflection (theta_i = theta_r -> 90 deg, same azimuth), where
+      the BRDF of deep pits grows like 1/cos(theta_i) (the "attitude effect" curve of
+      Fig 4 goes to infinity); there the returned value is large (~1e6 1/sr) but finite,
+      and the radiance ``f cos(theta_i)`` stays bounded.
+
+    Examples
+    --------
+    >>> import gonio
+    >>> round(float(gonio.models.get("pitted")(30.0, 0.0, 60.0, 180.0, rho=1.0, psi=90.0, coverage=1.0)), 6)
+    0.159155
+    """
+    return _prepare(theta_i, phi_i, theta_r, phi_r)(rho=rho, psi=psi, coverage=coverage)
+
+
+def aperture_mixture_brdf(
+    theta_i: ArrayLike,
+    phi_i: ArrayLike,
+    theta_r: ArrayLike,
+    phi_r: ArrayLike,
+    rho: float,
+    apertures: Sequence[float],
+    weights: Sequence[float],
+    coverage: float = 1.0,
+) -> np.ndarray:
+    """BRDF [1/sr] of a surface pitted with a distribution of apertures (section 5).
+
+    Parameters
+    ----------
+    theta_i, phi_i, theta_r, phi_r : array_like
+        Source and viewing directions [deg].
+    rho : float
+        Micro-scale albedo [-].
+    apertures : sequence of float
+        Pit apertures [deg], each in (0, 90].
+    weights : sequence of float
+        Non-negative fractions of the pitted area with each aperture (normalised here;
+        they must not all be zero).
+    coverage : float
+        Total fraction of the plane covered by pits [-].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(1 - coverage) rho/pi + coverage sum_k w_k f_pit(psi_k)`` [1/sr].
+
+    Notes
+    -----
+    Section 5 (conclusion): the BRDF of a distribution of apertures is the area-weighted
+    average of the pits' BRDFs; the distribution of diameters does not enter.
+
+    Examples
+    --------
+    >>> f = aperture_mixture_brdf(20.0, 0.0, 20.0, 0.0, rho=0.5, apertures=[90.0], weights=[1.0])
+    >>> import gonio
+    >>> bool(abs(f - gonio.brdf("pitted", 20.0, 0.0, 20.0, 0.0, rho=0.5, psi=90.0, coverage=1.0)) < 1e-14)
+    True
+    """
+    apertures = np.atleast_1d(np.asarray(apertures, float))
+    weights = np.atleast_1d(np.asarray(weights, float))
+    if apertures.shape != weights.shape or apertures.ndim != 1:
+        raise ValueError(
+            f"apertures and weights must be 1-D sequences of the same length, got {apertures.shape} and {weights.shape}"
+        )
+    if np.any(~(weights >= 0.0)) or weights.sum() <= 0.0:
+        raise ValueError(f"weights = {weights.tolist()} must be non-negative and not all zero")
+    rho, _, coverage = check_pit_parameters(rho=rho, psi=90.0, coverage=coverage)
+    for psi in apertures:
+        check_pit_parameters(rho=rho, psi=psi, coverage=coverage)
+    weights = weights / weights.sum()
+    pits = sum(w * PITTED(theta_i, phi_i, theta_r, phi_r, rho=rho, psi=psi, coverage=1.0)
+               for psi, w in zip(apertures, weights))
+    return (1.0 - coverage) * rho / np.pi + coverage * pits
+
+
+PITTED = register(
+    Model(
+        name="pitted",
+        params=(
+            Param("rho", "-", 0.8, (0.0, 1.0), "micro-scale Lambertian albedo of pits and plane"),
+            Param("psi", "deg", 90.0, (0.0, 90.0), "pit aperture; 90 is a hemispherical pit",
+                  open_lower=True),
+            Param("coverage", "-", 0.4, (0.0, 1.0), "fraction of the plane covered by pit orifices"),
+        ),
+        reference=(
+            "Koenderink, van Doorn, Dana & Nayar 1999, IJCV 31: eq 12 (interreflection), "
+            "eq 14-15 (single scattering, deterministic quadrature), eq 21 and 26-29 (psi = 90)"
+        ),
+        description="plane partly covered by Lambertian spherical pits (shadowing and interreflection)",
+        prepare=_prepare,
+        energy_conserving=True,
+        reciprocal=True,
+    )
+)

@@ -1,0 +1,225 @@
+"""The fit report: one self-contained HTML file plus the PNG figures.
+
+:func:`write_report` reads a fit result folder (``result.json`` + ``chain.npz``, written
+by :meth:`gonio.fitting.FitResult.save`) and writes, into the same folder or another one,
+``report.html`` (every figure embedded as a base64 PNG, no external reference) and the
+figures as ``fit-*.png``.  The report reads top to bottom: warnings first, then what was
+measured, data against the posterior predictive band, residuals, the parameter table,
+the posterior (corner plot), the chain (traces), sampler diagnostics, correlations and
+the plain-text summary.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from gonio.fitting.results import FitResult
+from gonio.models import get as get_model
+
+from . import fit_figures
+
+__all__ = ["write_report", "FIGURES"]
+
+#: (file name, section title, figure function, caption) in report order.
+FIGURES: tuple[tuple[str, str, Callable[[FitResult], Figure], str], ...] = (
+    ("fit-geometry.png", "What was measured", fit_figures.geometry_figure,
+     "Viewing directions (dots) and source directions (stars) on the hemisphere."),
+    ("fit-data.png", "Data and model", fit_figures.data_figure,
+     "Measurements with one-sigma error bars; the model's posterior median with its 68 % and 95 % "
+     "posterior predictive bands (spread of the model over posterior draws, measurement noise not added)."),
+    ("fit-residuals.png", "Residuals", fit_figures.residual_figure,
+     "Normalised residuals; about 68 % should fall in the dark band and 95 % within the light one."),
+    ("fit-corner.png", "Posterior", fit_figures.corner_figure,
+     "One- and two-dimensional marginal posteriors of the free parameters."),
+    ("fit-traces.png", "Chain", fit_figures.trace_figure,
+     "Every walker's position at every step; the shaded start is discarded as burn-in."),
+)
+
+_STYLE = """
+body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; max-width: 1100px;
+       margin: 2em auto; padding: 0 1em; color: #222; line-height: 1.45; }
+h1 { font-size: 1.6em; margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 1.8em; }
+table { border-collapse: collapse; margin: 0.8em 0; font-size: 0.92em; }
+th, td { border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }
+th { background: #f2f2f2; } td.name, th.name { text-align: left; }
+.flags { background: #fff3f0; border: 2px solid #d9534f; padding: 0.6em 1em; border-radius: 4px; }
+.ok { background: #f0fff3; border: 1px solid #5cb85c; padding: 0.6em 1em; border-radius: 4px; }
+figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #eee; }
+figcaption { font-size: 0.9em; color: #555; }
+pre { background: #f7f7f7; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
+.meta { color: #555; }
+"""
+
+
+def _png(fig: Figure, path: Path) -> bytes:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110)
+    data = buffer.getvalue()
+    path.write_bytes(data)
+    return data
+
+
+def _number(x: Any, digits: int = 4) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "&ndash;"
+    if isinstance(x, (int, np.integer)):
+        return str(x)
+    return f"{x:.{digits}g}"
+
+
+def _parameter_table(result: FitResult) -> str:
+    sampled = bool(result.posterior)
+    head = ["parameter", "unit", "range", "least squares", "std. error"]
+    if sampled:
+        head += ["median", "&minus;1&sigma;", "+1&sigma;", "2.5 %", "97.5 %", "MAP", "prior"]
+    rows = ["<tr>" + "".join(f"<th{' class=name' if i == 0 else ''}>{h}</th>" for i, h in enumerate(head)) + "</tr>"]
+    for r in result.parameter_rows():
+        lo, hi = r["bounds"]
+        cells = [f"<td class=name><b>{html.escape(r['name'])}</b></td>", f"<td>{html.escape(r['unit'])}</td>",
+                 f"<td>[{lo:g}, {hi:g}]</td>"]
+        if r["fixed"]:
+            cells += [f"<td>{_number(r['value'])}</td>", "<td>fixed</td>"]
+            cells += ["<td></td>"] * (7 if sampled else 0)
+        else:
+            cells += [f"<td>{_number(r['value'])}</td>", f"<td>{_number(r['stderr'], 3)}</td>"]
+            if sampled:
+                cells += [f"<td><b>{_number(r['median'])}</b></td>", f"<td>{_number(r['median'] - r['p16'], 3)}</td>",
+                          f"<td>{_number(r['p84'] - r['median'], 3)}</td>", f"<td>{_number(r['p2_5'])}</td>",
+                          f"<td>{_number(r['p97_5'])}</td>", f"<td>{_number(r['map'])}</td>",
+                          f"<td class=name>{html.escape(r['prior'])}</td>"]
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    return "<table>" + "".join(rows) + "</table>"
+
+
+def _diagnostics_table(result: FitResult) -> str:
+    ls = result.least_squares
+    info = result.information()
+    items = [
+        ("data points", result.dataset.n),
+        ("free parameters", len(result.free)),
+        ("chi-square", ls.chi2),
+        ("reduced chi-square", ls.redchi),
+        ("AIC / BIC", f"{_number(info['aic'])} / {_number(info['bic'])}"),
+        ("least-squares status", html.escape(ls.message)),
+    ]
+    if result.mcmc is not None:
+        m = result.mcmc
+        items += [
+            ("walkers &times; steps", f"{m.n_walkers} &times; {m.n_steps} (limit {m.max_steps})"),
+            ("burn-in / thin", f"{m.burn_in} / {m.thin}"),
+            ("converged", "yes (length &ge; %g &tau;, stable &tau;)" % m.tau_multiple if m.converged
+             else "<b style='color:#d9534f'>NO: step limit reached</b>"),
+            ("mean acceptance fraction", f"{float(m.acceptance_fraction.mean()):.3f} "
+             f"(walkers {float(m.acceptance_fraction.min()):.2f}&ndash;{float(m.acceptance_fraction.max()):.2f})"),
+            ("sampling time", f"{m.wall_seconds:.2f} s, of which model evaluation {m.model_seconds:.2f} s"),
+        ]
+    rows = "".join(f"<tr><th class=name>{k}</th><td>{v if isinstance(v, str) else _number(v)}</td></tr>" for k, v in items)
+    table = f"<table>{rows}</table>"
+    if result.mcmc is not None:
+        head = "<tr><th class=name>parameter</th><th>&tau; [steps]</th><th>chain length / &tau;</th><th>effective samples</th></tr>"
+        body = ""
+        for name, tau, ess in zip(result.free, result.mcmc.tau, result.mcmc.ess):
+            length = result.mcmc.n_steps / tau if math.isfinite(tau) and tau > 0 else math.nan
+            body += f"<tr><td class=name>{html.escape(name)}</td><td>{_number(float(tau), 3)}</td><td>{_number(length, 3)}</td><td>{_number(float(ess), 4)}</td></tr>"
+        table += f"<table>{head}{body}</table>"
+    return table
+
+
+def _correlation_table(result: FitResult) -> str:
+    matrix = np.asarray(result.posterior["correlation"] if result.posterior else result.least_squares.correlation, float)
+    names = list(result.free)
+    if len(names) < 2:
+        return "<p>One free parameter: no correlations.</p>"
+    head = "<tr><th></th>" + "".join(f"<th>{html.escape(n)}</th>" for n in names) + "</tr>"
+    body = ""
+    for i, name in enumerate(names):
+        cells = ""
+        for j in range(len(names)):
+            r = matrix[i, j]
+            shade = "" if not math.isfinite(r) or i == j else f" style='background: rgba({'217,83,79' if r > 0 else '49,130,189'},{min(abs(r), 1) * 0.6:.2f})'"
+            cells += f"<td{shade}>{_number(float(r), 3)}</td>"
+        body += f"<tr><th class=name>{html.escape(name)}</th>{cells}</tr>"
+    return f"<table>{head}{body}</table>"
+
+
+def write_report(source: str | Path | FitResult, out: str | Path | None = None) -> Path:
+    """Write ``report.html`` and the PNG figures of a fit.
+
+    Parameters
+    ----------
+    source : path or FitResult
+        A result folder (or its ``result.json``), or a result in memory.
+    out : path, optional
+        Output folder (default: the result folder; required for an in-memory result).
+
+    Returns
+    -------
+    pathlib.Path
+        The HTML file.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        The result cannot be read.
+    """
+    if isinstance(source, FitResult):
+        if out is None:
+            raise ValueError("write_report: give an output folder 'out' for an in-memory result")
+        result = source
+    else:
+        source = Path(source)
+        result = FitResult.load(source)
+        if out is None:
+            out = source if source.is_dir() else source.parent
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    model = get_model(result.model)
+    data = result.dataset
+    sections = []
+    for filename, title, make, caption in FIGURES:
+        png = _png(make(result), out / filename)
+        encoded = base64.b64encode(png).decode("ascii")
+        sections.append(
+            (title, f"<figure><img alt='{html.escape(title)}' src='data:image/png;base64,{encoded}'>"
+                    f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+        )
+    figures = dict(sections)
+    if result.flags:
+        flags = "<div class=flags><b>Warnings</b><ul>" + "".join(f"<li>{html.escape(f)}</li>" for f in result.flags) + "</ul></div>"
+    else:
+        flags = "<div class=ok>No warnings: parameters determined, none at a bound" + (
+            ", chain converged." if result.mcmc is not None else " (least squares only, no MCMC).") + "</div>"
+    fixed = ", ".join(f"{k} = {v:g}" for k, v in result.fixed.items()) or "none"
+    title = f"Fit of {html.escape(result.model)} to {html.escape(data.label or 'data')}"
+    body = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{title}</title><style>{_STYLE}</style></head><body>
+<h1>{title}</h1>
+<p class=meta>Model <b>{html.escape(model.name)}</b>: {html.escape(model.description)}.
+Reference: {html.escape(model.reference)}.<br>
+Data: {data.n} measurements of {html.escape(data.quantity)} [{html.escape(data.unit)}] at {len(data.incidences()[0])} incidences.
+Fixed parameters: {html.escape(fixed)}. Created {html.escape(result.created)} with gonio {html.escape(result.gonio_version)}.</p>
+{flags}
+<h2>What was measured</h2>{figures['What was measured']}
+<h2>Data and model</h2>{figures['Data and model']}
+<h2>Residuals</h2>{figures['Residuals']}
+<h2>Parameters</h2>{_parameter_table(result)}
+<p class=meta>Least squares: weighted by the measurement uncertainties, bounded by the physical ranges; standard errors from the
+Jacobian. Posterior: median with the 16th/84th percentiles (&plusmn;1&sigma;) and 2.5th/97.5th percentiles; MAP is the highest posterior
+density found.</p>
+<h2>Posterior</h2>{figures['Posterior']}
+<h2>Chain</h2>{figures['Chain']}
+<h2>Diagnostics</h2>{_diagnostics_table(result)}
+<h2>Correlations</h2>{_correlation_table(result)}
+<h2>Summary</h2><pre>{html.escape(result.summary())}</pre>
+</body></html>
+"""
+    path = out / "report.html"
+    path.write_text(body)
+    return path

@@ -1,0 +1,135 @@
+"""Forward model, weighted bounded least squares, covariance and degeneracy diagnostics."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import gonio
+from gonio.fitting import Dataset, FitProblem, fit_least_squares
+
+from .synthetic import brdf_reference, in_plane_geometry, synthetic_dataset
+
+
+def test_fast_path_prediction_equals_the_reference_path():
+    # One implementation, two paths (DESIGN.md): FitProblem uses Model.at, the
+    # reference is gonio.brdf.  Equality to 1e-14 relative (identical arithmetic).
+    geometry = in_plane_geometry()
+    truth = dict(rho=0.5, rho_s=0.2, exponent=15.0)
+    data = synthetic_dataset("lambert+phong", truth, 0.01, geometry=geometry)
+    problem = FitProblem("lambert+phong", data)
+    np.testing.assert_allclose(problem.predict(truth), brdf_reference("lambert+phong", geometry, **truth), rtol=1e-14)
+
+
+def test_normalised_radiance_is_the_brdf_ratio_to_the_normal_view():
+    # Oren & Nayar section 5 (Fig 16): L(theta_r)/L(0) = f_r(theta_r)/f_r(0) at fixed source.
+    geometry = in_plane_geometry()
+    truth = dict(rho=0.6, k=0.6)
+    data = synthetic_dataset("minnaert", truth, 0.01, quantity="normalised_radiance", geometry=geometry)
+    ti, pi_, tr, pr = geometry
+    expected = gonio.brdf("minnaert", ti, pi_, tr, pr, **truth) / gonio.brdf("minnaert", ti, pi_, 0.0, pi_, **truth)
+    np.testing.assert_allclose(FitProblem("minnaert", data).predict(truth), expected, rtol=1e-14)
+
+
+def test_relative_radiance_is_scale_times_brdf_times_cos_theta_i():
+    geometry = in_plane_geometry()
+    data = synthetic_dataset("lambert", dict(rho=0.5, scale=3.0), 0.01, quantity="radiance", geometry=geometry)
+    expected = 3.0 * 0.5 / np.pi * np.cos(np.radians(geometry[0]))
+    np.testing.assert_allclose(FitProblem("lambert", data).predict(dict(rho=0.5, scale=3.0)), expected, rtol=1e-14)
+
+
+def test_lambert_estimate_and_error_match_the_weighted_mean():
+    # For f = rho/pi the weighted least-squares solution is pi x the weighted mean of the
+    # data, with standard error pi / sqrt(sum 1/sigma^2) (exact, linear model).
+    data = synthetic_dataset("lambert", dict(rho=0.4), 0.003, seed=3)
+    weights = 1.0 / data.sigma**2
+    fit = fit_least_squares(FitProblem("lambert", data))
+    assert fit.values["rho"] == pytest.approx(np.pi * np.sum(weights * data.value) / weights.sum(), rel=1e-7)
+    assert fit.stderr["rho"] == pytest.approx(np.pi / math.sqrt(weights.sum()), rel=1e-5)
+    assert fit.dof == data.n - 1 and fit.chi2 == pytest.approx(fit.redchi * fit.dof)
+    assert fit.warnings == []
+
+
+@pytest.mark.parametrize(
+    "model, truth",
+    [
+        ("lambert", dict(rho=0.7)),
+        ("minnaert", dict(rho=0.6, k=0.7)),
+        ("lambert+phong", dict(rho=0.5, rho_s=0.2, exponent=15.0)),
+    ],
+)
+def test_recovers_known_parameters_within_four_standard_errors(model, truth):
+    # Gaussian noise of 1 % of the values: the estimate lies within 4 standard errors of
+    # the truth (a 6e-5 chance of failing per parameter for a correct fit).
+    data = synthetic_dataset(model, truth, 0.01, seed=11, relative=True)
+    fit = fit_least_squares(FitProblem(model, data))
+    for name, value in truth.items():
+        assert abs(fit.values[name] - value) < 4 * fit.stderr[name], (name, fit.values[name], fit.stderr[name])
+    assert 0.5 < fit.redchi < 1.6  # chi2/dof of 48+ points: 1 +/- 0.2 (1 sd); 3 sd band
+
+
+def test_fixed_parameters_stay_fixed_and_are_validated():
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.002)
+    fit = fit_least_squares(FitProblem("minnaert", data, fixed={"k": 0.7}))
+    assert fit.free == ("rho",) and fit.values["k"] == 0.7
+    assert fit.values["rho"] == pytest.approx(0.6, abs=0.002)
+    with pytest.raises(ValueError, match="parameter k = 1.5"):
+        FitProblem("minnaert", data, fixed={"k": 1.5})
+    with pytest.raises(ValueError, match="cannot fix 'sigma'"):
+        FitProblem("minnaert", data, fixed={"sigma": 1.0})
+    with pytest.raises(ValueError, match="nothing to fit"):
+        FitProblem("minnaert", data, fixed={"k": 0.7, "rho": 0.5})
+
+
+def test_albedo_of_normalised_data_is_reported_insensitive():
+    # Normalised radiance divides out rho of a Lambertian surface: rho cannot be fitted.
+    data = synthetic_dataset("lambert", dict(rho=0.7), 0.01, quantity="normalised_radiance")
+    fit = fit_least_squares(FitProblem("lambert", data))
+    assert fit.insensitive == ["rho"]
+    assert math.isnan(fit.stderr["rho"])
+    assert any("rho: the data do not depend on this parameter" in w and "normalised" in w for w in fit.warnings)
+
+
+def test_albedo_and_free_scale_are_reported_degenerate():
+    # Relative radiance: scale x rho is all the data determine (minnaert is linear in rho).
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7, scale=50.0), 0.01, quantity="radiance", relative=True)
+    fit = fit_least_squares(FitProblem("minnaert", data))
+    assert fit.degenerate == [["rho", "scale"]]
+    assert math.isnan(fit.stderr["rho"]) and math.isnan(fit.stderr["scale"])
+    assert fit.stderr["k"] == pytest.approx(fit.stderr["k"]) and math.isfinite(fit.stderr["k"])
+    assert fit.values["k"] == pytest.approx(0.7, abs=5 * fit.stderr["k"])
+    assert any("rho and scale are degenerate" in w for w in fit.warnings)
+    # Fixing rho removes the degeneracy and recovers rho x scale.
+    fixed = fit_least_squares(FitProblem("minnaert", data, fixed={"rho": 0.6}))
+    assert fixed.degenerate == [] and fixed.values["scale"] == pytest.approx(50.0, rel=0.01)
+
+
+def test_parameter_at_a_physical_bound_is_flagged():
+    # Data that darken towards the horizon faster than Lambert (cos(theta_r)^0.3) would need
+    # a Minnaert exponent k > 1 (Oren & Nayar section 1: k in [0, 1]); the fit stops at k = 1.
+    geometry = in_plane_geometry()
+    values = gonio.brdf("lambert", *geometry, rho=0.5) * np.cos(np.radians(geometry[2])) ** 0.3
+    data = Dataset(*geometry, values, 0.002)
+    fit = fit_least_squares(FitProblem("minnaert", data))
+    assert fit.values["k"] == pytest.approx(1.0, abs=1e-12)
+    assert fit.at_bound == {"k": "upper"}
+    assert any("k = 1 lies at the upper bound" in w for w in fit.warnings)
+
+
+def test_low_signal_is_reported_as_unconstrained():
+    # Noise 100x the signal: the exponent's error exceeds its whole range [0, 1].
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 20.0, seed=5)
+    fit = fit_least_squares(FitProblem("minnaert", data))
+    assert any("not constrained by the data" in w for w in fit.warnings)
+
+
+def test_jitter_is_estimated_when_uncertainties_are_too_small():
+    # Real scatter 0.01, quoted uncertainties 0.002: the maximum-likelihood jitter is
+    # sqrt(0.01^2 - 0.002^2) ~ 0.0098 within the sampling error of 51 points (~10 %).
+    geometry = in_plane_geometry()
+    exact = gonio.brdf("lambert", *geometry, rho=0.5)
+    rng = np.random.default_rng(4)
+    data = Dataset(*geometry, exact + 0.01 * rng.standard_normal(exact.shape), 0.002)
+    fit = fit_least_squares(FitProblem("lambert", data, jitter=True))
+    assert fit.values["jitter"] == pytest.approx(0.0098, rel=0.3)

@@ -1,0 +1,148 @@
+"""Bayesian fits with emcee: recovery, interval coverage, convergence flags, bounds.
+
+Sampler settings in these tests are smaller than the defaults to keep the suite fast:
+16 walkers (emcee needs at least 2 x the free parameters) and a chain of 20 (not 50)
+autocorrelation times.  20 tau with 16 walkers still gives a few hundred independent
+samples, enough for the 2.5/97.5 percentiles to within about a tenth of a standard
+deviation, which is all the assertions below resolve.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import gonio
+from gonio.fitting import ConvergenceWarning, FitProblem, Normal, fit, fit_least_squares, sample_posterior
+from gonio.fitting.problem import predict_quantity
+
+from .synthetic import FIG16_INCIDENCES, in_plane_geometry, synthetic_dataset
+
+QUICK = dict(n_walkers=16, tau_multiple=20.0, max_steps=6000)
+
+
+@pytest.mark.parametrize(
+    "model, truth",
+    [("minnaert", dict(rho=0.6, k=0.7)), ("lambert+phong", dict(rho=0.5, rho_s=0.2, exponent=15.0))],
+)
+def test_95_percent_interval_contains_the_truth(model, truth):
+    # One fixed noise realisation: a correct posterior misses the truth for 1 seed in 20
+    # per parameter; the rate itself is checked by test_interval_coverage_over_seeds.
+    data = synthetic_dataset(model, truth, 0.01, seed=1, relative=True)
+    result = fit(data, model, **QUICK)
+    assert result.converged
+    post = result.posterior
+    for name, value in truth.items():
+        assert post["p2_5"][name] < value < post["p97_5"][name], (name, post["p2_5"][name], post["p97_5"][name])
+        # The posterior width agrees with the least-squares error for these well-determined,
+        # nearly Gaussian posteriors (to 25 %, the sampling error of a percentile of ~300
+        # effective samples plus the non-linearity of the model).
+        half_width = 0.5 * (post["p84"][name] - post["p16"][name])
+        assert half_width == pytest.approx(result.least_squares.stderr[name], rel=0.25)
+    assert 0.2 < post["acceptance_fraction"] < 0.8
+    assert all(ess > 100 for ess in post["ess"].values())
+
+
+def test_interval_coverage_over_seeds():
+    # Frequentist check of the Bayesian intervals: over 12 noise realisations x 2
+    # parameters (24 intervals) the 68 % intervals should contain the truth 16.3 times on
+    # average (binomial sd 2.3) and the 95 % intervals 22.8 times (sd 1.1).  Accepted:
+    # 11..22 and >= 20, i.e. about +/-2.5 sd; too narrow intervals (over-confident) or
+    # too wide ones (68 % containing all 24) fail.
+    truth = dict(rho=0.6, k=0.7)
+    inside68 = inside95 = 0
+    for seed in range(12):
+        data = synthetic_dataset("minnaert", truth, 0.02, seed=100 + seed, relative=True,
+                                 geometry=in_plane_geometry(views=np.arange(-70.0, 71.0, 20.0)))
+        post = fit(data, "minnaert", seed=seed, **QUICK).posterior
+        for name, value in truth.items():
+            inside68 += post["p16"][name] < value < post["p84"][name]
+            inside95 += post["p2_5"][name] < value < post["p97_5"][name]
+    assert 11 <= inside68 <= 22, inside68
+    assert inside95 >= 20, inside95
+
+
+def test_least_squares_error_coverage_over_many_seeds():
+    # The covariance (J^T J)^-1 calibrates the errors: over 150 seeds the +/-1 standard
+    # error interval of each of 2 parameters should contain the truth 68.3 % of 300 times
+    # = 205 (binomial sd 8.1); accepted 180..230 (+/-3 sd).
+    truth = dict(rho=0.6, k=0.7)
+    geometry = in_plane_geometry(views=np.arange(-70.0, 71.0, 20.0))
+    inside = 0
+    for seed in range(150):
+        data = synthetic_dataset("minnaert", truth, 0.02, seed=seed, relative=True, geometry=geometry)
+        ls = fit_least_squares(FitProblem("minnaert", data), n_starts=1)
+        inside += sum(abs(ls.values[n] - v) < ls.stderr[n] for n, v in truth.items())
+    assert 180 <= inside <= 230, inside
+
+
+def test_step_limit_is_flagged_loudly():
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.01, relative=True)
+    with pytest.warns(ConvergenceWarning, match="CHAIN NOT CONVERGED"):
+        result = fit(data, "minnaert", n_walkers=8, max_steps=200)
+    assert result.converged is False
+    assert any("CHAIN NOT CONVERGED" in flag for flag in result.flags)
+    assert "!!! NOT CONVERGED" in result.summary()
+
+
+def test_posterior_piled_at_a_bound_is_flagged():
+    # A Lambertian sample fitted with Lambert + Phong: the specular albedo's posterior
+    # piles up against 0 and the summary asks for an upper limit instead.
+    data = synthetic_dataset("lambert", dict(rho=0.5), 0.005, seed=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)  # the exponent is then unconstrained
+        result = fit(data, "lambert+phong", fixed={"exponent": 20.0}, **QUICK)
+    assert any(flag.startswith("rho_s: the posterior piles up at the lower bound") for flag in result.flags)
+    assert not any(flag.startswith("rho: the posterior piles") for flag in result.flags)
+
+
+def test_walkers_use_the_fixed_geometry_fast_path():
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.01, relative=True)
+    problem = FitProblem("minnaert", data)
+    start = fit_least_squares(problem)
+    before = problem.evaluations
+    with pytest.warns(ConvergenceWarning):  # 300 steps are too few for a stable tau; not the point here
+        chain, _ = sample_posterior(problem, start, n_walkers=8, max_steps=300, tau_multiple=1.0, check_every=100)
+    # Every likelihood evaluation went through FitProblem.predict (Model.at).
+    assert problem.evaluations - before >= chain.evaluations > 0
+    assert chain.model_seconds <= chain.wall_seconds
+
+
+def test_user_prior_overrides_the_default():
+    # A tight prior on k dominates weak data: the posterior median moves to the prior mean.
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.05, relative=True)
+    # The likelihood alone gives k = 0.7 +/- 0.01; with a prior 0.4 +/- 0.001 the posterior
+    # mean is the precision-weighted mean 0.403.
+    result = fit(data, "minnaert", priors={"k": Normal(0.4, 0.001, 0.0, 1.0)}, **QUICK)
+    assert result.posterior["median"]["k"] == pytest.approx(0.403, abs=0.003)
+    assert str(result.priors["k"]) == "normal(0.4, 0.001) on [0, 1]"
+    with pytest.raises(ValueError, match="not a free parameter"):
+        fit(data, "minnaert", fixed={"k": 0.7}, priors={"k": Normal(0.4, 0.1)}, mcmc=True, **QUICK)
+
+
+@pytest.mark.skipif("oren-nayar" not in gonio.models.available(), reason="oren-nayar is not registered yet")
+def test_oren_nayar_fig16_recovery():
+    # Oren & Nayar (1995) Fig 16: wall plaster, sigma = 30 deg, rho = 0.90, normalised
+    # radiance in the plane of incidence at theta_i = 30, 45, 60 deg, camera every 10 deg.
+    # With 1 % noise the 95 % interval of sigma contains 30 deg.  rho enters normalised
+    # radiance only through the interreflection term, so its interval is wide but must
+    # still contain 0.9.
+    model = gonio.models.get("oren-nayar")
+    truth = dict(rho=0.9, sigma=30.0)
+    fixed = {p.name: p.default for p in model.params if p.name not in truth}
+    geometry = in_plane_geometry(FIG16_INCIDENCES, np.arange(-80.0, 81.0, 10.0))
+    exact = predict_quantity("oren-nayar", "normalised_radiance", *geometry, dict(truth, **fixed))
+    rng = np.random.default_rng(16)
+    from gonio.fitting import Dataset
+
+    data = Dataset(*geometry, exact * (1 + 0.01 * rng.standard_normal(exact.shape)), 0.01 * exact,
+                   quantity="normalised_radiance")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        result = fit(data, "oren-nayar", fixed=fixed, **QUICK)
+    post = result.posterior
+    for name, value in truth.items():
+        assert post["p2_5"][name] <= value <= post["p97_5"][name], (name, post["p2_5"][name], post["p97_5"][name])
+    assert post["p97_5"]["sigma"] - post["p2_5"]["sigma"] < 10.0  # sigma is well determined

@@ -1,0 +1,80 @@
+"""The fit report and the gonio fit / gonio report commands."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from gonio.cli import main
+from gonio.fitting import Dataset, fit
+from gonio.report.fit_report import FIGURES, write_report
+
+from .synthetic import in_plane_geometry, synthetic_dataset
+
+
+def _with_out_of_plane(data: Dataset) -> Dataset:
+    extra = 8
+    theta_r = np.linspace(5.0, 75.0, extra)
+    return Dataset(
+        np.r_[data.theta_i, np.full(extra, 45.0)], np.r_[data.phi_i, np.zeros(extra)],
+        np.r_[data.theta_r, theta_r], np.r_[data.phi_r, np.full(extra, 90.0)],
+        np.r_[data.value, np.full(extra, 0.2)], np.r_[data.sigma, np.full(extra, 0.01)], label="mixed",
+    )
+
+
+def test_report_is_one_self_contained_html_file(tmp_path):
+    data = _with_out_of_plane(synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.005, seed=1))
+    result = fit(data, "minnaert", n_walkers=8, tau_multiple=10.0)
+    result.save(tmp_path)
+    html_path = write_report(tmp_path)
+    text = html_path.read_text()
+    for filename, title, _, _ in FIGURES:
+        assert (tmp_path / filename).stat().st_size > 10_000  # a real picture, not an empty canvas
+        assert f"<h2>{title}</h2>" in text
+    sources = re.findall(r"src=['\"]([^'\"]*)['\"]", text)
+    assert len(sources) == len(FIGURES)
+    assert all(s.startswith("data:image/png;base64,") for s in sources)
+    assert "href=" not in text  # no external references of any kind
+    assert "Diagnostics" in text and "reduced chi-square" in text
+
+
+def test_report_of_a_least_squares_only_fit(tmp_path):
+    data = synthetic_dataset("lambert", dict(rho=0.5), 0.005)
+    write_report(fit(data, "lambert", mcmc=False), tmp_path)
+    text = (tmp_path / "report.html").read_text()
+    assert "least squares only, no MCMC" in text
+    assert (tmp_path / "fit-corner.png").exists() and "<h2>Posterior</h2>" in text
+
+
+def test_cli_fit_then_report(tmp_path, capsys):
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.005, seed=2)
+    csv = data.to_csv(tmp_path / "plaster.csv")
+    code = main(["fit", str(csv), "--model", "minnaert", "--walkers", "8", "--max-steps", "400", "--quiet"])
+    assert code == 0
+    out, err = capsys.readouterr()
+    assert "[[Variables]]" in out
+    folder = tmp_path / "plaster.fit-minnaert"
+    assert (folder / "result.json").exists()
+    # 400 steps cannot reach 50 tau: the CLI must say so loudly.
+    assert "did NOT converge" in err
+    assert main(["report", str(folder)]) == 0
+    assert (folder / "report.html").exists()
+
+
+def test_cli_errors_are_one_line_messages(tmp_path, capsys):
+    data = synthetic_dataset("lambert", dict(rho=0.5), 0.005)
+    csv = data.to_csv(tmp_path / "d.csv")
+    assert main(["fit", str(csv), "--model", "lambert", "--fix", "rho=2", "--no-mcmc"]) == 2
+    assert "parameter rho = 2" in capsys.readouterr().err
+    assert main(["fit", str(csv), "--model", "lambert", "--fix", "rho"]) == 2
+    assert "expected NAME=VALUE" in capsys.readouterr().err
+    assert main(["report", str(tmp_path / "missing")]) == 2
+    assert "no result.json" in capsys.readouterr().err
+
+
+def test_cli_compares_models(tmp_path, capsys):
+    data = synthetic_dataset("lambert", dict(rho=0.5), 0.003, seed=8)
+    csv = data.to_csv(tmp_path / "d.csv")
+    assert main(["fit", str(csv), "--model", "lambert", "--model", "minnaert"]) == 0
+    assert "chosen: lambert" in capsys.readouterr().out

@@ -1,0 +1,82 @@
+"""Fit results: JSON round trip, summaries, best values; model selection."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from gonio.fitting import FitResult, compare_models, fit, information_criteria
+
+from .synthetic import synthetic_dataset
+
+QUICK = dict(n_walkers=16, tau_multiple=20.0, max_steps=6000)
+
+
+@pytest.fixture(scope="module")
+def minnaert_result():
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.01, seed=3, relative=True)
+    return fit(data, "minnaert", **QUICK)
+
+
+def test_json_round_trip_preserves_every_number(minnaert_result, tmp_path):
+    path = minnaert_result.save(tmp_path / "fit")
+    assert {p.name for p in (tmp_path / "fit").iterdir()} == {"result.json", "chain.npz", "summary.txt"}
+    json.loads(path.read_text())  # strict JSON (no NaN literals)
+    back = FitResult.load(tmp_path / "fit")
+    assert back.summary() == minnaert_result.summary()
+    assert back.posterior == minnaert_result.posterior
+    assert back.least_squares.values == minnaert_result.least_squares.values
+    np.testing.assert_array_equal(back.mcmc.chain, minnaert_result.mcmc.chain)
+    np.testing.assert_array_equal(back.dataset.value, minnaert_result.dataset.value)
+    assert back.to_dict() == minnaert_result.to_dict()
+
+
+def test_json_round_trip_with_undetermined_parameters(tmp_path):
+    # NaN standard errors (degenerate rho and scale) are written as null and read back as NaN.
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7, scale=50.0), 0.01, quantity="radiance", relative=True)
+    result = fit(data, "minnaert", mcmc=False)
+    back = FitResult.load(result.save(tmp_path))
+    assert math.isnan(back.least_squares.stderr["rho"]) and back.mcmc is None
+    assert back.summary() == result.summary()
+    assert "+/- (undetermined)" in back.summary()
+
+
+def test_load_rejects_other_json(tmp_path):
+    (tmp_path / "result.json").write_text('{"format": "something-else"}')
+    with pytest.raises(ValueError, match="field 'format'"):
+        FitResult.load(tmp_path)
+
+
+def test_summary_reads_like_a_fit_report(minnaert_result):
+    text = minnaert_result.summary()
+    for section in ("[[Model]]", "[[Fit Statistics]]", "[[Variables]]", "[[Posterior]]", "[[Correlations]]", "[[Warnings]]"):
+        assert section in text
+    assert "reduced chi-square" in text and "C(rho, k)" in text
+
+
+def test_best_values_and_predictive_band(minnaert_result):
+    best = minnaert_result.best_values()
+    assert best["k"] == minnaert_result.posterior["median"]["k"]
+    band = minnaert_result.posterior_predictive(45.0, 0.0, np.array([0.0, 30.0]), 180.0, n_draws=100)
+    assert band.shape == (5, 2)
+    assert np.all(np.diff(band, axis=0) >= 0)  # percentiles are ordered
+
+
+def test_information_criteria_formulas():
+    # Akaike 1974 / Schwarz 1978 definitions with -2 ln L.
+    ic = information_criteria(-12.5, 3, 40)
+    assert ic["aic"] == pytest.approx(25.0 + 6.0)
+    assert ic["bic"] == pytest.approx(25.0 + 3 * math.log(40))
+    assert ic["aicc"] == pytest.approx(31.0 + 2 * 3 * 4 / 36)
+
+
+def test_model_selection_uses_no_more_model_than_the_data_need():
+    lambertian = synthetic_dataset("lambert", dict(rho=0.5), 0.003, seed=8)
+    comparison = compare_models(lambertian, ["minnaert", "lambert", "lambert+phong"])
+    assert comparison.chosen == "lambert"
+    limb = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.003, seed=8)
+    comparison = compare_models(limb, ["lambert", "minnaert"])
+    assert comparison.chosen == "minnaert"
+    assert "chosen: minnaert" in comparison.summary()
