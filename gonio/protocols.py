@@ -474,7 +474,7 @@ class PlannedPoint:
     the sample frame whose azimuth 0 is the camera's swing plane on the positive side.
     """
 
-    index: int
+    index: int  # position in the full expansion of the protocol, refused points included
     block: str
     repeat: int
     theta_i: float
@@ -608,6 +608,7 @@ def plan(protocol: Protocol) -> Plan:
         for repeat in range(block.repeats):
             for view in block.views:
                 point = PlannedPoint(index, block.name, repeat, block.theta_i, block.phi_i, view)
+                index += 1
                 reason = refusal_reason(block.theta_i, block.phi_i, view, rig)
                 if reason:
                     refused.append(Refusal(point, reason))
@@ -619,7 +620,6 @@ def plan(protocol: Protocol) -> Plan:
                 position = target
                 seconds += per_point
                 points.append(point)
-                index += 1
     darks = (1 if protocol.darks.at_start else 0) + (
         (len(points) - 1) // protocol.darks.every if protocol.darks.every and points else 0
     )

@@ -246,6 +246,25 @@ class RigControl:
         self._rig.stage.limit_faults.clear()
         self._rig.camera.fault = False
 
+    # -- sample holder ----------------------------------------------------------------
+    def mount_sample(self, brdf: Brdf, handling_s: float = 60.0) -> None:
+        """Put another sample on the holder, e.g. a reference standard for absolute BRDF.
+
+        Parameters
+        ----------
+        brdf : callable
+            The new sample's BRDF ``brdf(theta_i, phi_i, theta_r, phi_r)`` [1/sr], degrees.
+        handling_s : float
+            Simulated time the operator needs to swap samples [s].
+        """
+        if not callable(brdf):
+            raise ValueError(f"brdf must be callable brdf(theta_i, phi_i, theta_r, phi_r), got {brdf!r}")
+        scene = self._rig.scene
+        scene.brdf = brdf
+        scene._reflectance_cache.clear()
+        if handling_s > 0:
+            self.advance(handling_s)
+
     # -- ground truth -----------------------------------------------------------------
     def true_state(self) -> TrueState:
         """Ground truth now (true positions, lamp output, true radiance)."""

@@ -137,5 +137,6 @@ def _run(args: argparse.Namespace) -> int:
         print("gonio: WARNING: the MCMC chain did NOT converge (step limit reached); "
               "posterior numbers are unreliable. Increase --max-steps or simplify the model.", file=sys.stderr)
     for flag in result.flags:
-        print(f"gonio: warning: {flag}", file=sys.stderr)
+        if not flag.startswith("CHAIN NOT CONVERGED"):  # already said above
+            print(f"gonio: warning: {flag}", file=sys.stderr)
     return 0

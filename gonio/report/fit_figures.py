@@ -295,5 +295,5 @@ def trace_figure(result: FitResult) -> Figure:
     status = "converged" if m.converged else "NOT CONVERGED (step limit reached)"
     tau = float(np.nanmax(m.tau)) if np.any(np.isfinite(m.tau)) else math.nan
     fig.suptitle(f"Traces of {m.n_walkers} walkers; shaded: burn-in ({m.burn_in} steps); "
-                 f"max tau = {tau:.1f} steps; {status}", fontsize=10)
+                 f"max tau = {tau:.1f} steps; {status}", fontsize=10, color="black" if m.converged else "#c9302c")
     return fig

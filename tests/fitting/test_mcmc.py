@@ -146,3 +146,15 @@ def test_oren_nayar_fig16_recovery():
     for name, value in truth.items():
         assert post["p2_5"][name] <= value <= post["p97_5"][name], (name, post["p2_5"][name], post["p97_5"][name])
     assert post["p97_5"]["sigma"] - post["p2_5"]["sigma"] < 10.0  # sigma is well determined
+
+
+@pytest.mark.skipif("oren-nayar" not in gonio.models.available(), reason="oren-nayar is not registered yet")
+def test_oren_nayar_roughness_of_a_lambertian_sample_is_an_upper_limit():
+    # sigma = 0 is Lambert (Oren & Nayar eq 33-35 reduce to rho/pi), and the BRDF is
+    # stationary in sigma there, so Lambertian data only bound sigma from above: the fit
+    # must say "upper limit", not report sigma = x +/- y.
+    data = synthetic_dataset("lambert", dict(rho=0.8), 0.002, seed=3)
+    result = fit(data, "oren-nayar", fixed={"ir_weight": 1.0}, **QUICK)
+    assert any(flag.startswith("sigma: the posterior piles up at the lower bound 0 deg") for flag in result.flags)
+    assert result.posterior["p97_5"]["sigma"] < 5.0  # 0.2 % noise excludes visible roughness
+    assert result.posterior["p2_5"]["rho"] < 0.8 < result.posterior["p97_5"]["rho"]

@@ -111,7 +111,7 @@ def test_special_geometries_are_warning_free_and_finite():
     ti, tr, dphi = np.meshgrid(thetas, thetas, [0.0, 90.0, 180.0], indexing="ij")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        for psi in (1e-6, 30.0, 90.0):
+        for psi in (1e-200, 1e-6, 30.0, 90.0):
             values = PITTED(ti, 0.0, tr, dphi, rho=1.0, psi=psi, coverage=1.0)
             assert np.all(np.isfinite(values)) and np.all(values >= 0)
 

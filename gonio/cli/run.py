@@ -1,0 +1,132 @@
+"""``gonio run``: measure a sweep protocol on the emulated or a real rig."""
+from __future__ import annotations
+
+import argparse
+import functools
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+import gonio
+from gonio import acquisition, protocols
+
+from . import CLIError
+from .models import parse_model_spec
+from .progress import ProgressLine
+
+#: The paper's wall plaster (Oren & Nayar 1995, Fig 16): the default emulated sample.
+DEFAULT_SAMPLE = "oren-nayar:sigma=30,rho=0.9"
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``gonio run``."""
+    parser = subparsers.add_parser(
+        "run",
+        help="measure a sweep protocol on the emulated rig (default) or a real one",
+        description=(
+            "Run a protocol on the rig and record every point as it is measured (see "
+            "docs/data-format.md). Without --stage/--camera/--lamp an emulated rig is started "
+            "in-process with --sample as the sample. Ctrl-C stops cleanly; --resume continues."
+        ),
+    )
+    parser.add_argument("protocol", help="protocol TOML file (docs/protocols.md)")
+    parser.add_argument("--out", required=True, help="recording folder (created; never overwritten)")
+    parser.add_argument("--resume", action="store_true", help="continue an interrupted recording in --out")
+    parser.add_argument("--sample", default=DEFAULT_SAMPLE, metavar="MODEL[:k=v,...]",
+                        help=f"emulated sample (default {DEFAULT_SAMPLE})")
+    parser.add_argument("--seed", type=int, default=0, help="emulator seed (default 0)")
+    parser.add_argument("--stage", help="stage port or URL of a real rig (e.g. /dev/ttyUSB0)")
+    parser.add_argument("--camera", help="camera port or URL of a real rig")
+    parser.add_argument("--lamp", help="lamp supply port or URL of a real rig")
+    parser.add_argument("--lamp-voltage", type=float, default=120.0, help="lamp voltage [V] (default 120)")
+    parser.add_argument("--no-warm-up", action="store_true", help="do not wait for the lamp to stabilise")
+    parser.add_argument("--quiet", action="store_true", help="no progress line")
+    parser.set_defaults(func=_run)
+
+
+@contextmanager
+def emulated_rig(sample: str, seed: int, name: str = "gonio-run") -> Iterator[tuple]:
+    """An in-process emulated rig with a registry model as sample, opened through the drivers.
+
+    Yields ``(rig, emulator, change_sample, metadata)``: the driver-level Rig, the emulator
+    (for its clock), a function swapping the sample for a Lambertian reference standard
+    and back, and the configuration to store with the recording.
+    """
+    from drivers.emulator.rig import EmulatedRig
+    from drivers.rig import Rig
+
+    model_name, values = parse_model_spec(sample)
+    brdf = functools.partial(gonio.brdf, model_name, **values)
+    emulator = EmulatedRig(brdf, seed=seed, name=name, lamp_warm=False)
+    emulator.start(pty=False)
+    try:
+        rig = Rig.open(emulator.url("stage"), emulator.url("camera"), emulator.url("lamp"))
+        try:
+            def change_sample(which: str, reflectance: float | None = None) -> None:
+                if which == "sample":
+                    emulator.control.mount_sample(brdf)
+                else:
+                    emulator.control.mount_sample(functools.partial(gonio.brdf, "lambert", rho=reflectance))
+
+            metadata = {"rig": {"kind": "emulator", "sample": sample, "model": model_name,
+                                "parameters": values, "seed": seed,
+                                "min_separation_deg": emulator.min_separation_deg}}
+            yield rig, emulator, change_sample, metadata
+        finally:
+            rig.close()
+    finally:
+        emulator.close()
+
+
+def _progress_printer(quiet: bool):
+    if quiet:
+        return None
+    line = ProgressLine("points")
+
+    def show(p: acquisition.Progress) -> None:
+        extra = f"instrument {p.instrument_time / 60:.1f} min"
+        if p.refused or p.errors:
+            extra += f", {p.refused} refused, {p.errors} failed"
+        line.update(p.done, p.total, p.eta_wall, extra)
+
+    return show
+
+
+def _run(args: argparse.Namespace) -> int:
+    protocol = protocols.load(args.protocol)
+    ports = (args.stage, args.camera, args.lamp)
+    if any(ports) and not all(ports):
+        raise CLIError("a real rig needs all three of --stage, --camera and --lamp")
+    reflectance = protocol.reference.reflectance if protocol.reference else None
+    try:
+        if all(ports):
+            from drivers.rig import Rig
+
+            def prompt(which: str) -> None:
+                what = f"the reference standard ({protocol.reference.label})" if which == "reference" else "the sample"
+                input(f"Mount {what} on the sample holder, then press Enter: ")
+
+            with Rig.open(*ports) as rig:
+                result = acquisition.run_protocol(
+                    protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
+                    warm_up=not args.no_warm_up, change_sample=prompt,
+                    metadata={"rig": {"kind": "hardware", "stage": args.stage, "camera": args.camera, "lamp": args.lamp}},
+                    progress=_progress_printer(args.quiet),
+                )
+        else:
+            with emulated_rig(args.sample, args.seed) as (rig, emulator, change_sample, metadata):
+                result = acquisition.run_protocol(
+                    protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
+                    warm_up=not args.no_warm_up,
+                    change_sample=lambda which: change_sample(which, reflectance),
+                    clock=emulator.control.now, metadata=metadata,
+                    progress=_progress_printer(args.quiet),
+                )
+    except KeyboardInterrupt:
+        print(f"\ngonio run: interrupted; everything measured is in {args.out}. "
+              f"Continue with: gonio run {args.protocol} --out {args.out} --resume")
+        return 130
+    except acquisition.AcquisitionError as error:
+        raise CLIError(f"{error} (everything measured so far is in {args.out}; resume with --resume)") from error
+    print(result.summary())
+    return 0
