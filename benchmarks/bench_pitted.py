@@ -145,7 +145,9 @@ def chart(records: list[dict], path: Path) -> None:
             y = [max(r["relative_error"], 1e-16) for r in rows]
             ax.loglog(x, y, marker=marker, color=color, ls="-" if len(rows) > 1 else "", label=key)
             for r, xi, yi in zip(rows, x, y):
-                ax.annotate(r["method"].split()[2 if key != "Monte" else -1], (xi, yi), fontsize=6,
+                tokens = r["method"].split()
+                label = next((tok for tok in tokens if tok.startswith("n=")), tokens[-1])
+                ax.annotate(label, (xi, yi), fontsize=6,
                             xytext=(3, 2), textcoords="offset points")
         ax.set_title(family, fontsize=10)
         ax.set_xlabel("time per BRDF evaluation [s]")

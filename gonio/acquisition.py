@@ -35,6 +35,7 @@ __all__ = [
     "run_protocol",
     "Reduced",
     "reduce_recording",
+    "combine_reduced",
     "LAMP_STABILITY",
     "REFERENCE_BLOCK",
 ]
@@ -448,6 +449,30 @@ class Reduced:
         """Absolute BRDF when calibrated, else normalised radiance."""
         return self.brdf() if self.reference_irradiance is not None else self.normalised_radiance()
 
+    def fit_inputs(self, calibration_stability: float = LAMP_STABILITY):
+        """The dataset and priors a fit of this recording should use.
+
+        With a reference standard: relative radiance, whose ``scale`` (the lamp irradiance
+        E_0 in the recording's units) gets a Gaussian prior centred on the reference
+        estimate with its uncertainty and ``calibration_stability`` (lamp drift between
+        the reference and the sample) in quadrature.  The calibration error is common to
+        every point, so it belongs in one nuisance parameter, not in per-point
+        uncertainties (which would make the albedo's interval too narrow).  Without a
+        reference: normalised radiance L(theta_r)/L(0) and no extra prior.
+
+        Returns
+        -------
+        dataset : gonio.fitting.Dataset
+        priors : dict of name -> gonio.fitting.Prior
+        """
+        from .fitting import Normal
+
+        if self.reference_irradiance is None:
+            return self.normalised_radiance(), {}
+        e0 = self.reference_irradiance
+        sd = e0 * math.hypot(self.reference_irradiance_sigma / e0, calibration_stability)
+        return self.relative_radiance(), {"scale": Normal(e0, sd, 0.0, math.inf)}
+
 
 def _combine_repeats(values: np.ndarray, sigmas: np.ndarray, floor: float = 0.0) -> tuple[float, float]:
     """Weighted mean of repeats; uncertainty = max(propagated, observed scatter / sqrt(n)),
@@ -512,4 +537,29 @@ def reduce_recording(folder: str | Path, lamp_stability: float = 0.0) -> Reduced
         radiance=columns[5], radiance_sigma=columns[6], repeats=columns[7].astype(int),
         reference_irradiance=reference_irradiance, reference_irradiance_sigma=reference_sigma,
         label=label, metadata={"recording": str(folder), "protocol": meta.get("protocol", {}).get("name")},
+    )
+
+
+def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced:
+    """Join reduced recordings of one sample (e.g. in-plane and off-plane runs).
+
+    The geometries are concatenated; the reference irradiances, when present, are
+    combined by their inverse-variance weighted mean (the runs must share lamp, voltage
+    and camera settings for their relative radiances to be comparable).
+    """
+    if not parts:
+        raise ValueError("combine_reduced needs at least one reduced recording")
+    cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
+    refs = [(p.reference_irradiance, p.reference_irradiance_sigma) for p in parts if p.reference_irradiance is not None]
+    irradiance = sigma = None
+    if refs:
+        weights = np.array([1.0 / s**2 for _, s in refs])
+        irradiance = float(np.sum(weights * np.array([e for e, _ in refs])) / np.sum(weights))
+        sigma = float(1.0 / math.sqrt(np.sum(weights)))
+    return Reduced(
+        theta_i=cat("theta_i"), phi_i=cat("phi_i"), theta_r=cat("theta_r"), phi_r=cat("phi_r"), view=cat("view"),
+        radiance=cat("radiance"), radiance_sigma=cat("radiance_sigma"), repeats=cat("repeats"),
+        reference_irradiance=irradiance, reference_irradiance_sigma=sigma,
+        label=label or parts[0].label,
+        metadata={"recordings": [p.metadata.get("recording") for p in parts]},
     )

@@ -16,13 +16,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="fit a reflectance model to measured data (least squares + MCMC)",
         description=(
             "Fit a registered model to a CSV of measurements with the columns "
-            "theta_i,phi_i,theta_r,phi_r,value,sigma (angles in degrees). Weighted, bounded least squares, "
+            "theta_i,phi_i,theta_r,phi_r,value,sigma (angles in degrees), or to a recording folder written "
+            "by 'gonio run'. Weighted, bounded least squares, "
             "then Bayesian sampling with emcee until the chain is 50 autocorrelation times long. The result "
             "(result.json, chain.npz, summary.txt) is written to a folder next to the data; "
             "'gonio report FOLDER' turns it into an HTML report."
         ),
     )
-    parser.add_argument("data", help="CSV file: theta_i,phi_i,theta_r,phi_r,value,sigma")
+    parser.add_argument("data", help="CSV file (theta_i,phi_i,theta_r,phi_r,value,sigma) or a recording folder of "
+                                     "'gonio run' (absolute BRDF when calibrated, else normalised radiance)")
     parser.add_argument("--model", required=True, action="append",
                         help="registered model name (see 'gonio models'); repeat to compare models")
     parser.add_argument("--quantity", choices=["brdf", "normalised_radiance", "radiance"],
@@ -99,12 +101,27 @@ class _Progress:
         print(f"  mcmc: step {steps}/{max_steps}, max tau = {tau:.1f}{need}", file=sys.stderr, flush=True)
 
 
+def _load(path: Path, quantity: str | None):
+    """A CSV file, or a recording folder written by 'gonio run' (reduced here)."""
+    from gonio.fitting import Dataset
+
+    if not path.is_dir():
+        return Dataset.from_csv(path, quantity=quantity)
+    from gonio.acquisition import reduce_recording
+
+    reduced = reduce_recording(path)
+    if quantity is None:
+        return reduced.best_dataset()
+    return {"brdf": reduced.brdf, "normalised_radiance": reduced.normalised_radiance,
+            "radiance": reduced.relative_radiance}[quantity]()
+
+
 def _run(args: argparse.Namespace) -> int:
     from gonio import models
-    from gonio.fitting import ConvergenceWarning, Dataset, compare_models, fit, parse_prior
+    from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
 
     data_path = Path(args.data)
-    dataset = Dataset.from_csv(data_path, quantity=args.quantity)
+    dataset = _load(data_path, args.quantity)
     fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
     options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
     if len(args.model) > 1:

@@ -338,7 +338,7 @@ def fit_least_squares(
             at_bound[n] = "upper"
 
     chi2 = problem.chi_square(values)
-    dof = problem.dataset.n - len(free)
+    dof = problem.n_informative - len(free)
     warnings = _describe(problem, values, stderr, at_bound, insensitive, degenerate, dof)
     return LeastSquaresResult(
         values=values,
@@ -399,5 +399,6 @@ def _describe(problem, values, stderr, at_bound, insensitive, degenerate, dof) -
                 f"its physical range [{lo:g}, {hi:g}] (low signal or too few geometries)"
             )
     if dof <= 0:
-        notes.append(f"{problem.dataset.n} measurements for {len(problem.free)} free parameters: no degrees of freedom left")
+        notes.append(f"{problem.n_informative} informative measurements for {len(problem.free)} free parameters: "
+                     "no degrees of freedom left")
     return notes

@@ -172,6 +172,19 @@ class FitProblem:
         #: Number of model evaluations so far (for benchmarks).
         self.evaluations = 0
 
+    @property
+    def n_informative(self) -> int:
+        """Measurements that carry information about the parameters.
+
+        Normalised radiance at the normal view (theta_r = 0) that equals 1 exactly is the
+        normalisation itself: the model predicts exactly 1 there for every parameter value,
+        so such points add nothing to chi-square and are not counted as degrees of freedom.
+        """
+        if self.dataset.quantity != "normalised_radiance":
+            return self.dataset.n
+        reference = (self.dataset.theta_r == 0.0) & (self.dataset.value == 1.0)
+        return self.dataset.n - int(np.count_nonzero(reference))
+
     # ------------------------------------------------------------------ parameters
     def spec(self, name: str) -> Param:
         """The :class:`~gonio.models.Param` of a fit parameter."""

@@ -198,7 +198,7 @@ class FitResult:
 
     def information(self) -> dict[str, float]:
         """AIC, AICc and BIC of the maximum-likelihood fit (:mod:`gonio.fitting.selection`)."""
-        return information_criteria(self.least_squares.log_likelihood, len(self.free), self.dataset.n)
+        return information_criteria(self.least_squares.log_likelihood, len(self.free), self.least_squares.dof + len(self.free))
 
     # ------------------------------------------------------------------ persistence
     def to_dict(self) -> dict[str, Any]:

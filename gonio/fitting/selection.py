@@ -158,7 +158,7 @@ def compare_models(
         ls = fit_least_squares(problem, n_starts=n_starts)
         priors = resolve_priors(problem, ls.values)
         label = name + ("" if not fixed else " (" + ", ".join(f"{k}={v:g}" for k, v in fixed.items()) + ")")
-        info = information_criteria(ls.log_likelihood, len(problem.free), dataset.n)
+        info = information_criteria(ls.log_likelihood, len(problem.free), problem.n_informative)
         rows.append(
             {
                 "label": label,

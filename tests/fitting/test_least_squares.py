@@ -133,3 +133,13 @@ def test_jitter_is_estimated_when_uncertainties_are_too_small():
     data = Dataset(*geometry, exact + 0.01 * rng.standard_normal(exact.shape), 0.002)
     fit = fit_least_squares(FitProblem("lambert", data, jitter=True))
     assert fit.values["jitter"] == pytest.approx(0.0098, rel=0.3)
+
+
+def test_normal_view_reference_points_are_not_degrees_of_freedom():
+    # Normalised radiance is exactly 1 at theta_r = 0 by construction (Oren & Nayar
+    # section 5): those points cannot misfit, so they do not count in dof.
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.01, quantity="normalised_radiance", relative=True)
+    normal = data.theta_r == 0.0
+    exact = Dataset(*data.geometry, np.where(normal, 1.0, data.value), data.sigma, quantity="normalised_radiance")
+    fit = fit_least_squares(FitProblem("minnaert", exact))
+    assert fit.dof == data.n - int(normal.sum()) - 2

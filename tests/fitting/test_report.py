@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gonio.cli import main
-from gonio.fitting import Dataset, fit
+from gonio.fitting import Dataset, FitResult, fit
 from gonio.report.fit_report import FIGURES, write_report
 
 from .synthetic import in_plane_geometry, synthetic_dataset
@@ -78,3 +78,23 @@ def test_cli_compares_models(tmp_path, capsys):
     csv = data.to_csv(tmp_path / "d.csv")
     assert main(["fit", str(csv), "--model", "lambert", "--model", "minnaert"]) == 0
     assert "chosen: lambert" in capsys.readouterr().out
+
+
+def test_cli_fit_reads_a_recording_folder(tmp_path, capsys, monkeypatch):
+    # The acquisition layer reduces a recording to datasets; 'gonio fit FOLDER' fits the
+    # normalised radiance when asked (the reduction itself is tested with acquisition).
+    import gonio.acquisition as acquisition
+
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7, scale=40.0), 0.01, quantity="radiance", relative=True)
+    reduced = acquisition.Reduced(
+        theta_i=data.theta_i, phi_i=data.phi_i, theta_r=data.theta_r, phi_r=data.phi_r,
+        view=data.signed_view, radiance=data.value, radiance_sigma=data.sigma, repeats=np.ones(data.n, int),
+        reference_irradiance=None, reference_irradiance_sigma=None, label="recorded",
+    )
+    folder = tmp_path / "recording"
+    folder.mkdir()
+    monkeypatch.setattr(acquisition, "reduce_recording", lambda path: reduced)
+    assert main(["fit", str(folder), "--model", "minnaert", "--no-mcmc", "--quiet"]) == 0
+    result = FitResult.load(tmp_path / "recording.fit-minnaert")
+    assert result.dataset.quantity == "normalised_radiance" and result.dataset.label == "recorded"
+    assert result.least_squares.values["k"] == pytest.approx(0.7, abs=0.02)
