@@ -15,14 +15,14 @@ from importlib.metadata import PackageNotFoundError, version as _version
 
 import numpy as np
 
-from . import models
+from . import geometry, models, radiometry
 
 try:
     __version__ = _version("gonio")
 except PackageNotFoundError:  # running from a source tree that was not installed
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__", "brdf", "models"]
+__all__ = ["__version__", "brdf", "models", "geometry", "radiometry"]
 
 
 def brdf(name: str, theta_i, phi_i, theta_r, phi_r, **params) -> np.ndarray:

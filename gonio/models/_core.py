@@ -376,8 +376,9 @@ class FixedGeometryModel:
         return self(**dict(zip(names, vector)), **fixed)
 
     def _scatter(self, values: np.ndarray) -> np.ndarray:
-        if self._all_valid:
-            return np.broadcast_to(np.asarray(values, dtype=float), self.shape).copy()
+        if self._all_valid:  # the kernel saw the geometry flattened to 1-D
+            flat = np.broadcast_to(np.asarray(values, dtype=float), (self._valid.size,))
+            return flat.reshape(self.shape).copy()
         out = np.zeros(self.shape)
         out[self._nan] = np.nan
         out[self._valid] = values

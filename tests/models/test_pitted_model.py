@@ -95,14 +95,14 @@ def test_non_negative(ti, pi_, tr, pr, psi, rho):
 def test_energy_directional_hemispherical_reflectance(psi):
     # energy: rho_dh = (1-c) rho + c rho cos^2(psi/2)/(1 - rho sin^2(psi/2)) for every
     # incidence (from eq 9-10), <= 1 and exactly 1 for rho = 1.  The BRDF has kinks at
-    # shadow boundaries, so the 24-node quadrature of gonio.radiometry is good to ~1e-5;
-    # tolerance 1e-4.
+    # shadow boundaries, so the 24-node quadrature of gonio.radiometry is not exact:
+    # measured <= 4e-6 (psi = 90), 6e-8 (shallower); tolerance 3e-5.
     thetas = np.array([0.0, 35.0, 70.0])
     for rho, coverage in ((1.0, 1.0), (0.6, 0.5)):
         rho_dh = directional_hemispherical_reflectance(PITTED, thetas, rho=rho, psi=psi, coverage=coverage)
         expected = (1 - coverage) * rho + coverage * pit_albedo(rho, psi)
-        np.testing.assert_allclose(rho_dh, expected, rtol=1e-4)
-        assert np.all(rho_dh <= 1.0 + 1e-4)
+        np.testing.assert_allclose(rho_dh, expected, rtol=3e-5)
+        assert np.all(rho_dh <= 1.0 + 3e-5)
 
 
 def test_special_geometries_are_warning_free_and_finite():

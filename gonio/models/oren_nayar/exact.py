@@ -74,19 +74,20 @@ __all__ = [
 #: evaluated as the limit theta -> 90 deg.
 _HORIZON = np.pi / 2.0 - 1e-9
 
-#: Quadrature settings per accuracy target ``rtol``:
-#: (Gauss-Legendre nodes per slope panel, nodes per azimuth panel).  Calibrated in
-#: tests/models/test_oren_nayar_exact.py and benchmarks/bench_oren_nayar.py against the
-#: tightest setting.
-_QUADRATURE: dict[float, tuple[int, int]] = {
-    1e-2: (2, 2),
-    1e-3: (3, 3),
-    1e-4: (4, 4),
-    1e-5: (5, 5),
-    1e-6: (6, 6),
-    1e-8: (9, 8),
-    1e-10: (12, 11),
-    1e-12: (16, 14),
+#: Quadrature settings per accuracy target ``rtol``: Gauss-Legendre nodes per slope
+#: panel, per azimuth panel for the direct term, per half azimuth panel for the
+#: interreflection term.  Calibrated against the tightest setting over random geometries
+#: and sigma in [5, 40] deg (tests/models/test_oren_nayar_exact.py,
+#: benchmarks/bench_oren_nayar.py).
+_QUADRATURE: dict[float, tuple[int, int, int]] = {
+    1e-2: (3, 3, 2),
+    1e-3: (4, 3, 3),
+    1e-4: (6, 4, 4),
+    1e-5: (7, 5, 6),
+    1e-6: (9, 6, 8),
+    1e-8: (12, 8, 12),
+    1e-10: (16, 10, 18),
+    1e-12: (20, 12, 26),
 }
 RTOL_CHOICES: tuple[float, ...] = tuple(sorted(_QUADRATURE, reverse=True))
 
@@ -129,7 +130,7 @@ def _slope_weight(theta_a: np.ndarray, sigma: float) -> np.ndarray:
 
 def _tail_cut(rtol: float) -> float:
     """Slope, in units of sigma, beyond which the Gaussian weight is negligible for rtol."""
-    return math.sqrt(2.0 * math.log(1e4 / rtol))
+    return math.sqrt(2.0 * math.log(100.0 / rtol))
 
 
 def _slope_nodes(edges: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
@@ -187,7 +188,7 @@ class _Geometry:
 
 
 def _exact_chunk(geometry: _Geometry, sigma: float, rtol: float) -> tuple[np.ndarray, np.ndarray]:
-    theta_order, phi_order = _QUADRATURE[rtol]
+    theta_order, phi_order, interreflection_order = _QUADRATURE[rtol]
     top = min(np.pi / 2.0, _tail_cut(rtol) * sigma)
     ladder = sigma * np.arange(1.0, math.ceil(top / sigma))
     fixed = np.concatenate([[0.0], ladder[ladder < top], [top]])
@@ -201,6 +202,7 @@ def _exact_chunk(geometry: _Geometry, sigma: float, rtol: float) -> tuple[np.nda
     h1, h2 = isotropic_brdf_terms(
         column(geometry.cos_i), column(geometry.sin_i), column(geometry.cos_r), column(geometry.sin_r),
         column(geometry.delta_phi), np.cos(theta_a), np.sin(theta_a), order=phi_order,
+        interreflection_order=interreflection_order,
     )
     return np.sum(h1 * weight, axis=-1), np.sum(h2 * weight, axis=-1)
 
@@ -264,7 +266,7 @@ def exact_components(
     each panel uses a sin^2 change of variable (for the square-root onsets) and
     Gauss-Legendre nodes.  The azimuth integral is split at the ten critical azimuths (see
     :func:`~gonio.models.oren_nayar.single_slope.azimuth_breakpoints`).  The Gaussian is
-    cut where its remaining weight is below rtol/1e4.  All geometries are evaluated
+    cut where its remaining weight is below rtol/100.  All geometries are evaluated
     together, in chunks.
 
     References

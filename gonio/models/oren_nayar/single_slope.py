@@ -615,6 +615,7 @@ def _graded_nodes(lo, hi, left_gap, right_gap, order):
 def isotropic_brdf_terms(
     cos_i: ArrayLike, sin_i: ArrayLike, cos_r: ArrayLike, sin_r: ArrayLike,
     delta_phi: ArrayLike, cos_a: ArrayLike, sin_a: ArrayLike, order: int = 8,
+    interreflection_order: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exact azimuthal average (eq 29, 46) of the facet BRDF terms of one slope.
 
@@ -627,7 +628,9 @@ def isotropic_brdf_terms(
     cos_a, sin_a : array_like
         cos/sin of the facet slope theta_a (cos_a > 0).
     order : int, optional
-        Gauss-Legendre nodes on each of the 13 panels between the kinks.
+        Gauss-Legendre nodes on each of the 12 panels between the kinks (direct term).
+    interreflection_order : int, optional
+        Nodes on each half panel for the interreflection term (default: ``order``).
 
     Returns
     -------
@@ -682,7 +685,7 @@ def isotropic_brdf_terms(
     mask_left, mask_right = _pole_distances(lo, hi, expand(delta_phi), phi_cr)
     left = np.minimum(np.minimum(shadow_left, mask_left), scale[..., :-1])
     right = np.minimum(np.minimum(shadow_right, mask_right), scale[..., 1:])
-    x2, w2 = _graded_nodes(lo, hi, left, right, order)
+    x2, w2 = _graded_nodes(lo, hi, left, right, order if interreflection_order is None else interreflection_order)
     x2 = x2.reshape(edges.shape[:-1] + (-1,))
     w2 = w2.reshape(x2.shape) / _TWO_PI
     g2 = facet_interreflected_term(*geometry, np.cos(x2), np.cos(x2 - expand(delta_phi)))

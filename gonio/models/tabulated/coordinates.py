@@ -1,0 +1,125 @@
+"""Table coordinates in which the exact Oren-Nayar components are smooth.
+
+The exact V-cavity components f1, f2 (``oren-nayar-exact``) are not smooth in the plain
+angles (theta_i, theta_r, phi_r - phi_i, sigma): interpolating them there loses the
+accuracy a cubic rule should have.  This module maps a geometry and a roughness onto four
+coordinates, each in a fixed interval, in which they are (numerically checked: the
+accuracy study of docs/tabulated.md):
+
+``y``  = log(z_beta + Y_OFFSET),  z_beta = pi/2 - beta  [rad], beta = min(theta_i, theta_r)
+    Near grazing the BRDF changes on the angular scale sigma (shadowing and masking
+    switch on where tan(theta) tan(theta_a) = 1, Oren & Nayar eq 39), and it follows
+    power laws of cos(beta) (growing like 1/cos(beta) backwards, vanishing like cos(beta)
+    forwards).  A logarithmic distance from the horizon resolves every such scale with
+    the same number of nodes and makes the power laws linear; Y_OFFSET sets the smallest
+    resolved distance (directions closer to the horizon than a few Y_OFFSET are
+    interpolated between the horizon itself and that distance).
+``zeta`` = z_alpha / z_beta in [0, 1],  alpha = max(theta_i, theta_r)
+    Reciprocity (the model is symmetric in source and viewer) halves the domain to
+    alpha >= beta; the kink of the components at theta_i = theta_r becomes the edge
+    zeta = 1 of the table.  Near the grazing corner alpha = beta = 90 deg the components
+    depend on the ratio of the distances to the horizon, which zeta is.
+``t``  = (g - (alpha - beta)) / (2 beta) in [0, 1],  g the phase angle between the two
+    directions.  The V-cavity model has a cone-shaped peak at the retro-reflection
+    direction (g = 0): linear in g, not smooth in phi_r - phi_i.  t runs over the
+    phase angles that are possible for the given polar angles (from alpha - beta at
+    dphi = 0 to alpha + beta at dphi = 180 deg) and is linear in g.  As beta -> 0 it
+    tends to (1 - cos dphi)/2.
+``s``  = asinh(sigma / SIGMA_SCALE) / asinh(90 deg / SIGMA_SCALE) in [0, 1]
+    Linear in sigma for small roughness (the components are even in sigma there) and
+    logarithmic for large roughness.
+
+The tabulated quantities are logarithms of the components (:mod:`.oren_nayar_table`).
+
+References
+----------
+M. Oren, S. K. Nayar, IJCV 14(3), 1995: eq 8, 32 (the model tabulated), eq 39 (onset of
+shadowing and masking), Figure 10 (the backward peak).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "Y_OFFSET",
+    "Z_CLAMP",
+    "SIGMA_SCALE_DEG",
+    "SIGMA_MAX_DEG",
+    "geometry_coordinates",
+    "geometry_from_coordinates",
+    "sigma_coordinate",
+    "sigma_from_coordinate",
+]
+
+#: Smallest resolved angular distance from the horizon [rad] (about 0.0006 deg).
+Y_OFFSET = 1.0e-5
+#: Distance from the horizon [rad] at which the exact model evaluates directions on the
+#: horizon (its limit theta -> 90 deg); table nodes on the horizon use the same.
+Z_CLAMP = 1.0e-9
+#: Roughness [deg] where the sigma coordinate turns from linear to logarithmic.
+SIGMA_SCALE_DEG = 0.5
+#: Largest roughness [deg] (the physical bound of ``sigma``).
+SIGMA_MAX_DEG = 90.0
+
+_HALF_PI = 0.5 * math.pi
+_S_NORM = math.asinh(SIGMA_MAX_DEG / SIGMA_SCALE_DEG)
+
+
+def sigma_coordinate(sigma_deg: float | np.ndarray) -> np.ndarray:
+    """The table coordinate s in [0, 1] of a roughness ``sigma`` [deg]."""
+    return np.arcsinh(np.asarray(sigma_deg, float) / SIGMA_SCALE_DEG) / _S_NORM
+
+
+def sigma_from_coordinate(s: float | np.ndarray) -> np.ndarray:
+    """Inverse of :func:`sigma_coordinate`: roughness [deg] at table coordinate ``s``."""
+    return SIGMA_SCALE_DEG * np.sinh(np.asarray(s, float) * _S_NORM)
+
+
+def geometry_coordinates(
+    theta_i: np.ndarray, theta_r: np.ndarray, delta_phi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Table coordinates (y, zeta, t) and z_beta of geometries given in radians.
+
+    Parameters
+    ----------
+    theta_i, theta_r : numpy.ndarray
+        Polar angles [rad] in [0, pi/2].
+    delta_phi : numpy.ndarray
+        Azimuth difference phi_r - phi_i [rad] (any value; only its cosine matters).
+
+    Returns
+    -------
+    y, zeta, t, z_beta : numpy.ndarray
+        Coordinates of the module notes and the distance of the lower direction from the
+        horizon [rad], broadcast together.
+    """
+    alpha = np.maximum(theta_i, theta_r)
+    beta = np.minimum(theta_i, theta_r)
+    z_beta = np.maximum(_HALF_PI - beta, 0.0)
+    z_alpha = np.maximum(_HALF_PI - alpha, 0.0)
+    y = np.log(z_beta + Y_OFFSET)
+    zeta = np.divide(z_alpha, z_beta, out=np.ones_like(z_beta), where=z_beta > 0.0)
+    # phase angle by the haversine formula (accurate near the retro-reflection direction)
+    half = np.sin(0.5 * (alpha - beta)) ** 2 + np.sin(alpha) * np.sin(beta) * np.sin(0.5 * delta_phi) ** 2
+    phase = 2.0 * np.arcsin(np.sqrt(np.clip(half, 0.0, 1.0)))
+    limit = np.sin(0.5 * delta_phi) ** 2  # (1 - cos dphi)/2, the beta -> 0 limit of t
+    t = np.divide(phase - (alpha - beta), 2.0 * beta, out=limit * np.ones_like(beta), where=beta > 1e-6)
+    return y, zeta, np.clip(t, 0.0, 1.0), z_beta
+
+
+def geometry_from_coordinates(
+    y: np.ndarray, zeta: np.ndarray, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inverse map: (theta_i, theta_r, delta_phi) [rad] with theta_i = alpha >= theta_r."""
+    z_beta = np.maximum(np.exp(y) - Y_OFFSET, 0.0)
+    beta = _HALF_PI - z_beta
+    alpha = _HALF_PI - zeta * z_beta
+    phase = (alpha - beta) + 2.0 * beta * t
+    denominator = np.sin(alpha) * np.sin(beta)
+    cos_dphi = np.divide(
+        np.cos(phase) - np.cos(alpha) * np.cos(beta), denominator,
+        out=1.0 - 2.0 * np.asarray(t, float) * np.ones_like(beta), where=denominator > 1e-12,
+    )
+    return alpha, beta, np.arccos(np.clip(cos_dphi, -1.0, 1.0))

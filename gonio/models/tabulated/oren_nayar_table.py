@@ -1,0 +1,127 @@
+"""Building the Oren-Nayar table: the exact components on the grid of :mod:`.coordinates`.
+
+The table holds ``L1 = log(pi f1)`` and ``L2 = log(pi (f2 + F2_FLOOR f1))`` of the exact
+V-cavity model (``oren-nayar-exact``, :func:`~gonio.models.oren_nayar.exact.exact_components`)
+at every node of a regular grid in (y, zeta, t, s).  Logarithms make the interpolation
+error a *relative* error and turn the power laws of the grazing regime (f1 ~ 1/cos(beta)
+backwards, ~cos(beta) forwards) into straight lines in y.  The small floor on f2 keeps
+its logarithm finite where the interreflection vanishes (sigma = 0); the floor is removed
+after interpolation, so it costs at most F2_FLOOR times the relative error of f1 in the
+BRDF.
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from .coordinates import (
+    Z_CLAMP,
+    Y_OFFSET,
+    geometry_from_coordinates,
+    sigma_from_coordinate,
+)
+from .interpolation import Axis
+
+__all__ = ["F2_FLOOR", "OrenNayarGrid", "DEFAULT_GRID", "build_oren_nayar_table"]
+
+#: f2 is tabulated as log(pi (f2 + F2_FLOOR f1)).
+F2_FLOOR = 1e-4
+
+
+@dataclass(frozen=True)
+class OrenNayarGrid:
+    """Node counts of the four table axes (y, zeta, t, s)."""
+
+    y: int = 49
+    zeta: int = 12
+    t: int = 14
+    s: int = 26
+
+    def axes(self) -> tuple[Axis, Axis, Axis, Axis]:
+        return (
+            Axis("y", math.log(Y_OFFSET), math.log(0.5 * math.pi + Y_OFFSET), self.y),
+            Axis("zeta", 0.0, 1.0, self.zeta),
+            Axis("t", 0.0, 1.0, self.t),
+            Axis("s", 0.0, 1.0, self.s),
+        )
+
+    @property
+    def nodes(self) -> int:
+        return self.y * self.zeta * self.t * self.s
+
+
+DEFAULT_GRID = OrenNayarGrid()
+
+
+def _node_geometry(grid: OrenNayarGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ay, az, at, _ = grid.axes()
+    y, zeta, t = np.meshgrid(ay.nodes(), az.nodes(), at.nodes(), indexing="ij")
+    theta_i, theta_r, delta_phi = geometry_from_coordinates(y, zeta, t)
+    return np.degrees(theta_i), np.degrees(theta_r), np.degrees(delta_phi)
+
+
+def _sigma_slice(args) -> tuple[np.ndarray, np.ndarray]:
+    from ..oren_nayar.exact import exact_components
+
+    grid, sigma, rtol = args
+    theta_i, theta_r, delta_phi = _node_geometry(grid)
+    if sigma == 0.0:
+        f1, f2 = np.full(theta_i.shape, 1.0 / math.pi), np.zeros(theta_i.shape)
+    else:
+        f1, f2 = exact_components(theta_i, 0.0, theta_r, delta_phi, sigma, rtol=rtol)
+    return np.log(math.pi * f1), np.log(math.pi * (f2 + F2_FLOOR * f1))
+
+
+def build_oren_nayar_table(
+    grid: OrenNayarGrid = DEFAULT_GRID, rtol: float = 1e-6, workers: int | None = None,
+    progress=None,
+) -> dict[str, np.ndarray]:
+    """Evaluate the exact Oren-Nayar components on every node of ``grid``.
+
+    Parameters
+    ----------
+    grid : OrenNayarGrid
+        Node counts.
+    rtol : float
+        Accuracy of the exact model at the nodes (an ``rtol`` of ``oren-nayar-exact``).
+    workers : int, optional
+        Processes (one roughness node per task); default: the number of CPUs.
+    progress : callable, optional
+        Called with (done, total) after each roughness node.
+
+    Returns
+    -------
+    dict
+        ``log_f1``, ``log_f2`` of shape (y, zeta, t, s), the axis sizes and metadata.
+    """
+    sigmas = sigma_from_coordinate(grid.axes()[3].nodes())
+    sigmas[0] = 0.0
+    shape = (grid.y, grid.zeta, grid.t, grid.s)
+    log_f1, log_f2 = np.empty(shape), np.empty(shape)
+    tasks = [(grid, float(sigma), rtol) for sigma in sigmas]
+    start = time.perf_counter()
+    workers = workers or os.cpu_count() or 1
+    if workers == 1:
+        results = map(_sigma_slice, tasks)
+    else:
+        pool = ProcessPoolExecutor(max_workers=workers)
+        results = pool.map(_sigma_slice, tasks)
+    for k, (l1, l2) in enumerate(results):
+        log_f1[..., k], log_f2[..., k] = l1, l2
+        if progress is not None:
+            progress(k + 1, len(tasks))
+    if workers != 1:
+        pool.shutdown()
+    return {
+        "log_f1": log_f1,
+        "log_f2": log_f2,
+        "shape": np.array(shape),
+        "rtol": np.array(rtol),
+        "f2_floor": np.array(F2_FLOOR),
+        "build_seconds": np.array(time.perf_counter() - start),
+    }
