@@ -512,9 +512,15 @@ def reduce_recording(folder: str | Path, lamp_stability: float = 0.0) -> Reduced
     is_ref = points["block"] == REFERENCE_BLOCK
     label = meta.get("sample", {}).get("label", folder.name)
     protocol_text = meta.get("protocol", {}).get("text")
+    protocol = loads(protocol_text, source=str(folder / "metadata.json")) if protocol_text else None
+    aperture = meta.get("rig", {}).get("aperture_sr")
+    if aperture is None and protocol is not None:
+        aperture = [protocol.rig.lamp_solid_angle, protocol.rig.camera_solid_angle]
+    if aperture is not None and min(aperture) <= 0:
+        aperture = None  # ideal point apertures: fit the model itself
     reference_irradiance = reference_sigma = None
     if (ok & is_ref).any():
-        reflectance = loads(protocol_text, source=str(folder / "metadata.json")).reference.reflectance if protocol_text else None
+        reflectance = protocol.reference.reflectance if protocol is not None and protocol.reference else None
         if reflectance:
             cos_i = np.cos(np.radians(points["theta_i"][ok & is_ref]))
             e0 = np.pi * points["signal_rate"][ok & is_ref] / (reflectance * cos_i)
@@ -536,7 +542,8 @@ def reduce_recording(folder: str | Path, lamp_stability: float = 0.0) -> Reduced
         theta_i=columns[0], phi_i=columns[1], theta_r=columns[2], phi_r=columns[3], view=columns[4],
         radiance=columns[5], radiance_sigma=columns[6], repeats=columns[7].astype(int),
         reference_irradiance=reference_irradiance, reference_irradiance_sigma=reference_sigma,
-        label=label, metadata={"recording": str(folder), "protocol": meta.get("protocol", {}).get("name")},
+        label=label, metadata={"recording": str(folder), "protocol": meta.get("protocol", {}).get("name"),
+                               **({"aperture_sr": [float(a) for a in aperture]} if aperture else {})},
     )
 
 
@@ -549,6 +556,9 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
     """
     if not parts:
         raise ValueError("combine_reduced needs at least one reduced recording")
+    apertures = {tuple(p.metadata.get("aperture_sr", ())) for p in parts}
+    if len(apertures) > 1:
+        raise ValueError(f"cannot combine recordings measured through different apertures: {sorted(apertures)}")
     cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
     refs = [(p.reference_irradiance, p.reference_irradiance_sigma) for p in parts if p.reference_irradiance is not None]
     irradiance = sigma = None
@@ -561,5 +571,6 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
         radiance=cat("radiance"), radiance_sigma=cat("radiance_sigma"), repeats=cat("repeats"),
         reference_irradiance=irradiance, reference_irradiance_sigma=sigma,
         label=label or parts[0].label,
-        metadata={"recordings": [p.metadata.get("recording") for p in parts]},
+        metadata={"recordings": [p.metadata.get("recording") for p in parts],
+                  **({"aperture_sr": parts[0].metadata["aperture_sr"]} if "aperture_sr" in parts[0].metadata else {})},
     )

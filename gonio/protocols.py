@@ -85,6 +85,10 @@ class RigLimits:
         Wait after each move before exposing [s].
     readout_time : float
         CCD readout time per frame [s].
+    lamp_solid_angle, camera_solid_angle : float
+        Apertures of the lamp and of the camera's pupil seen from the sample [sr]
+        (Oren & Nayar 1995, section 5: 0.003 and 0.0009); fits of the recording average
+        the model over them (gonio.instrument).
     """
 
     camera_range: tuple[float, float] = (-90.0, 90.0)
@@ -95,6 +99,8 @@ class RigLimits:
     acceleration: float = 20.0
     settle_time: float = 0.2
     readout_time: float = 0.1
+    lamp_solid_angle: float = 0.003
+    camera_solid_angle: float = 0.0009
 
 
 @dataclass(frozen=True)
@@ -317,6 +323,8 @@ def loads(text: str, source: str = "<string>") -> Protocol:
         acceleration=f.number(rig_table, "acceleration", "rig", base.acceleration, 1e-6, unit="deg/s^2"),
         settle_time=f.number(rig_table, "settle_time", "rig", base.settle_time, 0.0, unit="s"),
         readout_time=f.number(rig_table, "readout_time", "rig", base.readout_time, 0.0, unit="s"),
+        lamp_solid_angle=f.number(rig_table, "lamp_solid_angle", "rig", base.lamp_solid_angle, 0.0, 1.0, "sr"),
+        camera_solid_angle=f.number(rig_table, "camera_solid_angle", "rig", base.camera_solid_angle, 0.0, 1.0, "sr"),
     )
 
     exp_table = f.table(data, "exposure", "")

@@ -15,7 +15,7 @@ import sys
 import gonio
 
 #: Sub-command modules in the order ``gonio --help`` lists them.
-SUBCOMMANDS = ("models", "figures", "plan", "run", "fit", "report", "emulator", "textons")
+SUBCOMMANDS = ("demo", "models", "figures", "plan", "run", "fit", "report", "emulator", "textons")
 
 
 class CLIError(Exception):

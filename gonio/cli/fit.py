@@ -102,18 +102,23 @@ class _Progress:
 
 
 def _load(path: Path, quantity: str | None):
-    """A CSV file, or a recording folder written by 'gonio run' (reduced here)."""
+    """A CSV file, or a recording folder written by 'gonio run' (reduced here).
+
+    Returns the dataset and the priors it implies: for a calibrated recording fitted as
+    it comes, relative radiance with the reference-standard prior on ``scale``
+    (gonio.acquisition.Reduced.fit_inputs).
+    """
     from gonio.fitting import Dataset
 
     if not path.is_dir():
-        return Dataset.from_csv(path, quantity=quantity)
+        return Dataset.from_csv(path, quantity=quantity), {}
     from gonio.acquisition import reduce_recording
 
     reduced = reduce_recording(path)
     if quantity is None:
-        return reduced.best_dataset()
+        return reduced.fit_inputs()
     return {"brdf": reduced.brdf, "normalised_radiance": reduced.normalised_radiance,
-            "radiance": reduced.relative_radiance}[quantity]()
+            "radiance": reduced.relative_radiance}[quantity](), {}
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -121,7 +126,7 @@ def _run(args: argparse.Namespace) -> int:
     from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
 
     data_path = Path(args.data)
-    dataset = _load(data_path, args.quantity)
+    dataset, priors = _load(data_path, args.quantity)
     fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
     options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
     if len(args.model) > 1:
@@ -130,7 +135,6 @@ def _run(args: argparse.Namespace) -> int:
         return 0
     name = args.model[0]
     model = models.get(name)
-    priors = {}
     for key, text in _pairs(args.prior, "--prior").items():
         bounds = model.param(key).bounds if key in model.param_names else (-float("inf"), float("inf"))
         priors[key] = parse_prior(text, bounds)

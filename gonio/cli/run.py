@@ -70,7 +70,9 @@ def emulated_rig(sample: str, seed: int, name: str = "gonio-run") -> Iterator[tu
 
             metadata = {"rig": {"kind": "emulator", "sample": sample, "model": model_name,
                                 "parameters": values, "seed": seed,
-                                "min_separation_deg": emulator.min_separation_deg}}
+                                "min_separation_deg": emulator.min_separation_deg,
+                                "aperture_sr": [emulator.optics.lamp_solid_angle_sr,
+                                                emulator.optics.camera_solid_angle_sr]}}
             yield rig, emulator, change_sample, metadata
         finally:
             rig.close()

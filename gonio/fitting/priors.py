@@ -225,5 +225,8 @@ def prior_from_dict(data: Mapping[str, Any]) -> Prior:
     if kind == "loguniform":
         return LogUniform(float(data["lower"]), float(data["upper"]))
     if kind == "normal":
-        return Normal(float(data["mean"]), float(data["sd"]), float(data["lower"]), float(data["upper"]))
+        # strict JSON has no infinity: an unbounded side is stored as null
+        lower = -math.inf if data.get("lower") is None else float(data["lower"])
+        upper = math.inf if data.get("upper") is None else float(data["upper"])
+        return Normal(float(data["mean"]), float(data["sd"]), lower, upper)
     raise ValueError(f"prior record {dict(data)!r}: unknown kind {kind!r}")

@@ -137,7 +137,18 @@ class FitProblem:
         options: Mapping[str, Any] | None = None,
         jitter: bool = False,
     ) -> None:
-        self.model = models.get(model) if isinstance(model, str) else model
+        #: The registered model the user asked for.
+        self.base_model = models.get(model) if isinstance(model, str) else model
+        #: What is evaluated: the base model, or its aperture average when the dataset was
+        #: measured through finite apertures (``dataset.metadata["aperture_sr"]`` =
+        #: [lamp, camera] solid angles [sr], set by gonio.acquisition for rig data; see
+        #: gonio.instrument).  Fitting the point model to such data biases the roughness.
+        self.model = self.base_model
+        aperture = dataset.metadata.get("aperture_sr") if dataset.metadata else None
+        if aperture:
+            from gonio.instrument import aperture_averaged
+
+            self.model = aperture_averaged(self.base_model, *aperture)
         self.dataset = dataset
         self.options = dict(options or {})
         self.jitter = bool(jitter)

@@ -123,7 +123,7 @@ class FitResult:
     ) -> "FitResult":
         """Assemble a result and compute the posterior summaries and flags."""
         result = cls(
-            model=problem.model.name,
+            model=problem.base_model.name,
             dataset=problem.dataset,
             fixed=dict(problem.fixed),
             free=problem.free,

@@ -104,33 +104,44 @@ def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
     axes = fig.subplots(len(shown), columns, squeeze=False)
     ylabel = QUANTITY_LABELS[data.quantity]
     band_name = "posterior predictive" if result.mcmc is not None else "least-squares model"
+    several_azimuths = len({round(float(p), 6) for p in sources[:, 1]}) > 1
     for row, k in enumerate(shown):
         theta_i, phi_i = sources[k]
         mask = index == k
+        incidence = f"theta_i = {theta_i:g} deg" + (f", phi_i = {phi_i:g} deg" if several_azimuths else "")
+        in_sel, out_sel = mask & in_plane, mask & ~in_plane
+        if np.any(out_sel):  # an off-plane sweep: its normal view (theta_r = 0) belongs to it
+            at_normal = data.theta_r == 0.0
+            in_sel, out_sel = in_sel & ~at_normal, out_sel | (mask & at_normal)
         column = 0
         if has_in:
             ax = axes[row, column]
             column += 1
-            sel = mask & in_plane
-            x = np.linspace(*_span(data.signed_view[sel], -89.0, 89.0), _BAND_POINTS)
-            geometry = in_plane_angles(theta_i, x, phi_i)
-            band = result.posterior_predictive(*geometry, n_draws=n_draws)
-            _band_axes(ax, x, band, "C0", row == 0)
-            ax.errorbar(data.signed_view[sel], data.value[sel], data.sigma[sel], fmt="o", ms=4, color="k",
-                        capsize=2, lw=1, label="measured" if row == 0 else None)
-            ax.axvline(theta_i, color="0.6", ls=":", lw=1, label="source direction" if row == 0 else None)
-            ax.set_xlim(-90, 90)
-            _data_ylim(ax, data.value[sel], data.sigma[sel])
-            ax.set_xlabel("signed viewing angle theta_r [deg] (+ source side)")
-            ax.set_ylabel(ylabel)
-            ax.set_title(f"in plane, theta_i = {theta_i:g} deg", fontsize=10)
-            if row == 0:
-                ax.legend(fontsize=8, title=band_name, title_fontsize=8)
+            sel = in_sel
+            if not np.any(sel):
+                ax.text(0.5, 0.5, f"{incidence}:\nno in-plane data", transform=ax.transAxes,
+                        ha="center", va="center", color="0.5")
+                ax.set_axis_off()
+            else:
+                x = np.linspace(*_span(data.signed_view[sel], -89.0, 89.0), _BAND_POINTS)
+                geometry = in_plane_angles(theta_i, x, phi_i)
+                band = result.posterior_predictive(*geometry, n_draws=n_draws)
+                _band_axes(ax, x, band, "C0", row == 0)
+                ax.errorbar(data.signed_view[sel], data.value[sel], data.sigma[sel], fmt="o", ms=4, color="k",
+                            capsize=2, lw=1, label="measured" if row == 0 else None)
+                ax.axvline(theta_i, color="0.6", ls=":", lw=1, label="source direction" if row == 0 else None)
+                ax.set_xlim(-90, 90)
+                _data_ylim(ax, data.value[sel], data.sigma[sel])
+                ax.set_xlabel("signed viewing angle theta_r [deg] (+ source side)")
+                ax.set_ylabel(ylabel)
+                ax.set_title(f"in plane, {incidence}", fontsize=10)
+                if row == 0:
+                    ax.legend(fontsize=8, title=band_name, title_fontsize=8)
         if has_out:
             ax = axes[row, column]
-            sel = mask & ~in_plane
+            sel = out_sel
             if not np.any(sel):
-                ax.text(0.5, 0.5, f"theta_i = {theta_i:g} deg:\nno out-of-plane data", transform=ax.transAxes,
+                ax.text(0.5, 0.5, f"{incidence}:\nno out-of-plane data", transform=ax.transAxes,
                         ha="center", va="center", color="0.5")
                 ax.set_axis_off()
                 continue
@@ -148,7 +159,7 @@ def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
             _data_ylim(ax, data.value[sel], data.sigma[sel])
             ax.set_xlabel("viewing angle theta_r [deg]")
             ax.set_ylabel(ylabel)
-            ax.set_title(f"out of plane, theta_i = {theta_i:g} deg", fontsize=10)
+            ax.set_title(f"out of plane, {incidence}", fontsize=10)
             ax.legend(fontsize=8)
     for ax in axes.flat:
         ax.grid(alpha=0.3)

@@ -41,3 +41,17 @@ def test_parse_and_round_trip():
         parse_prior("beta:1:2")
     with pytest.raises(ValueError, match="expected uniform:LO:HI"):
         parse_prior("uniform:1")
+
+
+def test_truncated_normal_with_open_side_round_trips_through_strict_json():
+    """A calibration prior N(E0, sd) on [0, inf) is saved with upper = null (strict JSON)."""
+    import json
+    import math
+
+    from gonio.fitting.priors import Normal, prior_from_dict
+    from gonio.fitting.results import _clean
+
+    prior = Normal(2.0e5, 300.0, 0.0, math.inf)
+    text = json.dumps(_clean(prior.to_dict()), allow_nan=False)
+    back = prior_from_dict(json.loads(text))
+    assert back.upper == math.inf and back.mean == prior.mean and back.sd == prior.sd

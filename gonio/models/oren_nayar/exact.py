@@ -187,24 +187,35 @@ class _Geometry:
         return self.theta_i.size
 
 
+def _slope_edges(geometry: _Geometry, sigma: float, top: float, extra: list[np.ndarray] | None = None) -> np.ndarray:
+    """Sorted slope panel edges (G, P+1): 0, 2 sigma, 4 sigma, ..., top and the kinks."""
+    ladder = 2.0 * sigma * np.arange(1.0, math.ceil(top / (2.0 * sigma)))
+    fixed = np.concatenate([[0.0], ladder[ladder < top], [top]])
+    kinks = geometry.kinks if extra is None else np.concatenate([geometry.kinks] + extra, axis=-1)
+    edges = np.concatenate(
+        [np.broadcast_to(fixed, (len(geometry), fixed.size)), np.clip(kinks, 0.0, top)], axis=-1
+    )
+    edges.sort(axis=-1)
+    return edges
+
+
 def _exact_chunk(geometry: _Geometry, sigma: float, rtol: float) -> tuple[np.ndarray, np.ndarray]:
     theta_order, phi_order, interreflection_order = _QUADRATURE[rtol]
     top = min(np.pi / 2.0, _tail_cut(rtol) * sigma)
-    ladder = sigma * np.arange(1.0, math.ceil(top / sigma))
-    fixed = np.concatenate([[0.0], ladder[ladder < top], [top]])
-    edges = np.concatenate(
-        [np.broadcast_to(fixed, (len(geometry), fixed.size)), np.clip(geometry.kinks, 0.0, top)], axis=-1
-    )
-    edges.sort(axis=-1)
-    theta_a, weight = _slope_nodes(edges, theta_order)
+    edges = _slope_edges(geometry, sigma, top)
+    # only panels of non-zero width (kinks beyond the Gaussian's reach collapse onto it)
+    row, panel = np.nonzero(np.diff(edges, axis=-1) > 0)
+    theta_a, weight = _slope_nodes(np.stack([edges[row, panel], edges[row, panel + 1]], axis=-1), theta_order)
     weight = weight * _slope_weight(theta_a, sigma)
-    column = (lambda a: a[:, None])
+    column = (lambda a: a[row][:, None])
     h1, h2 = isotropic_brdf_terms(
         column(geometry.cos_i), column(geometry.sin_i), column(geometry.cos_r), column(geometry.sin_r),
         column(geometry.delta_phi), np.cos(theta_a), np.sin(theta_a), order=phi_order,
         interreflection_order=interreflection_order,
     )
-    return np.sum(h1 * weight, axis=-1), np.sum(h2 * weight, axis=-1)
+    size = len(geometry)
+    return (np.bincount(row, weights=np.sum(h1 * weight, axis=-1), minlength=size),
+            np.bincount(row, weights=np.sum(h2 * weight, axis=-1), minlength=size))
 
 
 def _components(
@@ -294,14 +305,10 @@ _NUMERICAL_ORDER = 12
 def _numerical_chunk(geometry: _Geometry, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     ti, tr = geometry.theta_i[:, None], geometry.theta_r[:, None]
     top = min(np.pi / 2.0, _tail_cut(1e-12) * sigma)
-    ladder = sigma * np.arange(1.0, math.ceil(top / sigma))
-    fixed = np.concatenate([[0.0], ladder[ladder < top], [top]])
     # A_3 of eq 45 switches on where phi_c^i + phi_c^r = pi/2: tan^2 theta_a = cot^2 ti + cot^2 tr
     overlap = np.arctan(np.hypot(np.cos(ti) / np.sin(np.maximum(ti, 1e-300)),
                                  np.cos(tr) / np.sin(np.maximum(tr, 1e-300))))
-    kinks = np.concatenate([np.pi / 2.0 - ti, np.pi / 2.0 - tr, overlap], axis=-1)
-    edges = np.concatenate([np.broadcast_to(fixed, (len(geometry), fixed.size)), np.clip(kinks, 0.0, top)], axis=-1)
-    edges.sort(axis=-1)
+    edges = _slope_edges(geometry, sigma, top, [overlap])
     theta_a, weight = _slope_nodes(edges, _NUMERICAL_ORDER)
     weight = weight * _slope_weight(theta_a, sigma)
     d = geometry.delta_phi[:, None]

@@ -656,37 +656,54 @@ def isotropic_brdf_terms(
     >>> round(float(h1 * np.pi), 6)   # normal light and view: cos(theta_a)
     0.921061
     """
-    cos_i, sin_i, cos_r, sin_r, delta_phi, cos_a, sin_a = _arrays(
-        cos_i, sin_i, cos_r, sin_r, delta_phi, cos_a, sin_a
-    )
+    arrays = np.broadcast_arrays(*_arrays(cos_i, sin_i, cos_r, sin_r, delta_phi, cos_a, sin_a))
+    shape = arrays[0].shape
+    cos_i, sin_i, cos_r, sin_r, delta_phi, cos_a, sin_a = (a.ravel() for a in arrays)
     kinks, scale = _azimuth_kinks(cos_i, sin_i, cos_r, sin_r, delta_phi, cos_a, sin_a)
     kinks = np.mod(kinks, _TWO_PI)
     order_idx = np.argsort(kinks, axis=-1)
     kinks = np.take_along_axis(kinks, order_idx, axis=-1)
     scale = np.take_along_axis(scale, order_idx, axis=-1)
-    edges = np.concatenate([kinks, kinks[..., :1] + _TWO_PI], axis=-1)
-    scale = np.concatenate([scale, scale[..., :1]], axis=-1)
-    lo, hi = edges[..., :-1], edges[..., 1:]
-    expand = (lambda a: a[..., None])
-    geometry = (expand(cos_i), expand(sin_i), expand(cos_r), expand(sin_r), expand(cos_a), expand(sin_a))
+    edges = np.concatenate([kinks, kinks[:, :1] + _TWO_PI], axis=-1)
+    scale = np.concatenate([scale, scale[:, :1]], axis=-1)
+    lo, hi = edges[:, :-1], edges[:, 1:]
+    column = (lambda a: a[:, None])
+
+    # Which panels contribute: the signs of <s,a>, <s,a'>, <v,a> are constant on a panel.
+    mid = 0.5 * (lo + hi)
+    flat_i, tilt_i = column(cos_i * cos_a), column(sin_i * sin_a) * np.cos(mid)
+    flat_r, tilt_r = column(cos_r * cos_a), column(sin_r * sin_a) * np.cos(mid - column(delta_phi))
+    nonempty = hi > lo
+    seen = flat_r + tilt_r > 0
+    direct_panels = np.nonzero(nonempty & seen & (flat_i + tilt_i > 0))
+    bounce_panels = np.nonzero(nonempty & seen & (flat_i - tilt_i > 0))
 
     # direct term: analytic between kinks, plain Gauss-Legendre
+    row = direct_panels[0]
     unit_x, unit_w = _unit_gauss_legendre(order)
-    x = (lo[..., None] + (hi - lo)[..., None] * unit_x).reshape(edges.shape[:-1] + (-1,))
-    w = ((hi - lo)[..., None] * unit_w).reshape(x.shape) / _TWO_PI
-    g1 = facet_direct_term(*geometry, np.cos(x), np.cos(x - expand(delta_phi)))
+    p_lo, p_width = lo[direct_panels][:, None], (hi - lo)[direct_panels][:, None]
+    x = p_lo + p_width * unit_x
+    g1 = facet_direct_term(
+        column(cos_i[row]), column(sin_i[row]), column(cos_r[row]), column(sin_r[row]),
+        column(cos_a[row]), column(sin_a[row]), np.cos(x), np.cos(x - column(delta_phi[row])),
+    )
+    direct = np.bincount(row, weights=(g1 * (p_width * unit_w)).sum(axis=-1), minlength=cos_i.size)
 
-    # interreflection: poles of the width ratios and the m^s = m_v near-kink lie just
-    # outside some panels; grade the nodes towards them
-    theta_a = expand(np.arctan2(sin_a, cos_a))
-    phi_ci = critical_azimuth(expand(np.arctan2(sin_i, cos_i)), theta_a)
-    phi_cr = critical_azimuth(expand(np.arctan2(sin_r, cos_r)), theta_a)
-    shadow_left, shadow_right = _pole_distances(lo, hi, np.pi, phi_ci)
-    mask_left, mask_right = _pole_distances(lo, hi, expand(delta_phi), phi_cr)
-    left = np.minimum(np.minimum(shadow_left, mask_left), scale[..., :-1])
-    right = np.minimum(np.minimum(shadow_right, mask_right), scale[..., 1:])
-    x2, w2 = _graded_nodes(lo, hi, left, right, order if interreflection_order is None else interreflection_order)
-    x2 = x2.reshape(edges.shape[:-1] + (-1,))
-    w2 = w2.reshape(x2.shape) / _TWO_PI
-    g2 = facet_interreflected_term(*geometry, np.cos(x2), np.cos(x2 - expand(delta_phi)))
-    return np.sum(g1 * w, axis=-1), np.sum(g2 * w2, axis=-1)
+    # interreflection: poles of the width ratios (eq 20-21) and the m^s = m_v near-kink
+    # lie just outside some panels; grade the nodes towards them
+    row = bounce_panels[0]
+    theta_a = np.arctan2(sin_a[row], cos_a[row])
+    phi_ci = critical_azimuth(np.arctan2(sin_i[row], cos_i[row]), theta_a)
+    phi_cr = critical_azimuth(np.arctan2(sin_r[row], cos_r[row]), theta_a)
+    p_lo, p_hi = lo[bounce_panels], hi[bounce_panels]
+    shadow_left, shadow_right = _pole_distances(p_lo, p_hi, np.pi, phi_ci)
+    mask_left, mask_right = _pole_distances(p_lo, p_hi, delta_phi[row], phi_cr)
+    left = np.minimum(np.minimum(shadow_left, mask_left), scale[:, :-1][bounce_panels])
+    right = np.minimum(np.minimum(shadow_right, mask_right), scale[:, 1:][bounce_panels])
+    x2, w2 = _graded_nodes(p_lo, p_hi, left, right, order if interreflection_order is None else interreflection_order)
+    g2 = facet_interreflected_term(
+        column(cos_i[row]), column(sin_i[row]), column(cos_r[row]), column(sin_r[row]),
+        column(cos_a[row]), column(sin_a[row]), np.cos(x2), np.cos(x2 - column(delta_phi[row])),
+    )
+    bounce = np.bincount(row, weights=(g2 * w2).sum(axis=-1), minlength=cos_i.size)
+    return (direct / _TWO_PI).reshape(shape), (bounce / _TWO_PI).reshape(shape)

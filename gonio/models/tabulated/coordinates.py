@@ -25,9 +25,11 @@ accuracy study of docs/tabulated.md):
     phase angles that are possible for the given polar angles (from alpha - beta at
     dphi = 0 to alpha + beta at dphi = 180 deg) and is linear in g.  As beta -> 0 it
     tends to (1 - cos dphi)/2.
-``s``  = asinh(sigma / SIGMA_SCALE) / asinh(90 deg / SIGMA_SCALE) in [0, 1]
-    Linear in sigma for small roughness (the components are even in sigma there) and
-    logarithmic for large roughness.
+``s``  = asinh(p / scale) / asinh(p_max / scale) in [0, 1] for the model parameter p
+    (the roughness sigma of Oren-Nayar, the aperture psi of the pitted model), see
+    :class:`ParameterMap`.  Linear in p for small p and logarithmic for large p: the
+    grazing behaviour changes on the angular scale p (the similarity variable is
+    z_beta / p), which a logarithmic axis resolves uniformly.
 
 The tabulated quantities are logarithms of the components (:mod:`.oren_nayar_table`).
 
@@ -49,6 +51,8 @@ __all__ = [
     "SIGMA_MAX_DEG",
     "geometry_coordinates",
     "geometry_from_coordinates",
+    "ParameterMap",
+    "SIGMA_MAP",
     "sigma_coordinate",
     "sigma_from_coordinate",
 ]
@@ -64,17 +68,44 @@ SIGMA_SCALE_DEG = 0.5
 SIGMA_MAX_DEG = 90.0
 
 _HALF_PI = 0.5 * math.pi
-_S_NORM = math.asinh(SIGMA_MAX_DEG / SIGMA_SCALE_DEG)
+
+
+class ParameterMap:
+    """The table coordinate s = asinh(p / scale) / asinh(maximum / scale) of a parameter.
+
+    Parameters
+    ----------
+    scale : float
+        Value [deg] where the coordinate turns from linear to logarithmic.
+    maximum : float
+        Largest value [deg] (s = 1).
+    """
+
+    def __init__(self, scale: float, maximum: float):
+        self.scale, self.maximum = float(scale), float(maximum)
+        self._norm = math.asinh(self.maximum / self.scale)
+
+    def coordinate(self, value_deg: float | np.ndarray) -> np.ndarray:
+        """s in [0, 1] of a parameter value [deg]."""
+        return np.arcsinh(np.asarray(value_deg, float) / self.scale) / self._norm
+
+    def value(self, s: float | np.ndarray) -> np.ndarray:
+        """Inverse: parameter value [deg] at coordinate ``s``."""
+        return self.scale * np.sinh(np.asarray(s, float) * self._norm)
+
+
+#: The roughness coordinate of the Oren-Nayar table.
+SIGMA_MAP = ParameterMap(SIGMA_SCALE_DEG, SIGMA_MAX_DEG)
 
 
 def sigma_coordinate(sigma_deg: float | np.ndarray) -> np.ndarray:
     """The table coordinate s in [0, 1] of a roughness ``sigma`` [deg]."""
-    return np.arcsinh(np.asarray(sigma_deg, float) / SIGMA_SCALE_DEG) / _S_NORM
+    return SIGMA_MAP.coordinate(sigma_deg)
 
 
 def sigma_from_coordinate(s: float | np.ndarray) -> np.ndarray:
     """Inverse of :func:`sigma_coordinate`: roughness [deg] at table coordinate ``s``."""
-    return SIGMA_SCALE_DEG * np.sinh(np.asarray(s, float) * _S_NORM)
+    return SIGMA_MAP.value(s)
 
 
 def geometry_coordinates(

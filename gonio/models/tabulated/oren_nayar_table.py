@@ -15,17 +15,16 @@ import math
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
 
 import numpy as np
 
 from .coordinates import (
-    Z_CLAMP,
+    SIGMA_SCALE_DEG,
     Y_OFFSET,
     geometry_from_coordinates,
     sigma_from_coordinate,
 )
-from .interpolation import Axis
+from .lookup import TableGrid
 
 __all__ = ["F2_FLOOR", "OrenNayarGrid", "DEFAULT_GRID", "build_oren_nayar_table"]
 
@@ -33,34 +32,16 @@ __all__ = ["F2_FLOOR", "OrenNayarGrid", "DEFAULT_GRID", "build_oren_nayar_table"
 F2_FLOOR = 1e-4
 
 
-@dataclass(frozen=True)
-class OrenNayarGrid:
-    """Node counts of the four table axes (y, zeta, t, s)."""
-
-    y: int = 49
-    zeta: int = 12
-    t: int = 14
-    s: int = 26
-
-    def axes(self) -> tuple[Axis, Axis, Axis, Axis]:
-        return (
-            Axis("y", math.log(Y_OFFSET), math.log(0.5 * math.pi + Y_OFFSET), self.y),
-            Axis("zeta", 0.0, 1.0, self.zeta),
-            Axis("t", 0.0, 1.0, self.t),
-            Axis("s", 0.0, 1.0, self.s),
-        )
-
-    @property
-    def nodes(self) -> int:
-        return self.y * self.zeta * self.t * self.s
+#: The grid of the Oren-Nayar table (a :class:`~.lookup.TableGrid`).
+OrenNayarGrid = TableGrid
 
 
-DEFAULT_GRID = OrenNayarGrid()
+#: Node counts of the shipped table (accuracy study: docs/tabulated.md).
+DEFAULT_GRID = OrenNayarGrid(y=45, zeta=12, t=16, s=28)
 
 
 def _node_geometry(grid: OrenNayarGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    ay, az, at, _ = grid.axes()
-    y, zeta, t = np.meshgrid(ay.nodes(), az.nodes(), at.nodes(), indexing="ij")
+    y, zeta, t = grid.node_coordinates()
     theta_i, theta_r, delta_phi = geometry_from_coordinates(y, zeta, t)
     return np.degrees(theta_i), np.degrees(theta_r), np.degrees(delta_phi)
 
@@ -123,5 +104,7 @@ def build_oren_nayar_table(
         "shape": np.array(shape),
         "rtol": np.array(rtol),
         "f2_floor": np.array(F2_FLOOR),
+        "y_offset": np.array(Y_OFFSET),
+        "sigma_scale_deg": np.array(SIGMA_SCALE_DEG),
         "build_seconds": np.array(time.perf_counter() - start),
     }

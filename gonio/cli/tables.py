@@ -1,0 +1,94 @@
+"""``gonio tables``: build, inspect and clear the tables of the tabulated models.
+
+``gonio tables build [NAME ...]`` evaluates the exact model on the table grid (minutes on
+a few cores) and writes the table to the user cache, or to ``--output``;
+``gonio tables info`` says which table each tabulated model would read;
+``gonio tables clear`` deletes the user cache (never the tables shipped with gonio).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from . import CLIError
+
+
+def _run_build(args: argparse.Namespace) -> int:
+    from gonio.models import tabulated
+
+    names = args.name or sorted(tabulated.TABLES)
+    if args.output and len(names) != 1:
+        raise CLIError("--output needs exactly one table name")
+    options = {}
+    if args.grid:
+        from gonio.models.tabulated.oren_nayar_table import OrenNayarGrid
+
+        try:
+            options["grid"] = OrenNayarGrid(*(int(n) for n in args.grid.split(",")))
+        except (TypeError, ValueError):
+            raise CLIError(f"--grid {args.grid!r}: expected four node counts 'y,zeta,t,s', e.g. 45,12,16,28") from None
+    start = time.perf_counter()
+
+    def progress(done: int, total: int) -> None:
+        print(f"\r  {done}/{total} roughness nodes, {time.perf_counter() - start:.0f} s", end="", file=sys.stderr, flush=True)
+
+    for name in names:
+        print(f"building table {name!r} (rtol {args.rtol:g})", file=sys.stderr)
+        path = tabulated.build(name, output=args.output, rtol=args.rtol, workers=args.workers,
+                               progress=None if args.quiet else progress, **options)
+        print("", file=sys.stderr)
+        print(f"wrote {path}")
+    return 0
+
+
+def _run_info(args: argparse.Namespace) -> int:
+    from gonio.models import tabulated
+    from gonio.models.tabulated import store
+
+    print(f"user cache: {store.cache_dir()}")
+    print(f"shipped:    {store.PACKAGE_DIR}")
+    for name in args.name or sorted(tabulated.TABLES):
+        info = tabulated.describe(name)
+        print(f"{name}: model {info['model']} (values of {info['reference']})")
+        if info["path"] is None:
+            print(f"    no table found; build it with 'gonio tables build {name}'")
+            continue
+        origin = "shipped" if info["shipped"] else "user cache"
+        print(f"    {info['path']} ({origin}, {info['bytes'] / 1e6:.1f} MB)")
+        print(f"    grid {' x '.join(map(str, info['shape']))} = {info['nodes']} nodes, exact rtol {info['rtol']:g}, "
+              f"built in {info['build_seconds']:.0f} s")
+    return 0
+
+
+def _run_clear(args: argparse.Namespace) -> int:
+    from gonio.models import tabulated
+    from gonio.models.tabulated import store
+
+    removed = store.clear_cache()
+    tabulated._forget_loaded()
+    for path in removed:
+        print(f"removed {path}")
+    if not removed:
+        print(f"nothing to remove in {store.cache_dir()}")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``gonio tables build|info|clear``."""
+    parser = subparsers.add_parser("tables", help="build, inspect or clear the tables of tabulated models")
+    actions = parser.add_subparsers(dest="action", metavar="ACTION")
+    build = actions.add_parser("build", help="compute a table with the exact model (slow: minutes)")
+    build.add_argument("name", nargs="*", help="table names (default: all)")
+    build.add_argument("--output", help="file to write instead of the user cache")
+    build.add_argument("--rtol", type=float, default=1e-5, help="accuracy of the exact model at the nodes")
+    build.add_argument("--workers", type=int, default=None, help="processes (default: all CPUs)")
+    build.add_argument("--grid", help="node counts 'y,zeta,t,s' (default: the shipped grid)")
+    build.add_argument("--quiet", action="store_true", help="no progress output")
+    build.set_defaults(func=_run_build)
+    info = actions.add_parser("info", help="which table each tabulated model reads")
+    info.add_argument("name", nargs="*", help="table names (default: all)")
+    info.set_defaults(func=_run_info)
+    clear = actions.add_parser("clear", help="delete the tables in the user cache")
+    clear.set_defaults(func=_run_clear)
+    parser.set_defaults(func=lambda args: (parser.print_help(), 0)[1])

@@ -1,0 +1,104 @@
+"""Tables of logarithms on the grid (y, zeta, t, s) and their fast evaluation.
+
+A :class:`LogTable` holds one or more 4-D arrays of tabulated logarithms (one per model
+component) on a :class:`TableGrid`.  :meth:`LogTable.prepare` maps fixed geometries to
+their table coordinates and cubic stencils once and returns a function of the parameter
+coordinate ``s`` giving the interpolated logarithms:
+
+* on its first call it reduces each table along s (4 slices) and interpolates the
+  remaining 3-D table at every geometry (64 values each);
+* from the second call on (the same geometries evaluated again: fitting, ``Model.at``) it
+  keeps the 3-D interpolation of each s node it has needed, so a call only combines four
+  stored columns: a few operations per geometry.
+
+Both orders apply the same linear weights to the same values and agree to rounding.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .coordinates import Y_OFFSET, geometry_coordinates
+from .interpolation import Axis, axis_stencil, contract_last_axis, gather_3d
+
+__all__ = ["TableGrid", "LogTable"]
+
+
+@dataclass(frozen=True)
+class TableGrid:
+    """Node counts of the four table axes (y, zeta, t, s); see :mod:`.coordinates`."""
+
+    y: int
+    zeta: int
+    t: int
+    s: int
+
+    def axes(self) -> tuple[Axis, Axis, Axis, Axis]:
+        """The four regular axes."""
+        return (
+            Axis("y", math.log(Y_OFFSET), math.log(0.5 * math.pi + Y_OFFSET), self.y),
+            Axis("zeta", 0.0, 1.0, self.zeta),
+            Axis("t", 0.0, 1.0, self.t),
+            Axis("s", 0.0, 1.0, self.s),
+        )
+
+    @property
+    def shape(self) -> tuple[int, int, int, int]:
+        return (self.y, self.zeta, self.t, self.s)
+
+    @property
+    def nodes(self) -> int:
+        return math.prod(self.shape)
+
+    def node_coordinates(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(y, zeta, t) of every geometry node, each of shape (y, zeta, t)."""
+        ay, az, at, _ = self.axes()
+        return tuple(np.meshgrid(ay.nodes(), az.nodes(), at.nodes(), indexing="ij"))
+
+
+class LogTable:
+    """Interpolation of tabulated logarithms at geometries and a parameter coordinate.
+
+    Parameters
+    ----------
+    tables : sequence of numpy.ndarray
+        Arrays of the same shape (y, zeta, t, s).
+    """
+
+    def __init__(self, tables: Sequence[np.ndarray]):
+        self.tables = tuple(np.ascontiguousarray(t, dtype=float) for t in tables)
+        shapes = {t.shape for t in self.tables}
+        if len(shapes) != 1 or len(next(iter(shapes))) != 4:
+            raise ValueError(f"tables must share one 4-D shape, got {sorted(shapes)}")
+        self.grid = TableGrid(*self.tables[0].shape)
+        self.axes = self.grid.axes()
+
+    def prepare(self, theta_i, phi_i, theta_r, phi_r) -> Callable[[float], tuple[np.ndarray, ...]]:
+        """Geometries [rad] -> function of s returning the interpolated logs (flattened)."""
+        ti, pi_, tr, pr = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))
+        y, zeta, t, _ = geometry_coordinates(ti.ravel(), tr.ravel(), (pr - pi_).ravel())
+        stencils = tuple(axis_stencil(axis, x) for axis, x in zip(self.axes[:3], (y, zeta, t)))
+        s_axis = self.axes[3]
+        columns: dict[int, tuple[np.ndarray, ...]] = {}
+        calls = [0]
+
+        def column(node: int) -> tuple[np.ndarray, ...]:
+            if node not in columns:
+                columns[node] = tuple(gather_3d(table[..., node], stencils) for table in self.tables)
+            return columns[node]
+
+        def evaluate(s: float) -> tuple[np.ndarray, ...]:
+            calls[0] += 1
+            if calls[0] == 1:  # one-off evaluation: reduce along s first
+                return tuple(gather_3d(contract_last_axis(table, s_axis, s), stencils) for table in self.tables)
+            first, weights = axis_stencil(s_axis, np.asarray(float(s)))
+            sums = [np.zeros(y.shape) for _ in self.tables]
+            for node, weight in zip(range(int(first), int(first) + 4), weights):
+                for total, values in zip(sums, column(node)):
+                    total += weight * values
+            return tuple(sums)
+
+        return evaluate

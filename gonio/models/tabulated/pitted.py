@@ -1,0 +1,107 @@
+"""``pitted-tabulated``: the pitted-surface model with its single-scattering integral tabulated.
+
+The pitted BRDF of Koenderink, van Doorn, Dana & Nayar (1999) separates as
+``(1 - coverage) rho/pi + coverage (rho F1 + F2)`` (:mod:`gonio.models.pitted.model`).
+F1, the single-scattering factor of eq 14-15, depends on the geometry and the aperture
+psi and costs a quadrature per geometry; here it is read from a table
+(:mod:`.pitted_table`) by cubic interpolation in the smooth coordinates of
+:mod:`.coordinates`, and combined with the closed-form interreflection F2 (eq 12) by the
+same :class:`~gonio.models.pitted.model.PitTerms` the exact model uses.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+from .._core import Model, Param, register
+from ..pitted.model import PitTerms
+from .coordinates import Y_OFFSET
+from .lookup import LogTable
+from .pitted_table import PIT_SCALE, PSI_MAP, PSI_SCALE_DEG
+from .store import check_constants, load
+
+__all__ = ["PIT_TABLE_NAME", "PittedTable", "PITTED_TABULATED"]
+
+#: File name (without ``.npz``) of the pitted table.
+PIT_TABLE_NAME = "pitted"
+
+_COORDINATE_CONSTANTS = {"y_offset": Y_OFFSET, "psi_scale_deg": PSI_SCALE_DEG, "pit_scale": PIT_SCALE}
+
+
+class PittedTable:
+    """The tabulated single-scattering factor (asinh-transformed) and its evaluation.
+
+    Parameters
+    ----------
+    arrays : dict
+        ``asinh_f1`` (shape (y, zeta, t, s)) and the constants it was built with.
+    """
+
+    def __init__(self, arrays: dict[str, np.ndarray]):
+        check_constants(arrays, _COORDINATE_CONSTANTS, PIT_TABLE_NAME)
+        self.lookup = LogTable((arrays["asinh_f1"],))
+        self.grid = self.lookup.grid
+
+    def prepare(self, theta_i, phi_i, theta_r, phi_r) -> Callable[[float], np.ndarray]:
+        """Geometry [rad] -> function of psi [deg] returning F1 [1/sr]."""
+        shape = np.broadcast_shapes(*(np.shape(a) for a in (theta_i, phi_i, theta_r, phi_r)))
+        logs = self.lookup.prepare(theta_i, phi_i, theta_r, phi_r)
+
+        def factor(psi: float) -> np.ndarray:
+            (values,) = logs(float(PSI_MAP.coordinate(psi)))
+            return (np.sinh(values) * (PIT_SCALE / math.pi)).reshape(shape)
+
+        return factor
+
+
+_TABLE: list[PittedTable] = []
+
+
+def table() -> PittedTable:
+    """The pitted table (loaded on first use, then kept)."""
+    if not _TABLE:
+        _TABLE.append(PittedTable(load(PIT_TABLE_NAME)))
+    return _TABLE[0]
+
+
+def reset_table() -> None:
+    """Forget the loaded table (after ``gonio tables build`` or ``clear``)."""
+    _TABLE.clear()
+    load.cache_clear()
+
+
+def _prepare(theta_i, phi_i, theta_r, phi_r):
+    factor = table().prepare(theta_i, phi_i, theta_r, phi_r)
+    cache: dict[float, PitTerms] = {}
+
+    def evaluate(rho: float, psi: float, coverage: float) -> np.ndarray:
+        if psi not in cache:
+            if len(cache) > 8:
+                cache.clear()
+            psi_rad = math.radians(psi)
+            cache[psi] = PitTerms(factor(psi), math.sin(psi_rad) ** 2 / (4.0 * math.pi), math.sin(psi_rad / 2.0) ** 2)
+        return cache[psi].brdf(rho, coverage)
+
+    return evaluate
+
+
+PITTED_TABULATED = register(
+    Model(
+        name="pitted-tabulated",
+        params=(
+            Param("rho", "-", 0.8, (0.0, 1.0), "micro-scale Lambertian albedo of pits and plane"),
+            Param("psi", "deg", 90.0, (0.0, 90.0), "pit aperture; 90 is a hemispherical pit", open_lower=True),
+            Param("coverage", "-", 0.4, (0.0, 1.0), "fraction of the plane covered by pit orifices"),
+        ),
+        reference=(
+            "Koenderink, van Doorn, Dana & Nayar 1999, IJCV 31: eq 12 (interreflection, closed form) and "
+            "eq 14-15 (single scattering) tabulated from the pitted model, cubic interpolation"
+        ),
+        description="plane partly covered by Lambertian spherical pits, single scattering from a table (fast)",
+        prepare=_prepare,
+        energy_conserving=True,
+        reciprocal=True,
+    )
+)
