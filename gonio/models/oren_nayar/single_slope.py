@@ -607,8 +607,10 @@ def _graded_nodes(lo, hi, left_gap, right_gap, order):
         gap = np.clip(gap, 1e-12 * np.maximum(half, 1e-300), 1e3 * half + 1e-300)
         mu = np.arcsinh(half / gap)[..., None]
         gap = gap[..., None]
-        nodes.append(end[..., None] + sign * gap * np.sinh(mu * u))
-        weights.append(gap * mu * np.cosh(mu * u) * w)
+        grow = np.exp(mu * u)
+        shrink = 1.0 / grow
+        nodes.append(end[..., None] + sign * gap * 0.5 * (grow - shrink))
+        weights.append(gap * mu * 0.5 * (grow + shrink) * w)
     return np.concatenate(nodes, axis=-1), np.concatenate(weights, axis=-1)
 
 

@@ -391,13 +391,12 @@ def interreflection_factor(masked: ArrayLike, shadowed: ArrayLike, theta_a: Arra
 
 
 def _interreflection_factor(m_v: np.ndarray, m_s: np.ndarray, cos_2a: np.ndarray) -> np.ndarray:
-    """Eq 24 from the two widths and cos(2 theta_a)."""
-    one = np.ones_like(m_v)
+    """Eq 24 from the two widths and cos(2 theta_a); d(1, 1) = sqrt(2 + 2 cos 2 theta_a)."""
     value = (
-        _cavity_distance(one, m_v, cos_2a)
-        + _cavity_distance(one, m_s, cos_2a)
+        _cavity_distance(1.0, m_v, cos_2a)
+        + _cavity_distance(1.0, m_s, cos_2a)
         - _cavity_distance(m_s, m_v, cos_2a)
-        - _cavity_distance(one, one, cos_2a)
+        - np.sqrt(np.maximum(2.0 + 2.0 * cos_2a, 0.0))
     )
     return np.maximum(np.pi / 2.0 * value, 0.0)
 

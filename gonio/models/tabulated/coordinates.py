@@ -126,8 +126,9 @@ def geometry_coordinates(
         Coordinates of the module notes and the distance of the lower direction from the
         horizon [rad], broadcast together.
     """
-    alpha = np.maximum(theta_i, theta_r)
-    beta = np.minimum(theta_i, theta_r)
+    theta_i, theta_r, delta_phi = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, theta_r, delta_phi)))
+    alpha = np.asarray(np.maximum(theta_i, theta_r))
+    beta = np.asarray(np.minimum(theta_i, theta_r))
     z_beta = np.maximum(_HALF_PI - beta, 0.0)
     z_alpha = np.maximum(_HALF_PI - alpha, 0.0)
     y = np.log(z_beta + Y_OFFSET)
@@ -136,7 +137,7 @@ def geometry_coordinates(
     half = np.sin(0.5 * (alpha - beta)) ** 2 + np.sin(alpha) * np.sin(beta) * np.sin(0.5 * delta_phi) ** 2
     phase = 2.0 * np.arcsin(np.sqrt(np.clip(half, 0.0, 1.0)))
     limit = np.sin(0.5 * delta_phi) ** 2  # (1 - cos dphi)/2, the beta -> 0 limit of t
-    t = np.divide(phase - (alpha - beta), 2.0 * beta, out=limit * np.ones_like(beta), where=beta > 1e-6)
+    t = np.divide(phase - (alpha - beta), 2.0 * beta, out=np.array(np.broadcast_to(limit, beta.shape)), where=beta > 1e-6)
     return y, zeta, np.clip(t, 0.0, 1.0), z_beta
 
 
@@ -144,13 +145,14 @@ def geometry_from_coordinates(
     y: np.ndarray, zeta: np.ndarray, t: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Inverse map: (theta_i, theta_r, delta_phi) [rad] with theta_i = alpha >= theta_r."""
-    z_beta = np.maximum(np.exp(y) - Y_OFFSET, 0.0)
+    y, zeta, t = np.broadcast_arrays(*(np.asarray(a, float) for a in (y, zeta, t)))
+    z_beta = np.asarray(np.maximum(np.exp(y) - Y_OFFSET, 0.0))
     beta = _HALF_PI - z_beta
     alpha = _HALF_PI - zeta * z_beta
     phase = (alpha - beta) + 2.0 * beta * t
     denominator = np.sin(alpha) * np.sin(beta)
     cos_dphi = np.divide(
         np.cos(phase) - np.cos(alpha) * np.cos(beta), denominator,
-        out=1.0 - 2.0 * np.asarray(t, float) * np.ones_like(beta), where=denominator > 1e-12,
+        out=np.array(np.broadcast_to(1.0 - 2.0 * t, beta.shape)), where=denominator > 1e-12,
     )
     return alpha, beta, np.arccos(np.clip(cos_dphi, -1.0, 1.0))
