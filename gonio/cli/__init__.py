@@ -18,7 +18,7 @@ import gonio
 SUBCOMMANDS = ("demo", "models", "figures", "plan", "run", "fit", "report", "emulator", "textons")
 
 
-class CLIError(Exception):
+class CLIError(ValueError):
     """An error the user can fix; printed as ``gonio: error: ...`` with exit code 2."""
 
 

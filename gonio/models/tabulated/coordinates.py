@@ -6,25 +6,31 @@ accuracy a cubic rule should have.  This module maps a geometry and a roughness 
 coordinates, each in a fixed interval, in which they are (numerically checked: the
 accuracy study of docs/tabulated.md):
 
-``y``  = log(z_beta + Y_OFFSET),  z_beta = pi/2 - beta  [rad], beta = min(theta_i, theta_r)
+``y``  = log(z_beta + Y_OFFSET) + Y_SLOPE z_beta,  z_beta = pi/2 - beta  [rad],
+    beta = min(theta_i, theta_r)
     Near grazing the BRDF changes on the angular scale sigma (shadowing and masking
     switch on where tan(theta) tan(theta_a) = 1, Oren & Nayar eq 39), and it follows
     power laws of cos(beta) (growing like 1/cos(beta) backwards, vanishing like cos(beta)
     forwards).  A logarithmic distance from the horizon resolves every such scale with
     the same number of nodes and makes the power laws linear; Y_OFFSET sets the smallest
     resolved distance (directions closer to the horizon than a few Y_OFFSET are
-    interpolated between the horizon itself and that distance).
+    interpolated between the horizon itself and that distance).  The linear term keeps
+    the nodes a few degrees apart near the normal, where a rough surface's BRDF still
+    changes by tens of percent (a pure logarithm would space them 20 deg apart there).
 ``zeta`` = z_alpha / z_beta in [0, 1],  alpha = max(theta_i, theta_r)
     Reciprocity (the model is symmetric in source and viewer) halves the domain to
     alpha >= beta; the kink of the components at theta_i = theta_r becomes the edge
     zeta = 1 of the table.  Near the grazing corner alpha = beta = 90 deg the components
     depend on the ratio of the distances to the horizon, which zeta is.
-``t``  = (g - (alpha - beta)) / (2 beta) in [0, 1],  g the phase angle between the two
-    directions.  The V-cavity model has a cone-shaped peak at the retro-reflection
-    direction (g = 0): linear in g, not smooth in phi_r - phi_i.  t runs over the
-    phase angles that are possible for the given polar angles (from alpha - beta at
-    dphi = 0 to alpha + beta at dphi = 180 deg) and is linear in g.  As beta -> 0 it
-    tends to (1 - cos dphi)/2.
+``t``  = 1 - sqrt(1 - p),  p = (g - (alpha - beta)) / (2 beta) in [0, 1],  g the phase
+    angle between the two directions.  The V-cavity model has a cone-shaped peak at the
+    retro-reflection direction (g = 0): linear in g, not smooth in phi_r - phi_i.  p runs
+    over the phase angles that are possible for the given polar angles (from alpha - beta
+    at dphi = 0 to alpha + beta at dphi = 180 deg) and is linear in g; as beta -> 0 it
+    tends to (1 - cos dphi)/2.  Near the forward direction p is quadratic in
+    180 deg - dphi, while towards grazing the components there grow like
+    |180 deg - dphi|; the square root makes t linear in 180 deg - dphi at that end and
+    keeps it linear in g at the backward end.
 ``s``  = asinh(p / scale) / asinh(p_max / scale) in [0, 1] for the model parameter p
     (the roughness sigma of Oren-Nayar, the aperture psi of the pitted model), see
     :class:`ParameterMap`.  Linear in p for small p and logarithmic for large p: the
@@ -45,8 +51,12 @@ import math
 import numpy as np
 
 __all__ = [
+    "COORDINATES_VERSION",
     "Y_OFFSET",
+    "Y_SLOPE",
     "Z_CLAMP",
+    "y_coordinate",
+    "z_from_y",
     "SIGMA_SCALE_DEG",
     "SIGMA_MAX_DEG",
     "geometry_coordinates",
@@ -59,6 +69,10 @@ __all__ = [
 
 #: Smallest resolved angular distance from the horizon [rad] (about 0.0006 deg).
 Y_OFFSET = 1.0e-5
+#: Version of the coordinate maps (stored in tables; a table of another version is refused).
+COORDINATES_VERSION = 2
+#: Weight of the linear term of the y coordinate [1/rad].
+Y_SLOPE = 2.0
 #: Distance from the horizon [rad] at which the exact model evaluates directions on the
 #: horizon (its limit theta -> 90 deg); table nodes on the horizon use the same.
 Z_CLAMP = 1.0e-9
@@ -68,6 +82,25 @@ SIGMA_SCALE_DEG = 0.5
 SIGMA_MAX_DEG = 90.0
 
 _HALF_PI = 0.5 * math.pi
+
+
+def y_coordinate(z_beta: np.ndarray) -> np.ndarray:
+    """The y coordinate of a distance from the horizon ``z_beta`` [rad]."""
+    return np.log(z_beta + Y_OFFSET) + Y_SLOPE * z_beta
+
+
+def z_from_y(y: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`y_coordinate` (bisection then Newton; used to place nodes)."""
+    y = np.asarray(y, float)
+    lo, hi = np.zeros(y.shape), np.full(y.shape, _HALF_PI)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        above = y_coordinate(mid) > y
+        hi, lo = np.where(above, mid, hi), np.where(above, lo, mid)
+    z = 0.5 * (lo + hi)
+    for _ in range(3):
+        z = z - (y_coordinate(z) - y) / (1.0 / (z + Y_OFFSET) + Y_SLOPE)
+    return np.clip(z, 0.0, _HALF_PI)
 
 
 class ParameterMap:
@@ -131,14 +164,15 @@ def geometry_coordinates(
     beta = np.asarray(np.minimum(theta_i, theta_r))
     z_beta = np.maximum(_HALF_PI - beta, 0.0)
     z_alpha = np.maximum(_HALF_PI - alpha, 0.0)
-    y = np.log(z_beta + Y_OFFSET)
+    y = y_coordinate(z_beta)
     zeta = np.divide(z_alpha, z_beta, out=np.ones_like(z_beta), where=z_beta > 0.0)
     # phase angle by the haversine formula (accurate near the retro-reflection direction)
     half = np.sin(0.5 * (alpha - beta)) ** 2 + np.sin(alpha) * np.sin(beta) * np.sin(0.5 * delta_phi) ** 2
     phase = 2.0 * np.arcsin(np.sqrt(np.clip(half, 0.0, 1.0)))
     limit = np.sin(0.5 * delta_phi) ** 2  # (1 - cos dphi)/2, the beta -> 0 limit of t
-    t = np.divide(phase - (alpha - beta), 2.0 * beta, out=np.array(np.broadcast_to(limit, beta.shape)), where=beta > 1e-6)
-    return y, zeta, np.clip(t, 0.0, 1.0), z_beta
+    p = np.divide(phase - (alpha - beta), 2.0 * beta, out=np.array(np.broadcast_to(limit, beta.shape)), where=beta > 1e-6)
+    t = 1.0 - np.sqrt(1.0 - np.clip(p, 0.0, 1.0))
+    return y, zeta, t, z_beta
 
 
 def geometry_from_coordinates(
@@ -146,13 +180,14 @@ def geometry_from_coordinates(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Inverse map: (theta_i, theta_r, delta_phi) [rad] with theta_i = alpha >= theta_r."""
     y, zeta, t = np.broadcast_arrays(*(np.asarray(a, float) for a in (y, zeta, t)))
-    z_beta = np.asarray(np.maximum(np.exp(y) - Y_OFFSET, 0.0))
+    z_beta = np.asarray(z_from_y(y))
     beta = _HALF_PI - z_beta
     alpha = _HALF_PI - zeta * z_beta
-    phase = (alpha - beta) + 2.0 * beta * t
+    p = 1.0 - (1.0 - t) ** 2
+    phase = (alpha - beta) + 2.0 * beta * p
     denominator = np.sin(alpha) * np.sin(beta)
     cos_dphi = np.divide(
         np.cos(phase) - np.cos(alpha) * np.cos(beta), denominator,
-        out=np.array(np.broadcast_to(1.0 - 2.0 * t, beta.shape)), where=denominator > 1e-12,
+        out=np.array(np.broadcast_to(1.0 - 2.0 * p, beta.shape)), where=denominator > 1e-12,
     )
     return alpha, beta, np.arccos(np.clip(cos_dphi, -1.0, 1.0))

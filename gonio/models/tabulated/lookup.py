@@ -21,7 +21,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .coordinates import Y_OFFSET, geometry_coordinates
+from .coordinates import geometry_coordinates, y_coordinate
 from .interpolation import Axis, axis_stencil, contract_last_axis, gather_3d
 
 __all__ = ["TableGrid", "LogTable"]
@@ -39,7 +39,7 @@ class TableGrid:
     def axes(self) -> tuple[Axis, Axis, Axis, Axis]:
         """The four regular axes."""
         return (
-            Axis("y", math.log(Y_OFFSET), math.log(0.5 * math.pi + Y_OFFSET), self.y),
+            Axis("y", float(y_coordinate(0.0)), float(y_coordinate(0.5 * math.pi)), self.y),
             Axis("zeta", 0.0, 1.0, self.zeta),
             Axis("t", 0.0, 1.0, self.t),
             Axis("s", 0.0, 1.0, self.s),

@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 
 from .._core import Model, Param, register
-from .coordinates import SIGMA_SCALE_DEG, Y_OFFSET, sigma_coordinate
+from .coordinates import COORDINATES_VERSION, SIGMA_SCALE_DEG, Y_OFFSET, Y_SLOPE, sigma_coordinate
 from .lookup import LogTable
 from .oren_nayar_table import F2_FLOOR
 from .store import check_constants, load
@@ -32,7 +32,7 @@ __all__ = ["TABLE_NAME", "OrenNayarTable", "tabulated_components", "OREN_NAYAR_T
 TABLE_NAME = "oren-nayar"
 
 #: Constants a table must have been built with to be read by this module.
-_COORDINATE_CONSTANTS = {"y_offset": Y_OFFSET, "sigma_scale_deg": SIGMA_SCALE_DEG, "f2_floor": F2_FLOOR}
+_COORDINATE_CONSTANTS = {"y_offset": Y_OFFSET, "sigma_scale_deg": SIGMA_SCALE_DEG, "f2_floor": F2_FLOOR, "y_slope": Y_SLOPE, "coordinates_version": COORDINATES_VERSION}
 
 
 class OrenNayarTable:

@@ -19,7 +19,9 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from .coordinates import (
+    COORDINATES_VERSION,
     SIGMA_SCALE_DEG,
+    Y_SLOPE,
     Y_OFFSET,
     geometry_from_coordinates,
     sigma_from_coordinate,
@@ -105,6 +107,8 @@ def build_oren_nayar_table(
         "rtol": np.array(rtol),
         "f2_floor": np.array(F2_FLOOR),
         "y_offset": np.array(Y_OFFSET),
+        "y_slope": np.array(Y_SLOPE),
+        "coordinates_version": np.array(COORDINATES_VERSION),
         "sigma_scale_deg": np.array(SIGMA_SCALE_DEG),
         "build_seconds": np.array(time.perf_counter() - start),
     }

@@ -17,7 +17,7 @@ import numpy as np
 
 from .._core import Model, Param, register
 from ..pitted.model import PitTerms
-from .coordinates import Y_OFFSET
+from .coordinates import COORDINATES_VERSION, Y_OFFSET, Y_SLOPE
 from .lookup import LogTable
 from .pitted_table import PIT_SCALE, PSI_MAP, PSI_SCALE_DEG
 from .store import check_constants, load
@@ -27,7 +27,7 @@ __all__ = ["PIT_TABLE_NAME", "PittedTable", "PITTED_TABULATED"]
 #: File name (without ``.npz``) of the pitted table.
 PIT_TABLE_NAME = "pitted"
 
-_COORDINATE_CONSTANTS = {"y_offset": Y_OFFSET, "psi_scale_deg": PSI_SCALE_DEG, "pit_scale": PIT_SCALE}
+_COORDINATE_CONSTANTS = {"y_offset": Y_OFFSET, "psi_scale_deg": PSI_SCALE_DEG, "pit_scale": PIT_SCALE, "y_slope": Y_SLOPE, "coordinates_version": COORDINATES_VERSION}
 
 
 class PittedTable:

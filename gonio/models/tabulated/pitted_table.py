@@ -23,7 +23,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from .coordinates import Y_OFFSET, ParameterMap, geometry_from_coordinates
+from .coordinates import COORDINATES_VERSION, Y_OFFSET, Y_SLOPE, ParameterMap, geometry_from_coordinates
 from .lookup import TableGrid
 
 __all__ = ["PIT_SCALE", "PSI_SCALE_DEG", "PSI_MAP", "DEFAULT_PIT_GRID", "build_pitted_table"]
@@ -87,6 +87,8 @@ def build_pitted_table(grid: TableGrid = DEFAULT_PIT_GRID, workers: int | None =
         "rtol": np.array(1e-9),
         "pit_scale": np.array(PIT_SCALE),
         "y_offset": np.array(Y_OFFSET),
+        "y_slope": np.array(Y_SLOPE),
+        "coordinates_version": np.array(COORDINATES_VERSION),
         "psi_scale_deg": np.array(PSI_SCALE_DEG),
         "build_seconds": np.array(time.perf_counter() - start),
     }

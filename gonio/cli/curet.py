@@ -1,0 +1,596 @@
+"""``gonio curet``: list, export and fit the CUReT BRDF measurements.
+
+Three actions on the measured samples of the Columbia-Utrecht Reflectance and Texture
+database (Dana, van Ginneken, Nayar & Koenderink, ACM TOG 18(1), 1999; credit them
+whenever the data is used or shown):
+
+``gonio curet list``
+    Every sample with its number, name and a few statistics.
+``gonio curet export SAMPLE --out FILE.csv``
+    A fitting CSV (``gonio fit`` format) of one sample: the 205 geometries [deg], the BRDF
+    [1/sr] and the uncertainty of the noise model below.
+``gonio curet fit SAMPLE --out DIR``
+    Fits one or more models (default ``lambert``, ``oren-nayar-qualitative``,
+    ``oren-nayar`` with ``ir_weight`` fixed at 1 and free), each by least squares and MCMC,
+    writes a report per model and a model comparison.
+
+Noise model (the decision, and why)
+-----------------------------------
+The files give one number per geometry, with no uncertainty.  The values are quantised to
+0.001 sr^-1, and the scatter that matters is not the camera noise but the variation of the
+sample (texture in the averaged image region, re-positioning of the sample for each of the
+205 poses) and the calibration: effects proportional to the signal.  gonio therefore uses
+a *relative* uncertainty whose size is estimated from the data themselves, independently
+of the physical models under test:
+
+1. a smooth, reciprocal description of the sample is fitted: the Koenderink-van Doorn
+   isotropic series of order 6 (30 amplitudes, Tikhonov weight 1e-5 sr^-2;
+   :func:`gonio.models.kvd.fit_series`), flexible enough to follow every matte sample
+   (docs/kvd.md) yet far smoother than the point-to-point scatter;
+2. its relative prediction error is measured by 5-fold cross-validation (fixed folds):
+   ``s = rms(data - held-out prediction) / rms(held-out prediction)``;
+3. each value gets ``sigma_i = sqrt((s * |smooth_i|)^2 + q^2)`` with ``smooth_i`` the
+   series fitted to all geometries (not the noisy value itself, which would bias a fit
+   towards low values) and ``q = 0.001 / sqrt(12)`` sr^-1 the rounding of the files.
+
+``s`` includes the series' own interpolation error, so it over- rather than
+under-estimates the noise: a physical model that reaches a reduced chi-square near 1 fits
+as well as the best smooth description the data support, and a larger value measures
+systematic misfit.  ``--noise relative:0.05`` replaces the estimate by a fixed relative
+uncertainty.  By default the MCMC also fits ``jitter`` (extra noise in quadrature,
+:mod:`gonio.fitting.problem`) so that posterior intervals widen when the model misfits;
+the model comparison uses the noise model alone (the Laplace evidence is undefined with a
+jitter).
+
+Geometry selection: every value is kept by default (negative values are legitimate
+noisy measurements of a dark sample; dropping them would bias the fit upwards).
+``--drop-negative`` removes them, ``--exclude-specular DEG`` removes the geometries whose
+viewing direction lies within DEG of the mirror direction of the source (for shiny samples,
+whose near-specular values the database notes may be clipped; the files do not mark them).
+
+Data folder: ``--data DIR``, else the environment variable ``GONIO_CURET_DIR``, else
+``shared/data/curet`` beside the repository checkout (see :func:`default_curet_dir`).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from . import CLIError
+
+__all__ = [
+    "CREDIT",
+    "DEFAULT_CANDIDATES",
+    "NoiseEstimate",
+    "default_curet_dir",
+    "load_curet",
+    "parse_sample",
+    "parse_noise",
+    "estimate_relative_noise",
+    "select_geometries",
+    "curet_dataset",
+    "candidate_label",
+    "candidate_slug",
+    "register",
+]
+
+#: Credit line for anything that uses or shows the CUReT data.
+CREDIT = (
+    "CUReT data: K. J. Dana, B. van Ginneken, S. K. Nayar, J. J. Koenderink, "
+    '"Reflectance and texture of real-world surfaces", ACM Transactions on Graphics 18(1), 1999'
+)
+
+#: Models fitted by ``gonio curet fit`` when no ``--model`` is given (model-spec syntax of
+#: ``gonio models plot``: ``NAME[:param=value,...]``, values held fixed).
+DEFAULT_CANDIDATES = ("lambert", "oren-nayar-qualitative", "oren-nayar:ir_weight=1", "oren-nayar")
+
+#: Environment variable naming the folder with abrdf.dat and table.txt.
+ENVIRONMENT_VARIABLE = "GONIO_CURET_DIR"
+
+# The files print each BRDF value with three decimals [1/sr]; the rounding error is uniform
+# over one step, standard deviation step / sqrt(12).
+QUANTISATION_STEP = 0.001
+# Smooth reference of the noise estimate: KvD order and Tikhonov weight [sr^-2]; order 6
+# had the smallest cross-validated error of orders 2-8 on samples 6, 10, 11 and 30 (0.029,
+# 0.034, 0.050, 0.038 relative rms), and the weight 1e-5 keeps order 6 from ringing.
+SMOOTH_ORDER = 6
+SMOOTH_REGULARIZATION = 1e-5
+CROSS_VALIDATION_FOLDS = 5
+
+
+# ---------------------------------------------------------------------- data location
+def default_curet_dir() -> Path:
+    """The CUReT folder used when none is given.
+
+    ``$GONIO_CURET_DIR`` if set, else ``shared/data/curet`` in the folder that holds the
+    repository checkout (``<checkout>/../shared/data/curet``), which is where both a
+    developer checkout and the CI's fresh clone find it.  The path is returned whether or
+    not it exists; :func:`load_curet` says what to do when it does not.
+    """
+    configured = os.environ.get(ENVIRONMENT_VARIABLE)
+    if configured:
+        return Path(configured)
+    checkout = Path(__file__).resolve().parents[2]  # gonio/cli/curet.py -> checkout
+    return checkout.parent / "shared" / "data" / "curet"
+
+
+def load_curet(directory: str | Path | None = None, angle_order: str = "view-first"):
+    """Read the CUReT files from ``directory`` (default :func:`default_curet_dir`).
+
+    Raises
+    ------
+    CLIError
+        The folder lacks ``abrdf.dat`` or ``table.txt`` (naming the folder and the ways to
+        point gonio at the data).
+    """
+    from gonio.curet import read_curet
+
+    folder = Path(directory) if directory is not None else default_curet_dir()
+    missing = [name for name in ("abrdf.dat", "table.txt") if not (folder / name).is_file()]
+    if missing:
+        how = "" if directory is not None else f" (default location; set --data DIR or ${ENVIRONMENT_VARIABLE})"
+        raise CLIError(f"CUReT folder {folder}{how} lacks {' and '.join(missing)}; "
+                       "it must hold abrdf.dat and table.txt of the CUReT BRDF database")
+    return read_curet(folder, angle_order=angle_order)
+
+
+def parse_sample(text: str | int) -> int | str:
+    """A sample key: a number (``"11"``) or a name (``"plaster_b"``)."""
+    text = str(text).strip()
+    return int(text) if text.isdigit() else text
+
+
+# ---------------------------------------------------------------------- noise model
+@dataclass(frozen=True)
+class NoiseEstimate:
+    """Uncertainties of one sample's values (module notes, "Noise model").
+
+    Attributes
+    ----------
+    sigma : numpy.ndarray
+        One-standard-deviation uncertainty of each value [1/sr].
+    relative : float
+        Relative uncertainty s [-].
+    method : str
+        ``"kvd-cross-validation"`` or ``"fixed"``.
+    description : str
+        One line for metadata and reports.
+    smooth : numpy.ndarray
+        The smooth reference each sigma is proportional to [1/sr].
+    """
+
+    sigma: np.ndarray
+    relative: float
+    method: str
+    description: str
+    smooth: np.ndarray
+
+
+def parse_noise(text: str) -> float | None:
+    """``"kvd"`` -> None (estimate), ``"relative:S"`` -> S (fixed relative uncertainty).
+
+    Raises
+    ------
+    CLIError
+        Anything else, or S outside (0, 1].
+    """
+    text = text.strip()
+    if text == "kvd":
+        return None
+    kind, _, value = text.partition(":")
+    if kind == "relative":
+        try:
+            relative = float(value)
+        except ValueError:
+            relative = math.nan
+        if 0.0 < relative <= 1.0:
+            return relative
+        raise CLIError(f"--noise {text!r}: the relative uncertainty must be a number in (0, 1], e.g. relative:0.05")
+    raise CLIError(f"--noise {text!r}: expected 'kvd' (estimated from the data) or 'relative:S' (e.g. relative:0.05)")
+
+
+def _fit_smooth(theta_i, phi_i, theta_r, phi_r, brdf) -> np.ndarray:
+    from gonio.models import kvd
+
+    fitted = kvd.fit_series(theta_i, phi_i, theta_r, phi_r, brdf, order=SMOOTH_ORDER, regularization=SMOOTH_REGULARIZATION)
+    return fitted.coefficients.model()
+
+
+def estimate_relative_noise(
+    theta_i: np.ndarray,
+    phi_i: np.ndarray,
+    theta_r: np.ndarray,
+    phi_r: np.ndarray,
+    brdf: np.ndarray,
+    relative: float | None = None,
+    folds: int = CROSS_VALIDATION_FOLDS,
+    seed: int = 0,
+) -> NoiseEstimate:
+    """Relative uncertainties of measured BRDF values from a cross-validated smooth fit.
+
+    Parameters
+    ----------
+    theta_i, phi_i, theta_r, phi_r : numpy.ndarray
+        Geometries [deg].
+    brdf : numpy.ndarray
+        Measured BRDF [1/sr].
+    relative : float, optional
+        Use this relative uncertainty [-] instead of estimating it (the smooth reference
+        is still fitted).
+    folds : int
+        Number of cross-validation folds (>= 2).
+    seed : int
+        Seed of the fold assignment (fixed, so the estimate is reproducible).
+
+    Returns
+    -------
+    NoiseEstimate
+
+    Raises
+    ------
+    ValueError
+        Too few geometries for the order-6 series in each training set.
+
+    Notes
+    -----
+    The smooth reference is the isotropic Koenderink-van Doorn series (KvD 1998, eq 26-31)
+    of order 6 fitted by Tikhonov-regularised least squares; s is the ratio of the rms
+    held-out residual to the rms held-out prediction, a consistent estimate of the relative
+    scatter when the scatter is proportional to the signal (module notes).
+
+    Examples
+    --------
+    >>> import numpy as np, gonio
+    >>> rng = np.random.default_rng(1)
+    >>> ti, tr = rng.uniform(0, 80, 200), rng.uniform(0, 80, 200)
+    >>> pi_, pr = rng.uniform(-180, 180, 200), rng.uniform(-180, 180, 200)
+    >>> f = gonio.brdf("oren-nayar", ti, pi_, tr, pr, rho=0.8, sigma=20)
+    >>> noisy = f * (1 + 0.04 * rng.standard_normal(200))
+    >>> round(estimate_relative_noise(ti, pi_, tr, pr, noisy).relative, 2)   # doctest: +SKIP
+    0.04
+    """
+    from gonio.models import kvd
+
+    n_modes = len(kvd.isotropic_indices(SMOOTH_ORDER))
+    n = brdf.size
+    if folds < 2:
+        raise ValueError(f"folds = {folds} must be >= 2")
+    if relative is None and n * (folds - 1) / folds < 2 * n_modes:
+        raise ValueError(
+            f"{n} geometries are too few to estimate the noise with the order-{SMOOTH_ORDER} series "
+            f"({n_modes} amplitudes need >= {2 * n_modes} per training fold); give --noise relative:S"
+        )
+    geometry = (theta_i, phi_i, theta_r, phi_r)
+    smooth = _fit_smooth(*geometry, brdf)(*geometry)
+    if relative is None:
+        assignment = np.random.default_rng(seed).permutation(n) % folds
+        held_out = np.empty(n)
+        for k in range(folds):
+            train, test = assignment != k, assignment == k
+            model = _fit_smooth(*(g[train] for g in geometry), brdf[train])
+            held_out[test] = model(*(g[test] for g in geometry))
+        relative = float(np.sqrt(np.mean((brdf - held_out) ** 2) / np.mean(held_out**2)))
+        method = "kvd-cross-validation"
+        description = (
+            f"sigma = sqrt((s f_smooth)^2 + q^2), s = {relative:.4f} from {folds}-fold cross-validation of a "
+            f"KvD order-{SMOOTH_ORDER} series, q = {QUANTISATION_STEP:g}/sqrt(12) sr^-1 (rounding)"
+        )
+    else:
+        relative = float(relative)
+        method = "fixed"
+        description = (
+            f"sigma = sqrt((s f_smooth)^2 + q^2), fixed s = {relative:g}, f_smooth a KvD order-{SMOOTH_ORDER} "
+            f"series, q = {QUANTISATION_STEP:g}/sqrt(12) sr^-1 (rounding)"
+        )
+    quantisation = QUANTISATION_STEP / math.sqrt(12.0)
+    sigma = np.sqrt((relative * np.abs(smooth)) ** 2 + quantisation**2)
+    return NoiseEstimate(sigma, relative, method, description, smooth)
+
+
+# ---------------------------------------------------------------------- data selection
+def select_geometries(sample, exclude_specular: float = 0.0, drop_negative: bool = False) -> tuple[np.ndarray, dict[str, int]]:
+    """Mask of the geometries to fit, and how many each rule dropped.
+
+    Parameters
+    ----------
+    sample : gonio.curet.CuretSample
+    exclude_specular : float
+        Drop geometries whose viewing direction lies within this angle [deg] of the mirror
+        direction of the source (0 keeps all).
+    drop_negative : bool
+        Drop negative values.
+
+    Raises
+    ------
+    ValueError
+        ``exclude_specular`` outside [0, 90] deg, or nothing left.
+    """
+    from gonio.geometry import angle_between
+
+    if not 0.0 <= exclude_specular <= 90.0:
+        raise ValueError(f"exclude_specular = {exclude_specular:g} deg is outside [0, 90] deg")
+    keep = np.ones(sample.brdf.size, bool)
+    dropped = {"near_specular": 0, "negative": 0}
+    if exclude_specular > 0.0:
+        off_mirror = angle_between(sample.theta_i, sample.phi_i + 180.0, sample.theta_r, sample.phi_r)
+        near = off_mirror < exclude_specular
+        dropped["near_specular"] = int(np.count_nonzero(near))
+        keep &= ~near
+    if drop_negative:
+        negative = sample.negative & keep
+        dropped["negative"] = int(np.count_nonzero(negative))
+        keep &= ~negative
+    if not keep.any():
+        raise ValueError(f"no geometry of CUReT sample {sample.number} is left after the selection")
+    return keep, dropped
+
+
+def curet_dataset(
+    data,
+    key: int | str,
+    noise: float | None = None,
+    exclude_specular: float = 0.0,
+    drop_negative: bool = False,
+):
+    """A :class:`gonio.fitting.Dataset` of one CUReT sample with the noise model.
+
+    Parameters
+    ----------
+    data : gonio.curet.CuretData
+        From :func:`load_curet` or :func:`gonio.curet.read_curet`.
+    key : int or str
+        Sample number (1-61) or name.
+    noise : float, optional
+        Fixed relative uncertainty; None estimates it (module notes).
+    exclude_specular, drop_negative
+        Geometry selection (:func:`select_geometries`).
+
+    Returns
+    -------
+    dataset : Dataset
+        Absolute BRDF [1/sr]; ``metadata`` records the sample, the selection, the noise
+        model and the credit.
+    noise : NoiseEstimate
+        For the selected geometries.
+
+    Examples
+    --------
+    >>> dataset, noise = curet_dataset(load_curet(), "plaster_a")     # doctest: +SKIP
+    >>> dataset.n, round(noise.relative, 3)                          # doctest: +SKIP
+    (205, 0.034)
+    """
+    from gonio.fitting import Dataset
+
+    sample = data.sample(key)
+    keep, dropped = select_geometries(sample, exclude_specular, drop_negative)
+    geometry = tuple(g[keep] for g in (sample.theta_i, sample.phi_i, sample.theta_r, sample.phi_r))
+    values = sample.brdf[keep]
+    estimate = estimate_relative_noise(*geometry, values, relative=noise)
+    metadata = {
+        "source": CREDIT,
+        "curet_sample": sample.number,
+        "curet_name": sample.name,
+        "angle_order": data.angle_order,
+        "geometries_used": int(keep.sum()),
+        "dropped_near_specular": dropped["near_specular"],
+        "dropped_negative": dropped["negative"],
+        "exclude_specular_deg": float(exclude_specular),
+        "noise_model": estimate.description,
+        "noise_relative": round(estimate.relative, 6),
+    }
+    dataset = Dataset(*geometry, values, estimate.sigma, quantity="brdf",
+                      label=f"CUReT {sample.number} {sample.name}", metadata=metadata)
+    return dataset, estimate
+
+
+# ---------------------------------------------------------------------- candidates
+def candidate_label(name: str, fixed: dict[str, Any]) -> str:
+    """``name`` or ``name (k=v, ...)`` as :func:`gonio.fitting.compare_models` labels it."""
+    return name + ("" if not fixed else " (" + ", ".join(f"{k}={v:g}" for k, v in fixed.items()) + ")")
+
+
+def candidate_slug(name: str, fixed: dict[str, Any], options: dict[str, Any] | None = None) -> str:
+    """A folder name for a candidate, e.g. ``oren-nayar.ir_weight-1``."""
+    parts = [name] + [f"{k}-{v:g}" for k, v in fixed.items()] + [f"{k}-{v}" for k, v in (options or {}).items()]
+    return re.sub(r"[^A-Za-z0-9_.+-]", "_", ".".join(parts))
+
+
+def _parse_candidates(specs: Sequence[str]) -> list[tuple[str, dict[str, float], dict[str, str]]]:
+    from .models import parse_model_spec
+
+    out = []
+    for spec in specs:
+        name, values = parse_model_spec(spec)
+        fixed = {k: float(v) for k, v in values.items() if not isinstance(v, str)}
+        options = {k: v for k, v in values.items() if isinstance(v, str)}
+        out.append((name, fixed, options))
+    return out
+
+
+# ---------------------------------------------------------------------- CLI
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``gonio curet`` with the actions ``list``, ``export`` and ``fit``."""
+    parser = subparsers.add_parser(
+        "curet",
+        help="list, export and fit the CUReT BRDF measurements (Dana et al. 1999)",
+        description=(
+            "The measured BRDFs of the Columbia-Utrecht Reflectance and Texture database: 61 samples at 205 "
+            "geometries, RGB-averaged absolute BRDF [1/sr]. " + CREDIT + "."
+        ),
+    )
+    actions = parser.add_subparsers(dest="curet_action", metavar="ACTION")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--data", metavar="DIR",
+                        help=f"folder with abrdf.dat and table.txt (default: ${ENVIRONMENT_VARIABLE}, else "
+                             "shared/data/curet beside the gonio checkout)")
+    common.add_argument("--angle-order", choices=["view-first", "illumination-first"], default="view-first",
+                        help="column order of table.txt (default view-first; see gonio.curet)")
+    selection = argparse.ArgumentParser(add_help=False)
+    selection.add_argument("sample", help="sample number (1-61) or name (e.g. plaster_b, 'plaster_b zoomed')")
+    selection.add_argument("--noise", default="kvd", metavar="kvd|relative:S",
+                           help="uncertainty model: 'kvd' estimates a relative uncertainty from a cross-validated "
+                                "smooth series (default), 'relative:S' fixes it")
+    selection.add_argument("--exclude-specular", type=float, default=0.0, metavar="DEG",
+                           help="drop geometries within DEG of the mirror direction (default 0: keep all)")
+    selection.add_argument("--drop-negative", action="store_true", help="drop negative (dark-noise) values")
+
+    listing = actions.add_parser("list", parents=[common], help="list the samples with names and statistics")
+    listing.set_defaults(func=_run_list)
+
+    export = actions.add_parser("export", parents=[common, selection],
+                                help="write one sample as a fitting CSV (gonio fit format)")
+    export.add_argument("--out", required=True, metavar="FILE.csv", help="CSV file to write")
+    export.set_defaults(func=_run_export)
+
+    fitting = actions.add_parser(
+        "fit", parents=[common, selection],
+        help="fit models to one sample (least squares + MCMC), write reports and a comparison",
+        description=(
+            "Fit each model to one CUReT sample: least squares, then emcee (with a jitter term unless "
+            "--no-jitter), a folder with result.json and report.html per model, and comparison.txt/.json "
+            "(chi-square, AIC, BIC, Laplace evidence under the noise model). Models are NAME[:param=value,...] "
+            "with the values held fixed, e.g. oren-nayar:ir_weight=1."
+        ),
+    )
+    fitting.add_argument("--model", action="append", metavar="NAME[:p=v,...]",
+                         help="model to fit, repeatable (default: " + ", ".join(DEFAULT_CANDIDATES) + ")")
+    fitting.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    fitting.add_argument("--mcmc", action=argparse.BooleanOptionalAction, default=True,
+                         help="sample the posterior with emcee (default: yes)")
+    fitting.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=True,
+                         help="fit an extra noise term in the MCMC (default: yes)")
+    fitting.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
+    fitting.add_argument("--max-steps", type=int, default=20000, help="step limit of each chain (default 20000)")
+    fitting.add_argument("--tau-multiple", type=float, default=50.0,
+                         help="chain length required, in autocorrelation times (default 50)")
+    fitting.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    fitting.add_argument("--report", action=argparse.BooleanOptionalAction, default=True,
+                         help="write report.html per model (default: yes)")
+    fitting.add_argument("--quiet", action="store_true", help="no progress messages")
+    fitting.set_defaults(func=_run_fit)
+    parser.set_defaults(func=lambda args: _no_action(parser))
+
+
+def _no_action(parser: argparse.ArgumentParser) -> int:
+    parser.print_help()
+    return 2
+
+
+def format_sample_table(data) -> str:
+    """Plain-text table of every sample: number, name, median BRDF, pi x median, negatives."""
+    lines = [f"{'number':>6}  {'name':<18} {'min':>7} {'median':>7} {'max':>7} {'pi*median':>9} {'negative':>8}",
+             "-" * 70]
+    for number, name, row in zip(data.sample_numbers, data.names, data.brdf):
+        lines.append(f"{int(number):>6}  {name:<18} {row.min():>7.3f} {np.median(row):>7.3f} {row.max():>7.3f} "
+                     f"{math.pi * np.median(row):>9.3f} {int(np.count_nonzero(row < 0)):>8}")
+    return "\n".join(lines)
+
+
+def _run_list(args: argparse.Namespace) -> int:
+    data = load_curet(args.data, args.angle_order)
+    print(format_sample_table(data))
+    print(f"{len(data.sample_numbers)} samples x {data.theta_i.size} geometries; BRDF [1/sr], RGB average "
+          "(pi*median ~ albedo of a matte sample).")
+    print(CREDIT + ".")
+    return 0
+
+
+def _dataset_from_args(args: argparse.Namespace):
+    data = load_curet(args.data, args.angle_order)
+    return curet_dataset(data, parse_sample(args.sample), parse_noise(args.noise), args.exclude_specular,
+                         args.drop_negative)
+
+
+def _describe(dataset, noise) -> str:
+    meta = dataset.metadata
+    dropped = meta["dropped_near_specular"] + meta["dropped_negative"]
+    return (f"{dataset.label}: {dataset.n} geometries ({dropped} dropped), relative uncertainty "
+            f"{noise.relative:.4f} ({noise.method})")
+
+
+def _run_export(args: argparse.Namespace) -> int:
+    dataset, noise = _dataset_from_args(args)
+    path = dataset.to_csv(args.out)
+    print(_describe(dataset, noise))
+    print(f"written: {path}")
+    return 0
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def comparison_record(comparison) -> dict[str, Any]:
+    """JSON-safe form of a :class:`gonio.fitting.ModelComparison`."""
+    keys = ("label", "model", "fixed", "k", "chi2", "redchi", "aic", "aicc", "bic", "delta_bic", "log_evidence",
+            "delta_log_evidence", "values", "warnings")
+    return _clean({"chosen": comparison.chosen, "reason": comparison.reason, "threshold": comparison.threshold,
+                   "rows": [{k: row[k] for k in keys} for row in comparison.rows]})
+
+
+def _run_fit(args: argparse.Namespace) -> int:
+    from gonio.fitting import ConvergenceWarning, compare_models, fit
+
+    candidates = _parse_candidates(args.model or DEFAULT_CANDIDATES)
+    dataset, noise = _dataset_from_args(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    dataset.to_csv(out / "data.csv")
+    say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
+    say(_describe(dataset, noise))
+    summary_rows = []
+    for name, fixed, options in candidates:
+        label = candidate_label(name, fixed)
+        folder = out / candidate_slug(name, fixed, options)
+        say(f"fitting {label} ...")
+        start = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)  # reported below
+            result = fit(dataset, name, fixed=fixed, options=options, mcmc=args.mcmc, jitter=args.jitter and args.mcmc,
+                         n_walkers=args.walkers, max_steps=args.max_steps, tau_multiple=args.tau_multiple,
+                         seed=args.seed)
+        result.save(folder)
+        if args.report:
+            from gonio.report.fit_report import write_report
+
+            write_report(folder)
+        seconds = time.perf_counter() - start
+        summary_rows.append((label, folder, result, seconds))
+        if result.converged is False:
+            print(f"gonio: WARNING: {label}: the MCMC chain did NOT converge; posterior numbers are unreliable "
+                  "(increase --max-steps)", file=sys.stderr)
+    # The comparison uses the noise model alone: least squares of each candidate, no jitter.
+    comparison = compare_models(dataset, [(name, fixed) for name, fixed, _ in candidates]) if not any(
+        options for _, _, options in candidates) else None
+    lines = [_describe(dataset, noise), CREDIT + ".", ""]
+    for label, folder, result, seconds in summary_rows:
+        best = result.best_values()
+        values = ", ".join(f"{k} = {best[k]:.4g}" for k in result.free)
+        lines.append(f"{label:<34} redchi {result.least_squares.redchi:8.3f}  {values}  [{folder.name}, {seconds:.1f} s]")
+    if comparison is not None:
+        lines += ["", "Model comparison (least squares under the noise model, no jitter):", comparison.summary()]
+        (out / "comparison.json").write_text(json.dumps(comparison_record(comparison), indent=1, allow_nan=False))
+    text = "\n".join(lines)
+    (out / "comparison.txt").write_text(text + "\n")
+    print(text)
+    print(f"results: {out}")
+    return 0
