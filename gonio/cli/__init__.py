@@ -15,7 +15,7 @@ import sys
 import gonio
 
 #: Sub-command modules in the order ``gonio --help`` lists them.
-SUBCOMMANDS = ("demo", "models", "figures", "plan", "run", "fit", "report", "emulator", "textons")
+SUBCOMMANDS = ("demo", "models", "figures", "plan", "run", "fit", "report", "emulator", "textons", "curet")
 
 
 class CLIError(ValueError):

@@ -579,8 +579,8 @@ def _run_fit(args: argparse.Namespace) -> int:
             print(f"gonio: WARNING: {label}: the MCMC chain did NOT converge; posterior numbers are unreliable "
                   "(increase --max-steps)", file=sys.stderr)
     # The comparison uses the noise model alone: least squares of each candidate, no jitter.
-    comparison = compare_models(dataset, [(name, fixed) for name, fixed, _ in candidates]) if not any(
-        options for _, _, options in candidates) else None
+    with_options = [candidate_label(name, fixed) for name, fixed, options in candidates if options]
+    comparison = None if with_options else compare_models(dataset, [(name, fixed) for name, fixed, _ in candidates])
     lines = [_describe(dataset, noise), CREDIT + ".", ""]
     for label, folder, result, seconds in summary_rows:
         best = result.best_values()
@@ -589,6 +589,9 @@ def _run_fit(args: argparse.Namespace) -> int:
     if comparison is not None:
         lines += ["", "Model comparison (least squares under the noise model, no jitter):", comparison.summary()]
         (out / "comparison.json").write_text(json.dumps(comparison_record(comparison), indent=1, allow_nan=False))
+    else:
+        lines += ["", f"No model comparison: {', '.join(with_options)} set model options, which the comparison "
+                      "does not take; fit them in a separate run."]
     text = "\n".join(lines)
     (out / "comparison.txt").write_text(text + "\n")
     print(text)

@@ -67,49 +67,79 @@ def _say(quiet: bool, text: str) -> None:
         print(text, flush=True)
 
 
-def _run(args: argparse.Namespace) -> int:
+def measure_demo(out: Path, seed: int = 0, quiet: bool = True):
+    """Measure the demo protocols on the emulated plaster into ``out/recordings``.
+
+    Returns
+    -------
+    gonio.acquisition.Reduced
+        The recordings reduced and combined.
+    """
     from gonio import acquisition, protocols
-    from gonio.fitting import ConvergenceWarning, compare_models, fit
-    from gonio.report.fit_report import write_report
 
     from .run import emulated_rig
 
-    start = time.perf_counter()
-    out = Path(args.out)
-    _prepare_output(out)
     sample = f"{SAMPLE_MODEL}:" + ",".join(f"{k}={v:g}" for k, v in TRUTH.items())
     folders = []
-    _say(args.quiet, f"gonio demo: emulated rig with sample {sample} (seed {args.seed})")
-    with emulated_rig(sample, args.seed, name="gonio-demo") as (rig, emulator, change_sample, metadata):
+    _say(quiet, f"gonio demo: emulated rig with sample {sample} (seed {seed})")
+    with emulated_rig(sample, seed, name=f"gonio-demo-{seed}") as (rig, emulator, change_sample, metadata):
         for name in PROTOCOLS:
             protocol = protocols.load(protocols_folder() / name)
             folder = out / "recordings" / protocol.name
-            _say(args.quiet, f"measuring {protocol.name}: {protocol.description}")
-            line = None if args.quiet else ProgressLine("points")
+            _say(quiet, f"measuring {protocol.name}: {protocol.description}")
+            line = None if quiet else ProgressLine("points")
             reflectance = protocol.reference.reflectance if protocol.reference else None
             result = acquisition.run_protocol(
                 protocol, rig, folder, metadata=metadata, clock=emulator.control.now,
                 change_sample=lambda which, r=reflectance: change_sample(which, r),
                 progress=None if line is None else (lambda p, line=line: line.update(p.done, p.total, p.eta_wall)),
             )
-            _say(args.quiet, "  " + result.summary())
+            _say(quiet, "  " + result.summary())
             folders.append(folder)
-    reduced = acquisition.combine_reduced([acquisition.reduce_recording(f) for f in folders], label="wall plaster (emulated)")
-    dataset, priors = reduced.fit_inputs()
-    _say(args.quiet, f"fitting {dataset.n} {dataset.quantity} values "
-                     f"(model averaged over the rig's apertures {dataset.metadata.get('aperture_sr')} sr)")
-    comparison = compare_models(dataset, ["lambert", "oren-nayar-qualitative", ("oren-nayar", {"ir_weight": 1.0})])
-    _say(args.quiet, comparison.summary())
-    mcmc_line = None if args.quiet else ProgressLine("MCMC steps")
+    return acquisition.combine_reduced([acquisition.reduce_recording(f) for f in folders],
+                                       label="wall plaster (emulated)")
 
-    def mcmc_progress(step: int, max_steps: int, tau: float) -> None:
-        if mcmc_line is not None:
-            mcmc_line.update(step, max_steps, None, f"max tau {tau:.1f}")
+
+def fit_demo(reduced, seed: int = 0, quiet: bool = True):
+    """Compare models and fit ``oren-nayar`` with MCMC as the demo does.
+
+    The dataset is relative radiance with the reference-standard prior on its scale, the
+    model is averaged over the rig's apertures, ``ir_weight`` is fixed at 1 (the paper's
+    model) and an extra-noise term absorbs lamp flicker the CCD noise model does not know.
+
+    Returns
+    -------
+    result : gonio.fitting.FitResult
+    comparison : gonio.fitting.ModelComparison
+    """
+    from gonio.fitting import ConvergenceWarning, compare_models, fit
+
+    dataset, priors = reduced.fit_inputs()
+    _say(quiet, f"fitting {dataset.n} {dataset.quantity} values "
+                f"(model averaged over the rig's apertures {dataset.metadata.get('aperture_sr')} sr)")
+    comparison = compare_models(dataset, ["lambert", "oren-nayar-qualitative", (SAMPLE_MODEL, {"ir_weight": 1.0})])
+    _say(quiet, comparison.summary())
+    line = None if quiet else ProgressLine("MCMC steps")
+
+    def progress(step: int, max_steps: int, tau: float) -> None:
+        if line is not None:
+            line.update(step, max_steps, None, f"max tau {tau:.1f}")
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)  # reported in the result, loudly
         result = fit(dataset, SAMPLE_MODEL, fixed={"ir_weight": 1.0}, priors=priors, jitter=True,
-                     seed=args.seed, progress=mcmc_progress)
+                     seed=seed, progress=progress)
+    return result, comparison
+
+
+def _run(args: argparse.Namespace) -> int:
+    from gonio.report.fit_report import write_report
+
+    start = time.perf_counter()
+    out = Path(args.out)
+    _prepare_output(out)
+    reduced = measure_demo(out, args.seed, args.quiet)
+    result, comparison = fit_demo(reduced, args.seed, args.quiet)
     fit_folder = out / f"fit-{SAMPLE_MODEL}"
     result.save(fit_folder)
     (fit_folder / "model-comparison.txt").write_text(comparison.summary() + "\n")

@@ -22,15 +22,16 @@ accuracy study of docs/tabulated.md):
     alpha >= beta; the kink of the components at theta_i = theta_r becomes the edge
     zeta = 1 of the table.  Near the grazing corner alpha = beta = 90 deg the components
     depend on the ratio of the distances to the horizon, which zeta is.
-``t``  = 1 - sqrt(1 - p),  p = (g - (alpha - beta)) / (2 beta) in [0, 1],  g the phase
+``t``  = (2/pi) arcsin(sqrt(p)),  p = (g - (alpha - beta)) / (2 beta) in [0, 1],  g the phase
     angle between the two directions.  The V-cavity model has a cone-shaped peak at the
     retro-reflection direction (g = 0): linear in g, not smooth in phi_r - phi_i.  p runs
     over the phase angles that are possible for the given polar angles (from alpha - beta
     at dphi = 0 to alpha + beta at dphi = 180 deg) and is linear in g; as beta -> 0 it
     tends to (1 - cos dphi)/2.  Near the forward direction p is quadratic in
     180 deg - dphi, while towards grazing the components there grow like
-    |180 deg - dphi|; the square root makes t linear in 180 deg - dphi at that end and
-    keeps it linear in g at the backward end.
+    |180 deg - dphi|: with p = sin^2(pi t / 2), t is linear in 180 deg - dphi at that
+    end, while any smooth function of p (the cone is linear in p) stays smooth in t, and
+    the nodes crowd towards both ends, where the components change fastest.
 ``s``  = asinh(p / scale) / asinh(p_max / scale) in [0, 1] for the model parameter p
     (the roughness sigma of Oren-Nayar, the aperture psi of the pitted model), see
     :class:`ParameterMap`.  Linear in p for small p and logarithmic for large p: the
@@ -70,7 +71,7 @@ __all__ = [
 #: Smallest resolved angular distance from the horizon [rad] (about 0.0006 deg).
 Y_OFFSET = 1.0e-5
 #: Version of the coordinate maps (stored in tables; a table of another version is refused).
-COORDINATES_VERSION = 2
+COORDINATES_VERSION = 3
 #: Weight of the linear term of the y coordinate [1/rad].
 Y_SLOPE = 2.0
 #: Distance from the horizon [rad] at which the exact model evaluates directions on the
@@ -171,7 +172,7 @@ def geometry_coordinates(
     phase = 2.0 * np.arcsin(np.sqrt(np.clip(half, 0.0, 1.0)))
     limit = np.sin(0.5 * delta_phi) ** 2  # (1 - cos dphi)/2, the beta -> 0 limit of t
     p = np.divide(phase - (alpha - beta), 2.0 * beta, out=np.array(np.broadcast_to(limit, beta.shape)), where=beta > 1e-6)
-    t = 1.0 - np.sqrt(1.0 - np.clip(p, 0.0, 1.0))
+    t = np.arcsin(np.sqrt(np.clip(p, 0.0, 1.0))) * (2.0 / math.pi)
     return y, zeta, t, z_beta
 
 
@@ -183,7 +184,7 @@ def geometry_from_coordinates(
     z_beta = np.asarray(z_from_y(y))
     beta = _HALF_PI - z_beta
     alpha = _HALF_PI - zeta * z_beta
-    p = 1.0 - (1.0 - t) ** 2
+    p = np.sin(0.5 * math.pi * t) ** 2
     phase = (alpha - beta) + 2.0 * beta * p
     denominator = np.sin(alpha) * np.sin(beta)
     cos_dphi = np.divide(
