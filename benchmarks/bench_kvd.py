@@ -12,7 +12,7 @@ isotropic KvD basis (KvD 1998 eq 29); each truncated series is then
   paper's inner product and with Fejer damping, for the docs table.
 
 It also draws the mirror/retroreflector truncations of KvD Figs 4-6 and, when the CUReT
-files are present (GONIO_CURET_DIR, default /work/shared/data/curet), fits the named
+files are present (gonio.curet.default_directory()), fits the named
 samples by least squares (fit and held-out residuals per order).
 
 Run:  python benchmarks/bench_kvd.py
@@ -38,6 +38,7 @@ from _common import OUT, best_time, machine, random_geometries, write_json  # no
 
 import gonio  # noqa: E402
 from gonio.models import kvd  # noqa: E402
+from gonio.curet import default_directory  # noqa: E402
 
 ORDERS = list(range(11))
 REFERENCE = ("oren-nayar", {"rho": 0.8, "sigma": 30.0})
@@ -100,7 +101,7 @@ def timing_records(errors: dict) -> list[dict]:
 def curet_fits() -> dict | None:
     from gonio.curet import read_curet
 
-    folder = Path(os.environ.get("GONIO_CURET_DIR", "/work/shared/data/curet"))
+    folder = default_directory()
     if not (folder / "abrdf.dat").exists():
         return None
     data = read_curet(folder)

@@ -34,6 +34,7 @@ data is used or shown).
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -183,6 +184,25 @@ def _numeric_rows(path: Path, columns: int, what: str) -> np.ndarray:
     return np.array(rows)
 
 
+#: Environment variable naming the folder with abrdf.dat and table.txt.
+ENVIRONMENT_VARIABLE = "GONIO_CURET_DIR"
+
+
+def default_directory() -> Path:
+    """The CUReT folder used when none is given.
+
+    ``$GONIO_CURET_DIR`` if set, else ``shared/data/curet`` in the folder that holds the
+    repository checkout (``<checkout>/../shared/data/curet``), where both a developer
+    checkout and a fresh clone beside the project's shared data find it.  The path is
+    returned whether or not it exists.
+    """
+    configured = os.environ.get(ENVIRONMENT_VARIABLE)
+    if configured:
+        return Path(configured)
+    checkout = Path(__file__).resolve().parents[1]  # gonio/curet.py -> checkout
+    return checkout.parent / "shared" / "data" / "curet"
+
+
 def read_curet_geometry(path: str | Path, angle_order: str = "view-first") -> tuple[np.ndarray, ...]:
     """Measurement geometries of ``table.txt`` in degrees.
 
@@ -275,7 +295,7 @@ def read_curet(directory: str | Path, angle_order: str = "view-first") -> CuretD
 
     Examples
     --------
-    >>> data = read_curet("/work/shared/data/curet")            # doctest: +SKIP
+    >>> data = read_curet(default_directory())                  # doctest: +SKIP
     >>> velvet = data.sample("velvet")                           # doctest: +SKIP
     >>> velvet.brdf.shape, velvet.theta_i.shape                  # doctest: +SKIP
     ((205,), (205,))

@@ -56,3 +56,12 @@ def test_bad_plot_arguments_give_one_line_errors(tmp_path, capsys):
     assert main(["models", "plot", "lambert", "--plane", "sideways", "--out", str(tmp_path / "x.png")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("gonio: error: plane 'sideways'") and "Traceback" not in err
+
+
+def test_figures_reproduces_oren_nayar_figs_10_to_14(tmp_path, capsys):
+    """gonio figures draws Figs 10-14 of Oren & Nayar (1995) from the registered models."""
+    assert main(["figures", "--out", str(tmp_path)]) == 0
+    names = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert [n[:5] for n in names] == ["fig10", "fig11", "fig12", "fig13", "fig14"]
+    assert all((tmp_path / n).stat().st_size > 20_000 for n in names)
+    assert "5 figures written" in capsys.readouterr().out

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.curet import read_curet, read_curet_brdf, read_curet_geometry
+from gonio.curet import default_directory, read_curet, read_curet_brdf, read_curet_geometry
 from gonio.geometry import angle_between
 from gonio.models import kvd
 
-CURET_DIR = Path(os.environ.get("GONIO_CURET_DIR", "/work/shared/data/curet"))
+CURET_DIR = default_directory()
 needs_data = pytest.mark.skipif(not (CURET_DIR / "abrdf.dat").exists(), reason=f"CUReT files not found in {CURET_DIR}")
 
 

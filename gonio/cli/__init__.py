@@ -15,7 +15,7 @@ import sys
 import gonio
 
 #: Sub-command modules in the order ``gonio --help`` lists them.
-SUBCOMMANDS = ("demo", "models", "figures", "plan", "run", "fit", "report", "emulator", "textons", "curet")
+SUBCOMMANDS = ("demo", "models", "figures", "plan", "run", "fit", "report", "emulator", "textons", "curet", "tables")
 
 
 class CLIError(ValueError):

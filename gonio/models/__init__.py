@@ -25,6 +25,7 @@ MODEL_MODULES = (
     "phong",
     "kvd",
     "oren_nayar.functional",
+    "oren_nayar.exact",
     "torrance_sparrow",
     "pitted.model",
     "wolff",

@@ -19,6 +19,7 @@ Where the paper's curve is the numerical evaluation of eq 31, gonio draws
 """
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -68,7 +69,7 @@ _NUMERICAL = "oren-nayar-numerical"
 
 def _fig10() -> PaperFigure:
     total = Curve(_NUMERICAL, _PLASTER, 75.0, "total (direct + interreflection), eq 31", "-", 2.4)
-    direct = Curve("oren-nayar", {**_PLASTER, "ir_weight": 0.0}, 75.0, "direct illumination only (eq 33-34)", "-", 1.0)
+    direct = Curve(_NUMERICAL, {**_PLASTER, "interreflection": False}, 75.0, "direct illumination only", "-", 1.0)
     return PaperFigure(
         "fig10_plane_of_incidence",
         "Fig 10: radiance in the plane of incidence, sigma = 30 deg, rho = 0.9, theta_i = 75 deg",
@@ -163,7 +164,7 @@ def draw_paper_figure(figure: PaperFigure) -> Figure:
         ax.set_title(panel.title)
         ax.grid(alpha=0.3)
         ax.legend(fontsize="small")
-    fig.suptitle(figure.caption, fontsize="medium")
+    fig.suptitle("\n".join(textwrap.wrap(figure.caption, width=int(70 * len(figure.panels)))), fontsize="medium")
     return fig
 
 

@@ -39,7 +39,7 @@ OrenNayarGrid = TableGrid
 
 
 #: Node counts of the shipped table (accuracy study: docs/tabulated.md).
-DEFAULT_GRID = OrenNayarGrid(y=45, zeta=12, t=16, s=28)
+DEFAULT_GRID = OrenNayarGrid(y=55, zeta=12, t=24, s=26)
 
 
 def _node_geometry(grid: OrenNayarGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
