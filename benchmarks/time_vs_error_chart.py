@@ -1,8 +1,8 @@
 """Combined chart: time per evaluation against relative error, every method of every family.
 
-Reads every docs/benchmarks/*.json written by the benchmark scripts (records with
-``family``, ``method``, ``seconds_per_evaluation`` and ``relative_error``) and draws one
-panel per model family: what accuracy each method buys at what cost.
+Reads the model-evaluation benchmarks' JSON in docs/benchmarks/ (:data:`MODEL_BENCHMARKS`;
+records with ``family``, ``method``, ``seconds_per_evaluation`` and ``relative_error``) and
+draws one panel per model family: what accuracy each method buys at what cost.
 
 Run:  python benchmarks/time_vs_error_chart.py   (writes docs/benchmarks/time_vs_error.png)
 """
@@ -21,11 +21,18 @@ from _common import OUT  # noqa: E402
 
 #: Errors below this are drawn at the floor (rounding-level agreement).
 ERROR_FLOOR = 1e-16
+#: Benchmarks whose records are methods of evaluating a model (speed against accuracy of
+#: the same quantity).  Rig throughput, fitting and real-data fits write their own charts.
+MODEL_BENCHMARKS = ("closed_forms", "oren_nayar", "tabulated", "wolff", "pitted", "kvd")
 
 
 def load_records() -> dict[str, list[dict]]:
     families: dict[str, list[dict]] = defaultdict(list)
-    for path in sorted(OUT.glob("*.json")):
+    for name in MODEL_BENCHMARKS:
+        path = OUT / f"{name}.json"
+        if not path.exists():
+            print(f"note: {path.name} missing (run its benchmark); left off the chart")
+            continue
         payload = json.loads(path.read_text())
         for record in payload.get("records", []):
             if {"family", "method", "seconds_per_evaluation", "relative_error"} <= set(record):
@@ -46,7 +53,7 @@ def main() -> Path:
         for k, r in enumerate(records):
             err = max(float(r["relative_error"]), ERROR_FLOOR)
             ax.loglog(r["seconds_per_evaluation"], err, "o", color=f"C{k % 10}", ms=7)
-            ax.annotate(r["method"], (r["seconds_per_evaluation"], err), fontsize=7,
+            ax.annotate(r["method"], (r["seconds_per_evaluation"], err), fontsize=6,
                         xytext=(4, 3), textcoords="offset points")
         ax.set_title(family)
         ax.set_xlabel("time per evaluation [s]")
