@@ -25,7 +25,6 @@ Run: ``python benchmarks/bench_fitting.py``.
 from __future__ import annotations
 
 import json
-import platform
 import sys
 import time
 from pathlib import Path
@@ -37,7 +36,8 @@ from gonio.fitting import Dataset, FitProblem, fit, fit_least_squares
 from gonio.fitting.problem import combine_prediction, predict_quantity
 from gonio.geometry import in_plane_angles
 
-OUT = Path(__file__).resolve().parent.parent / "docs" / "benchmarks"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import OUT, machine  # noqa: E402
 
 
 def demo_dataset() -> tuple[str, dict, dict, Dataset]:
@@ -113,8 +113,7 @@ def main() -> int:
     report = {
         "benchmark": "fitting",
         "command": "python benchmarks/bench_fitting.py",
-        "machine": {"platform": platform.platform(), "processor": platform.processor(), "python": sys.version.split()[0],
-                    "numpy": np.__version__},
+        "machine": machine(),
         "records": records,
         "demo": {"model": name, "truth": truth, "fixed": fixed, "n_data": data.n, "quantity": data.quantity},
         "fast_path_speedup": reference_seconds / fast_seconds,

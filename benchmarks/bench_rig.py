@@ -20,7 +20,6 @@ Writes docs/benchmarks/rig.json and docs/benchmarks/rig.png. Run:
 from __future__ import annotations
 
 import json
-import platform
 import sys
 import time
 from pathlib import Path
@@ -34,7 +33,8 @@ from drivers.camera import Roi  # noqa: E402
 from drivers.emulator.rig import EmulatedRig  # noqa: E402
 from drivers.rig import Rig  # noqa: E402
 
-OUT = ROOT / "docs" / "benchmarks"
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _common import OUT, machine  # noqa: E402
 
 
 def lambert(ti, pi, tr, pr):
@@ -163,10 +163,7 @@ def main():
     result = {
         "benchmark": "rig",
         "command": "python benchmarks/bench_rig.py",
-        "machine": {
-            "python": platform.python_version(), "platform": platform.platform(),
-            "processor": platform.processor(), "numpy": np.__version__,
-        },
+        "machine": machine(),
         "records": records,
         "transports": extra,
     }

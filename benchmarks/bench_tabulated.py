@@ -88,15 +88,28 @@ def worst_cases(s: dict[str, np.ndarray], err: np.ndarray, k: int = 5) -> list[d
 
 
 def horizon_check() -> dict[str, float]:
-    """Directions on the horizon (theta = 90 deg exactly) at a few roughnesses."""
-    worst = 0.0
+    """Directions on the horizon (theta = 90 deg exactly) at a few roughnesses.
+
+    Both directions on the horizon in the forward direction (theta_i = theta_r = 90,
+    dphi = 180) is reported apart: there the exact model's own f2 changes by ~10% between
+    its rtol settings (its quadrature does not converge at that singular point), so the
+    table can match it no better than that; the spread is recorded next to the error.
+    """
+    worst, corner_error, corner_spread = 0.0, 0.0, 0.0
     for sigma in (5.0, 20.0, 45.0, 80.0):
         for ti, tr in ((90.0, 90.0), (90.0, 45.0), (90.0, 0.0), (90.0, 89.0)):
             dphi = np.array([0.0, 90.0, 180.0])
             e1, e2 = exact_components(ti, 0.0, tr, dphi, sigma)
             t1, t2 = tabulated_components(ti, 0.0, tr, dphi, sigma)
-            worst = max(worst, float(np.max(np.abs((t1 + t2) / (e1 + e2) - 1.0))))
-    return {"max_brdf_rho1": worst}
+            error = np.abs((t1 + t2) / (e1 + e2) - 1.0)
+            if tr == 90.0:
+                corner_error = max(corner_error, float(error[2]))
+                c1, c2 = exact_components(ti, 0.0, tr, 180.0, sigma, rtol=1e-5)
+                corner_spread = max(corner_spread, float(abs((c1 + c2) / (e1[2] + e2[2]) - 1.0)))
+                error = error[:2]
+            worst = max(worst, float(np.max(error)))
+    return {"max_brdf_rho1": worst, "forward_corner_error": corner_error,
+            "forward_corner_reference_spread_rtol_1e-5_vs_1e-6": corner_spread}
 
 
 def speed() -> dict[str, float]:
@@ -145,10 +158,10 @@ def chart(full: dict[str, np.ndarray], full_err: dict, grazing_err: dict, record
 
     fig = Figure(figsize=(13, 4.2), layout="constrained")
     ax1, ax2, ax3 = fig.subplots(1, 3)
-    for r in records:
+    for k, r in enumerate(records):
         ax1.loglog(r["seconds_per_evaluation"], max(r["relative_error"], 1e-9), "o")
         ax1.annotate(r["method"], (r["seconds_per_evaluation"], max(r["relative_error"], 1e-9)), fontsize=7,
-                     xytext=(4, 3), textcoords="offset points")
+                     xytext=(4, 3 - 12 * (k % 2)), textcoords="offset points")
     ax1.axhline(1e-3, color="grey", lw=0.8, ls="--")
     ax1.axvline(1 / 5e6, color="grey", lw=0.8, ls=":")
     ax1.set(xlabel="time per evaluation [s] (one core)", ylabel="99th-percentile relative error [-]",
@@ -187,7 +200,10 @@ def main() -> dict:
         for key, value in accuracy[stratum].items():
             print(f"  {stratum:<22} {key:<5} max {value['max']:.2e}  p99 {value['p99']:.2e}  "
                   f"p90 {value['p90']:.2e}  median {value['median']:.2e}  (n={value['n']})")
-    print(f"  horizon (theta = 90): max {accuracy['horizon_theta_90']['max_brdf_rho1']:.2e}")
+    horizon = accuracy["horizon_theta_90"]
+    print(f"  horizon (theta = 90): max {horizon['max_brdf_rho1']:.2e}; forward corner (90, 90, 180): "
+          f"{horizon['forward_corner_error']:.2e}, the exact model's own spread there "
+          f"{horizon['forward_corner_reference_spread_rtol_1e-5_vs_1e-6']:.2e}")
     times = speed()
     for key, value in times.items():
         print(f"  {key:<32} {1 / value:11.3e} evaluations/s")

@@ -78,3 +78,12 @@ def test_darks_round_trip(tmp_path):
     w.append_dark({"after_index": -1, "exposure": 0.02, "gain": 1.0, "roi_mean": 100.25, "roi_std": 3.5, "roi_pixels": 400})
     darks = data.read_darks(tmp_path)
     assert darks["after_index"][0] == -1 and darks["roi_mean"][0] == 100.25
+
+
+def test_data_format_doc_lists_the_columns_the_code_writes():
+    """docs/data-format.md shows the column tables generated from data.COLUMNS / DARK_COLUMNS."""
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "data-format.md").read_text()
+    assert data.column_table(data.COLUMNS) in doc
+    assert data.column_table(data.DARK_COLUMNS) in doc

@@ -130,3 +130,21 @@ def test_reciprocity_of_every_reciprocal_model(name, ti, pi_, tr, pr):
     # 1e-9: exact formulas differ only by rounding; quadrature-based references are
     # symmetric by construction of their quadrature, so the same bound applies.
     assert violation.worst < 1e-9, violation
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_unchecked_fixed_geometry_path_equals_checked_path(name):
+    """FixedGeometryModel.unchecked (fitting's inner loop) is the checked call minus the checks."""
+    model = gonio.models.get(name)
+    rng = np.random.default_rng(11)
+    shape = (2, 3) if name.endswith("-exact") else (4, 25)
+    ti, tr = rng.uniform(0, 89, shape), rng.uniform(0, 89, shape)
+    pi_, pr = rng.uniform(-180, 180, shape), rng.uniform(-180, 180, shape)
+    fixed = model.at(ti, pi_, tr, pr)  # every direction above the horizon: the reshape branch
+    params, _ = model.resolve(model.defaults)
+    unchecked = fixed.unchecked(**params)
+    assert unchecked.shape == shape
+    # Same code after validation: equal to the last bit.
+    np.testing.assert_array_equal(unchecked, fixed(**params))
+    # Against the plain path: rounding only, as in the fixed-geometry test above.
+    np.testing.assert_allclose(unchecked, model(ti, pi_, tr, pr, **params), rtol=1e-12, atol=0)

@@ -374,7 +374,9 @@ def curet_dataset(
 # ---------------------------------------------------------------------- candidates
 def candidate_label(name: str, fixed: dict[str, Any]) -> str:
     """``name`` or ``name (k=v, ...)`` as :func:`gonio.fitting.compare_models` labels it."""
-    return name + ("" if not fixed else " (" + ", ".join(f"{k}={v:g}" for k, v in fixed.items()) + ")")
+    from gonio.fitting.selection import candidate_label as comparison_label  # imported on use: fast CLI start
+
+    return comparison_label(name, fixed)
 
 
 def candidate_slug(name: str, fixed: dict[str, Any], options: dict[str, Any] | None = None) -> str:
@@ -504,20 +506,10 @@ def _run_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _clean(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
-
-
 def comparison_record(comparison) -> dict[str, Any]:
     """JSON-safe form of a :class:`gonio.fitting.ModelComparison`."""
+    from gonio.fitting.results import _clean  # the fit results' JSON conversion (NaN -> null)
+
     keys = ("label", "model", "fixed", "k", "chi2", "redchi", "aic", "aicc", "bic", "delta_bic", "log_evidence",
             "delta_log_evidence", "values", "warnings")
     return _clean({"chosen": comparison.chosen, "reason": comparison.reason, "threshold": comparison.threshold,

@@ -180,6 +180,9 @@ class FitProblem:
             self._normal_index = index
         self._cos_i = np.cos(np.radians(dataset.theta_i))
         self._model_names = set(self.model.param_names)
+        # Free model parameters, checked on each evaluation from a vector; fixed values were
+        # checked above and defaults lie inside their bounds.
+        self._free_model_specs = tuple(self._spec[n] for n in self.free if n in self._model_names)
         #: Number of model evaluations so far (for benchmarks).
         self.evaluations = 0
 
@@ -218,14 +221,38 @@ class FitProblem:
 
     # ------------------------------------------------------------------ model
     def predict(self, values: Mapping[str, float]) -> np.ndarray:
-        """Predicted measured values at the dataset's geometries (fast path)."""
+        """Predicted measured values at the dataset's geometries (fast path).
+
+        The model parameters in ``values`` are validated (``ValueError`` outside their
+        physical range); missing ones take their defaults.
+        """
+        params, _ = self.model.resolve(
+            {k: v for k, v in values.items() if k in self._model_names} | self.options
+        )
+        return self._predict_checked(values, params)
+
+    def _predict_checked(self, values: Mapping[str, Any], params: dict[str, float]) -> np.ndarray:
+        """:meth:`predict` for complete, validated model parameters ``params``."""
         self.evaluations += 1
-        params = {k: v for k, v in values.items() if k in self._model_names}
-        brdf = self._fast(**params)
+        brdf = self._fast.unchecked(**params)
         normal = None
         if self._normal_index is not None:
-            normal = self._fast_normal(**params)[self._normal_index]
+            normal = self._fast_normal.unchecked(**params)[self._normal_index]
         return combine_prediction(self.dataset.quantity, brdf, normal, self._cos_i, values.get("scale", 1.0))
+
+    def _predict_vector(self, vector: Any) -> tuple[dict[str, float], np.ndarray]:
+        """All parameter values for ``vector`` and the prediction (fitting's inner loop).
+
+        Only the free model parameters need a bounds check here (a cheap one: the fit
+        keeps them inside their bounds); the values raise the same ``ValueError`` as
+        :meth:`predict` when they are outside.
+        """
+        values = self.values(vector)
+        for spec in self._free_model_specs:
+            if not spec.contains(values[spec.name]):
+                spec.check(values[spec.name], self.model.name)  # raises, naming the value
+        params = {name: values[name] for name in self.model.param_names}
+        return values, self._predict_checked(values, params)
 
     def total_sigma(self, values: Mapping[str, float]) -> np.ndarray:
         """Measurement uncertainty with the jitter added in quadrature."""
@@ -236,16 +263,15 @@ class FitProblem:
 
     def residuals(self, vector: Any) -> np.ndarray:
         """Weighted residuals (prediction - value) / sigma (jitter not included)."""
-        values = self.values(vector)
-        return (self.predict(values) - self.dataset.value) / self.dataset.sigma
+        _, predicted = self._predict_vector(vector)
+        return (predicted - self.dataset.value) / self.dataset.sigma
 
     def log_likelihood(self, vector: Any) -> float:
         """Gaussian log-likelihood of the data (with jitter when it is a parameter).
 
         ``-inf`` when the prediction is undefined (normalised data of a black sample).
         """
-        values = self.values(vector)
-        predicted = self.predict(values)
+        values, predicted = self._predict_vector(vector)
         sigma = self.total_sigma(values)
         z = (predicted - self.dataset.value) / sigma
         chi2 = float(np.dot(z, z))

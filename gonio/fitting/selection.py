@@ -32,7 +32,7 @@ import numpy as np
 
 from .dataset import Dataset
 
-__all__ = ["information_criteria", "laplace_log_evidence", "ModelComparison", "compare_models"]
+__all__ = ["information_criteria", "laplace_log_evidence", "ModelComparison", "compare_models", "candidate_label"]
 
 
 def information_criteria(log_likelihood: float, k: int, n: int) -> dict[str, float]:
@@ -112,6 +112,17 @@ class ModelComparison:
         return "\n".join(lines)
 
 
+def candidate_label(name: str, fixed: Mapping[str, float]) -> str:
+    """The label of a candidate model in a comparison: ``name`` or ``name (k=v, ...)``.
+
+    Examples
+    --------
+    >>> candidate_label("oren-nayar", {"ir_weight": 1.0})
+    'oren-nayar (ir_weight=1)'
+    """
+    return name + ("" if not fixed else " (" + ", ".join(f"{k}={v:g}" for k, v in fixed.items()) + ")")
+
+
 def compare_models(
     dataset: Dataset,
     candidates: Sequence[str | tuple[str, Mapping[str, float]]],
@@ -157,7 +168,7 @@ def compare_models(
         problem = FitProblem(name, dataset, fixed)
         ls = fit_least_squares(problem, n_starts=n_starts)
         priors = resolve_priors(problem, ls.values)
-        label = name + ("" if not fixed else " (" + ", ".join(f"{k}={v:g}" for k, v in fixed.items()) + ")")
+        label = candidate_label(name, fixed)
         info = information_criteria(ls.log_likelihood, len(problem.free), problem.n_informative)
         rows.append(
             {

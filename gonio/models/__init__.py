@@ -26,6 +26,7 @@ MODEL_MODULES = (
     "kvd",
     "oren_nayar.functional",
     "oren_nayar.exact",
+    "tabulated.oren_nayar",
     "torrance_sparrow",
     "pitted.model",
     "wolff",

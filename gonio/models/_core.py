@@ -356,8 +356,34 @@ class FixedGeometryModel:
         self._evaluate = evaluate
 
     def __call__(self, **values: Any) -> np.ndarray:
-        """BRDF [1/sr] at the frozen geometries for these parameter values."""
+        """BRDF [1/sr] at the frozen geometries for these parameter values.
+
+        The values are validated (:meth:`Model.resolve`: unknown names, non-numbers and
+        values outside the physical bounds raise ``ValueError``); missing ones take their
+        defaults.
+        """
         params, _ = self.model.resolve({**values, **self._options})
+        return self.unchecked(**params)
+
+    def unchecked(self, **params: float) -> np.ndarray:
+        """BRDF [1/sr] for parameter values that are already validated (no checks).
+
+        The inner loop of a fit evaluates the model many times with values that it keeps
+        inside the physical bounds itself; this path skips :meth:`Model.resolve` for them.
+
+        Parameters
+        ----------
+        **params : float
+            Every model parameter, as a float inside its physical range (as returned by
+            :meth:`Model.resolve` or :meth:`Param.check`).  Nothing is checked, neither
+            names nor ranges nor missing values: the result of anything else is undefined.
+            Use ``self(**values)`` for values that come from users.
+
+        Returns
+        -------
+        numpy.ndarray
+            The same values as ``self(**params)`` [1/sr].
+        """
         return self._scatter(self._evaluate(**params))
 
     def evaluate(self, vector, names: tuple[str, ...] | None = None, **fixed: float) -> np.ndarray:
@@ -377,8 +403,10 @@ class FixedGeometryModel:
 
     def _scatter(self, values: np.ndarray) -> np.ndarray:
         if self._all_valid:  # the kernel saw the geometry flattened to 1-D
-            flat = np.broadcast_to(np.asarray(values, dtype=float), (self._valid.size,))
-            return flat.reshape(self.shape).copy()
+            values = np.asarray(values, dtype=float)
+            if values.shape != (self._valid.size,):  # e.g. a constant BRDF as a scalar
+                values = np.broadcast_to(values, (self._valid.size,))
+            return values.reshape(self.shape).copy()
         out = np.zeros(self.shape)
         out[self._nan] = np.nan
         out[self._valid] = values

@@ -57,6 +57,7 @@ from numpy.typing import ArrayLike
 
 from ._core import Model, Option, Param, register
 from .fresnel import fresnel_reflectance
+from .oren_nayar.exact import _gaussian_slope_integral, slope_normalisation
 from .oren_nayar.functional import RHO, SIGMA, _prepare_oren_nayar
 from .oren_nayar.vcavity import geometric_attenuation
 
@@ -87,36 +88,19 @@ FRESNEL = Option(
     "reflectance of a dielectric of index n ('dielectric')",
 )
 
-_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(24)
-
 
 # ---------------------------------------------------------------- slope integrals
-def _gaussian_slope_integral(sigma: float, upper: float, attenuated: bool) -> float:
-    """2 pi int_0^upper exp(-t^2/(2 sigma^2)) w(t) sin(t) dt, sigma and upper in [rad].
+def _normal_incidence_attenuation(t: np.ndarray) -> np.ndarray:
+    """GAF (eq 15) at normal incidence for the mirror direction 2t of facets of slope t [rad].
 
-    w = 1, or w = GAF at normal incidence for the mirror direction 2t (``attenuated``).
-    Gauss-Legendre panels with edges at multiples of sigma (the Gaussian's scale) and at
-    pi/6, where the attenuation has its kink (2 cos 2t = 1); the integrand is negligible
-    (< exp(-72)) beyond 12 sigma.  Relative accuracy ~1e-15.
+    Its kink is at t = pi/6, where 2 cos 2t = 1.
     """
-    top = min(upper, 12.0 * sigma)
-    edges = [0.0, top] + [k * sigma for k in (0.5, 1.0, 2.0, 3.0, 4.5, 6.5, 9.0) if k * sigma < top]
-    if attenuated and math.pi / 6.0 < top:
-        edges.append(math.pi / 6.0)
-    edges = np.unique(edges)
-    lo, hi = edges[:-1, None], edges[1:, None]
-    half = 0.5 * (hi - lo)
-    t = (lo + half * (_GAUSS_X + 1.0)).ravel()
-    w = (half * _GAUSS_W).ravel()
-    integrand = np.exp(-0.5 * (t / sigma) ** 2) * np.sin(t)
-    if attenuated:
-        integrand = integrand * geometric_attenuation(0.0, 0.0, 2.0 * t, 0.0, t, 0.0)
-    return float(2.0 * math.pi * np.sum(w * integrand))
+    return geometric_attenuation(0.0, 0.0, 2.0 * t, 0.0, t, 0.0)
 
 
 @lru_cache(maxsize=1024)
 def _slope_area_normalisation_rad(sigma: float) -> float:
-    return 1.0 / _gaussian_slope_integral(sigma, math.pi / 2.0, attenuated=False)
+    return 1.0 / (2.0 * math.pi * slope_normalisation(sigma))
 
 
 def slope_area_normalisation(sigma: float) -> float:
@@ -172,7 +156,8 @@ def normal_incidence_albedo(sigma_s: float) -> float:
     0.8325
     """
     s = math.radians(float(sigma_s))
-    return _slope_area_normalisation_rad(s) * _gaussian_slope_integral(s, math.pi / 4.0, attenuated=True)
+    masked = _gaussian_slope_integral(s, math.pi / 4.0, _normal_incidence_attenuation, kinks=(math.pi / 6.0,))
+    return _slope_area_normalisation_rad(s) * 2.0 * math.pi * masked
 
 
 def ks_over_kd_from_paper(ratio: ArrayLike) -> np.ndarray:

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._core import Model, Option, Param, register
-from .chandrasekhar import DEFAULT_ORDER, h_function
+from .chandrasekhar import DEFAULT_ORDER, _check_omega, h_function
 from .oren_nayar.functional import OREN_NAYAR, SIGMA, c1
 from .fresnel import (
     exit_transmittance,
@@ -314,15 +314,6 @@ def _check_index(n: float) -> float:
     if not value > 1.0:
         raise ValueError(
             f"n = {value:g} (refractive index relative to air) is outside its valid range (1, inf)"
-        )
-    return value
-
-
-def _check_omega(omega: float) -> float:
-    value = float(omega)
-    if not 0.0 <= value <= 1.0:
-        raise ValueError(
-            f"omega = {value:g} (single-scattering albedo) is outside its valid range [0, 1]"
         )
     return value
 

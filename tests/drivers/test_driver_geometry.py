@@ -101,7 +101,9 @@ def test_planned_moves_never_command_a_refused_end_point(a, b):
     final = dict(start)
     for stage in plan.stages:
         final.update(dict(stage))
-    assert all(final[k] == pytest.approx(end[k]) for k in (1, 2, 3))
+    # The planner skips axis moves below 1e-9 deg (trig round-off of the same nominal
+    # position; re-commanding them would cost a real move), so compare at that dead-band.
+    assert all(final[k] == pytest.approx(end[k], abs=1e-9) for k in (1, 2, 3))
 
 
 def test_swapping_sides_in_plane_needs_a_waypoint():

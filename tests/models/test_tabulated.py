@@ -190,8 +190,10 @@ def test_shipped_table_matches_the_exact_model_on_a_random_sample():
     assert worst < SHIPPED_SAMPLE_BOUND, worst
 
 
-#: Bound for the 60-point sample above (set from docs/benchmarks/tabulated.json).
-SHIPPED_SAMPLE_BOUND = 5e-3
+#: Bound for the 60-point sample above: the maximum over the benchmark's 4800 points is
+#: 2.6e-3 (docs/benchmarks/tabulated.json, 99th percentile 5.6e-4); a table that does not
+#: belong to the exact model (wrong grid, stale build, axis mix-up) is off by 1e-2 or more.
+SHIPPED_SAMPLE_BOUND = 3e-3
 
 
 def test_special_geometries_are_finite_and_warning_free():
@@ -204,13 +206,51 @@ def test_special_geometries_are_finite_and_warning_free():
     assert np.isfinite(values).all() and (values >= 0.0).all()
 
 
-def test_horizon_corner_equals_the_exact_model():
-    """Both directions on the horizon: the node value is the exact model's limit value."""
-    exact = gonio.brdf("oren-nayar-exact", 90.0, 0.0, 90.0, 0.0, rho=0.5, sigma=20.0)
-    fast = gonio.brdf("oren-nayar-tabulated", 90.0, 0.0, 90.0, 0.0, rho=0.5, sigma=20.0)
-    # interpolated only in sigma there (20 deg is between nodes): the documented accuracy
-    assert abs(fast / exact - 1.0) < 1e-2
+def test_horizon_equals_the_exact_model():
+    """Directions on the horizon (theta = 90 deg) are table nodes in y: only the sigma
+    interpolation is left (the benchmark measures 2.7e-4 there).  The forward point with
+    both directions on the horizon is left out: the exact model does not converge there
+    (docs/tabulated.md)."""
+    ti = np.array([90.0, 90.0, 90.0, 90.0])
+    tr = np.array([90.0, 45.0, 89.0, 0.0])
+    dphi = np.array([0.0, 120.0, 180.0, 30.0])
+    exact = gonio.brdf("oren-nayar-exact", ti, 0.0, tr, dphi, rho=0.5, sigma=20.0)
+    fast = gonio.brdf("oren-nayar-tabulated", ti, 0.0, tr, dphi, rho=0.5, sigma=20.0)
+    assert np.max(np.abs(fast / exact - 1.0)) < 1e-3
 
 
 def test_table_is_loaded_lazily_once():
     assert table() is table()
+
+
+# ------------------------------------------------------------------ pitted (machinery)
+def test_pitted_tiny_table_reproduces_the_single_scattering_factor_at_its_nodes():
+    """Koenderink et al. (1999) eq 14-15: F1 from a 4x4x4x4 table equals pitted_terms at nodes."""
+    from gonio.models.pitted.model import pitted_terms
+    from gonio.models.tabulated.pitted_table import PSI_MAP, PittedTable, build_pitted_table
+
+    tab = PittedTable(build_pitted_table(TINY, workers=1))
+    ay, az, at, as_ = TINY.axes()
+    y, zeta, t = np.meshgrid(ay.nodes()[1:], az.nodes(), at.nodes()[:-1], indexing="ij")
+    alpha, beta, dphi = geometry_from_coordinates(y.ravel(), zeta.ravel(), t.ravel())
+    psi = float(PSI_MAP.value(as_.nodes()[2]))
+    exact = pitted_terms(np.degrees(alpha), 0.0, np.degrees(beta), np.degrees(dphi), psi).single_scattering
+    # 1e-9 absolute: coordinate round trip (1e-15 rad) through asinh/sinh of values O(1)
+    np.testing.assert_allclose(tab.prepare(alpha, 0.0, beta, dphi)(psi), exact, rtol=1e-7, atol=1e-9)
+    flat = tab.prepare(np.radians([10.0, 70.0]), 0.0, np.radians([40.0, 5.0]), np.radians([30.0, 150.0]))(0.0)
+    np.testing.assert_allclose(flat * np.pi, 1.0, rtol=1e-12)  # psi -> 0: a flat Lambertian plane
+
+
+def test_shipped_table_was_built_from_the_current_exact_model():
+    """The exact values stored with the table at its probe geometries are still what
+    oren-nayar-exact computes: a changed exact model means the table must be rebuilt
+    ('gonio tables build oren-nayar --output gonio/models/tabulated/data/oren-nayar.npz')."""
+    from gonio.models.tabulated.oren_nayar import TABLE_NAME
+    from gonio.models.tabulated.oren_nayar_table import probe_values
+
+    stored = store.load(TABLE_NAME)
+    f1, f2 = probe_values()
+    # 1e-5: the probes were computed at rtol 1e-6 by the same code; any change of the
+    # model (not of its quadrature accuracy) moves them by far more
+    np.testing.assert_allclose(f1, stored["probe_f1"], rtol=1e-5)
+    np.testing.assert_allclose(f2, stored["probe_f2"], rtol=1e-5, atol=1e-12)

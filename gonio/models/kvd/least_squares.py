@@ -142,8 +142,11 @@ def fit_series(
         w = np.ones_like(f)
     else:
         w = np.broadcast_to(np.asarray(weights, dtype=float), np.broadcast_shapes(np.shape(weights), np.shape(brdf))).ravel()
-        if w.shape != f.shape or not np.all(np.isfinite(w)) or np.any(w < 0.0):
-            raise ValueError("weights must be finite, non-negative and one per sample")
+        if w.shape != f.shape:
+            raise ValueError(f"weights must be one per sample: {w.size} weights for {f.size} samples")
+        if not np.all(np.isfinite(w) & (w >= 0.0)):
+            bad = w[~(np.isfinite(w) & (w >= 0.0))][0]
+            raise ValueError(f"weights must be finite and non-negative, got {bad:g}")
     modes = isotropic_indices(order)
     matrix = design_matrix(modes, np.cos(np.radians(ti)), np.cos(np.radians(tr)), np.radians(pr - pi_))
     scale = np.sqrt(w / f.size)

@@ -110,12 +110,16 @@ class KvdCoefficients:
     def __post_init__(self) -> None:
         modes = tuple(check_isotropic_index(*mode) for mode in self.modes)
         if len(set(modes)) != len(modes):
-            raise ValueError("KvdCoefficients: a mode appears twice")
+            twice = next(mode for mode in modes if modes.count(mode) > 1)
+            raise ValueError(f"KvdCoefficients: the mode (n, m, l) = {twice} appears twice")
         values = np.array(self.values, dtype=float).reshape(-1)
         if values.shape != (len(modes),):
             raise ValueError(f"KvdCoefficients: {len(modes)} modes but {values.size} values")
         if not np.all(np.isfinite(values)):
-            raise ValueError("KvdCoefficients: coefficient values must be finite")
+            bad = int(np.flatnonzero(~np.isfinite(values))[0])
+            raise ValueError(
+                f"KvdCoefficients: coefficient values must be finite, got {values[bad]} for mode {modes[bad]}"
+            )
         values.setflags(write=False)
         object.__setattr__(self, "modes", modes)
         object.__setattr__(self, "values", values)

@@ -143,7 +143,7 @@ def _forget_loaded() -> None:
     from . import store
 
     store.load.cache_clear()
-    for name in ("oren_nayar", "pitted"):
+    for name in ("oren_nayar", "pitted_table"):
         module = sys.modules.get(f"{__name__}.{name}")
         if module is not None:
             module.reset_table()

@@ -17,14 +17,16 @@ accuracy study of docs/tabulated.md):
     interpolated between the horizon itself and that distance).  The linear term keeps
     the nodes a few degrees apart near the normal, where a rough surface's BRDF still
     changes by tens of percent (a pure logarithm would space them 20 deg apart there).
-``zeta`` = (y(z_alpha) - y(0)) / (y(z_beta) - y(0)) in [0, 1],  alpha = max(theta_i, theta_r),
-    y(z) the map of the y coordinate.  Reciprocity (the model is symmetric in source and
-    viewer) halves the domain to alpha >= beta; the kink of the components at
-    theta_i = theta_r becomes the edge zeta = 1 of the table.  The upper direction has
-    the same grazing boundary layer as the lower one (width ~ sigma), so zeta measures
-    its distance from the horizon on the same logarithmic scale, relative to beta's;
-    near the grazing corner alpha = beta = 90 deg it is a function of the ratio of the
-    two distances, on which the components depend there.
+``zeta`` = (r + l) / 2 in [0, 1],  r = z_alpha / z_beta,
+    l = (y(z_alpha) - y(0)) / (y(z_beta) - y(0)),  alpha = max(theta_i, theta_r), y(z) the
+    map of the y coordinate.  Reciprocity (the model is symmetric in source and viewer)
+    halves the domain to alpha >= beta; the kink of the components at theta_i = theta_r
+    becomes the edge zeta = 1 of the table.  The linear part r keeps nodes close to that
+    edge (the backward peak is sharpest there); the logarithmic part l resolves the
+    grazing boundary layer of the upper direction (width ~ sigma, like beta's) when
+    alpha -> 90 deg.  Near the grazing corner alpha = beta = 90 deg both parts are
+    functions of the ratio of the two distances from the horizon, on which the
+    components depend there.
 ``t``  = 1 - sqrt(1 - p),  p = (g - (alpha - beta)) / (2 beta) in [0, 1],  g the phase
     angle between the two directions.  The V-cavity model has a cone-shaped peak at the
     retro-reflection direction (g = 0): linear in g, not smooth in phi_r - phi_i.  p runs
@@ -74,7 +76,7 @@ __all__ = [
 #: Smallest resolved angular distance from the horizon [rad] (about 0.0006 deg).
 Y_OFFSET = 1.0e-5
 #: Version of the coordinate maps (stored in tables; a table of another version is refused).
-COORDINATES_VERSION = 3
+COORDINATES_VERSION = 4
 #: Weight of the linear term of the y coordinate [1/rad].
 Y_SLOPE = 2.0
 #: Distance from the horizon [rad] at which the exact model evaluates directions on the
@@ -105,6 +107,26 @@ def z_from_y(y: np.ndarray) -> np.ndarray:
     for _ in range(3):
         z = z - (y_coordinate(z) - y) / (1.0 / (z + Y_OFFSET) + Y_SLOPE)
     return np.clip(z, 0.0, _HALF_PI)
+
+
+def _zeta(z_alpha: np.ndarray, z_beta: np.ndarray) -> np.ndarray:
+    """The zeta coordinate (module notes) of z_alpha <= z_beta [rad]; 1 where z_beta = 0."""
+    y_floor = float(y_coordinate(0.0))
+    positive = z_beta > 0.0
+    ratio = np.divide(z_alpha, z_beta, out=np.ones_like(z_beta), where=positive)
+    logratio = np.divide(y_coordinate(z_alpha) - y_floor, y_coordinate(z_beta) - y_floor,
+                         out=np.ones_like(z_beta), where=positive)
+    return 0.5 * (ratio + logratio)
+
+
+def _z_alpha_from_zeta(zeta: np.ndarray, z_beta: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`_zeta` in z_alpha (bisection; used to place nodes)."""
+    lo, hi = np.zeros(np.shape(zeta)), np.broadcast_to(z_beta, np.shape(zeta)).astype(float)
+    for _ in range(64):
+        mid = 0.5 * (lo + hi)
+        above = _zeta(mid, z_beta) > zeta
+        hi, lo = np.where(above, mid, hi), np.where(above, lo, mid)
+    return 0.5 * (lo + hi)
 
 
 class ParameterMap:
@@ -169,8 +191,7 @@ def geometry_coordinates(
     z_beta = np.maximum(_HALF_PI - beta, 0.0)
     z_alpha = np.maximum(_HALF_PI - alpha, 0.0)
     y = y_coordinate(z_beta)
-    y_floor = float(y_coordinate(0.0))
-    zeta = np.divide(y_coordinate(z_alpha) - y_floor, y - y_floor, out=np.ones_like(z_beta), where=z_beta > 0.0)
+    zeta = _zeta(z_alpha, z_beta)
     # phase angle by the haversine formula (accurate near the retro-reflection direction)
     half = np.sin(0.5 * (alpha - beta)) ** 2 + np.sin(alpha) * np.sin(beta) * np.sin(0.5 * delta_phi) ** 2
     phase = 2.0 * np.arcsin(np.sqrt(np.clip(half, 0.0, 1.0)))
@@ -187,8 +208,7 @@ def geometry_from_coordinates(
     y, zeta, t = np.broadcast_arrays(*(np.asarray(a, float) for a in (y, zeta, t)))
     z_beta = np.asarray(z_from_y(y))
     beta = _HALF_PI - z_beta
-    y_floor = float(y_coordinate(0.0))
-    alpha = _HALF_PI - np.minimum(z_from_y(y_floor + zeta * (y - y_floor)), z_beta)
+    alpha = _HALF_PI - _z_alpha_from_zeta(zeta, z_beta)
     p = 1.0 - (1.0 - t) ** 2
     phase = (alpha - beta) + 2.0 * beta * p
     denominator = np.sin(alpha) * np.sin(beta)

@@ -11,7 +11,8 @@ coordinate ``s`` giving the interpolated logarithms:
   keeps the 3-D interpolation of each s node it has needed, so a call only combines four
   stored columns: a few operations per geometry.
 
-Both orders apply the same linear weights to the same values and agree to rounding.
+Both orders apply the same linear weights to the same values and agree to rounding; the
+result of the first call is kept, so evaluating the same s again returns the same bits.
 """
 from __future__ import annotations
 
@@ -83,7 +84,7 @@ class LogTable:
         stencils = tuple(axis_stencil(axis, x) for axis, x in zip(self.axes[:3], (y, zeta, t)))
         s_axis = self.axes[3]
         columns: dict[int, tuple[np.ndarray, ...]] = {}
-        calls = [0]
+        first_call: dict[float, tuple[np.ndarray, ...]] = {}
 
         def column(node: int) -> tuple[np.ndarray, ...]:
             if node not in columns:
@@ -91,9 +92,11 @@ class LogTable:
             return columns[node]
 
         def evaluate(s: float) -> tuple[np.ndarray, ...]:
-            calls[0] += 1
-            if calls[0] == 1:  # one-off evaluation: reduce along s first
-                return tuple(gather_3d(contract_last_axis(table, s_axis, s), stencils) for table in self.tables)
+            s = float(s)
+            if not first_call:  # one-off evaluation: reduce along s first
+                first_call[s] = tuple(gather_3d(contract_last_axis(t, s_axis, s), stencils) for t in self.tables)
+            if s in first_call:  # the same s again gives the same bits
+                return first_call[s]
             first, weights = axis_stencil(s_axis, np.asarray(float(s)))
             sums = [np.zeros(y.shape) for _ in self.tables]
             for node, weight in zip(range(int(first), int(first) + 4), weights):

@@ -32,7 +32,10 @@ __all__ = ["TABLE_NAME", "OrenNayarTable", "tabulated_components", "OREN_NAYAR_T
 TABLE_NAME = "oren-nayar"
 
 #: Constants a table must have been built with to be read by this module.
-_COORDINATE_CONSTANTS = {"y_offset": Y_OFFSET, "sigma_scale_deg": SIGMA_SCALE_DEG, "f2_floor": F2_FLOOR, "y_slope": Y_SLOPE, "coordinates_version": COORDINATES_VERSION}
+_COORDINATE_CONSTANTS = {
+    "y_offset": Y_OFFSET, "sigma_scale_deg": SIGMA_SCALE_DEG, "f2_floor": F2_FLOOR,
+    "y_slope": Y_SLOPE, "coordinates_version": COORDINATES_VERSION,
+}
 
 
 class OrenNayarTable:
@@ -57,6 +60,8 @@ class OrenNayarTable:
         logs = self.lookup.prepare(theta_i, phi_i, theta_r, phi_r)
 
         def components(sigma: float) -> tuple[np.ndarray, np.ndarray]:
+            if sigma == 0.0:  # footnote 10: Lambert, exactly (as the exact model does)
+                return np.full(shape, 1.0 / math.pi), np.zeros(shape)
             log_f1, log_f2 = logs(float(sigma_coordinate(sigma)))
             f1 = np.exp(log_f1) * (1.0 / math.pi)
             # the floor is removed exactly; rounding can leave -1e-20 where f2 = 0

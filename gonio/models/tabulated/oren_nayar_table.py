@@ -28,7 +28,7 @@ from .coordinates import (
 )
 from .lookup import TableGrid
 
-__all__ = ["F2_FLOOR", "OrenNayarGrid", "DEFAULT_GRID", "build_oren_nayar_table"]
+__all__ = ["PROBES", "probe_values", "F2_FLOOR", "OrenNayarGrid", "DEFAULT_GRID", "build_oren_nayar_table"]
 
 #: f2 is tabulated as log(pi (f2 + F2_FLOOR f1)).
 F2_FLOOR = 1e-4
@@ -39,7 +39,7 @@ OrenNayarGrid = TableGrid
 
 
 #: Node counts of the shipped table (accuracy study: docs/tabulated.md).
-DEFAULT_GRID = OrenNayarGrid(y=55, zeta=12, t=24, s=26)
+DEFAULT_GRID = OrenNayarGrid(y=55, zeta=16, t=24, s=26)
 
 
 def _node_geometry(grid: OrenNayarGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -58,6 +58,29 @@ def _sigma_slice(args) -> tuple[np.ndarray, np.ndarray]:
     else:
         f1, f2 = exact_components(theta_i, 0.0, theta_r, delta_phi, sigma, rtol=rtol)
     return np.log(math.pi * f1), np.log(math.pi * (f2 + F2_FLOOR * f1))
+
+
+#: Geometries (theta_i, theta_r, dphi [deg], sigma [deg]) where the exact model's values
+#: are stored with the table, so that a change of the exact model is detected
+#: (tests/models/test_tabulated.py): ordinary, near-normal, grazing and horizon corners.
+PROBES = np.array([
+    [30.0, 60.0, 40.0, 20.0],
+    [5.0, 2.0, 10.0, 70.0],
+    [75.0, 70.0, 5.0, 45.0],
+    [85.0, 80.0, 170.0, 30.0],
+    [90.0, 45.0, 90.0, 10.0],
+    [90.0, 90.0, 0.0, 60.0],
+    [90.0, 90.0, 180.0, 60.0],
+    [89.0, 10.0, 150.0, 85.0],
+])
+
+
+def probe_values(rtol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """Exact (f1, f2) [1/sr] at :data:`PROBES`, at accuracy ``rtol``."""
+    from ..oren_nayar.exact import exact_components
+
+    values = [exact_components(ti, 0.0, tr, dphi, sigma, rtol=rtol) for ti, tr, dphi, sigma in PROBES]
+    return np.array([float(v[0]) for v in values]), np.array([float(v[1]) for v in values])
 
 
 def build_oren_nayar_table(
@@ -100,7 +123,10 @@ def build_oren_nayar_table(
             progress(k + 1, len(tasks))
     if workers != 1:
         pool.shutdown()
+    probe_f1, probe_f2 = probe_values()
     return {
+        "probe_f1": probe_f1,
+        "probe_f2": probe_f2,
         "log_f1": log_f1,
         "log_f2": log_f2,
         "shape": np.array(shape),

@@ -11,66 +11,14 @@ same :class:`~gonio.models.pitted.model.PitTerms` the exact model uses.
 from __future__ import annotations
 
 import math
-from typing import Callable
 
 import numpy as np
 
 from .._core import Model, Param, register
 from ..pitted.model import PitTerms
-from .coordinates import COORDINATES_VERSION, Y_OFFSET, Y_SLOPE
-from .lookup import LogTable
-from .pitted_table import PIT_SCALE, PSI_MAP, PSI_SCALE_DEG
-from .store import check_constants, load
+from .pitted_table import table
 
-__all__ = ["PIT_TABLE_NAME", "PittedTable", "PITTED_TABULATED"]
-
-#: File name (without ``.npz``) of the pitted table.
-PIT_TABLE_NAME = "pitted"
-
-_COORDINATE_CONSTANTS = {"y_offset": Y_OFFSET, "psi_scale_deg": PSI_SCALE_DEG, "pit_scale": PIT_SCALE, "y_slope": Y_SLOPE, "coordinates_version": COORDINATES_VERSION}
-
-
-class PittedTable:
-    """The tabulated single-scattering factor (asinh-transformed) and its evaluation.
-
-    Parameters
-    ----------
-    arrays : dict
-        ``asinh_f1`` (shape (y, zeta, t, s)) and the constants it was built with.
-    """
-
-    def __init__(self, arrays: dict[str, np.ndarray]):
-        check_constants(arrays, _COORDINATE_CONSTANTS, PIT_TABLE_NAME)
-        self.lookup = LogTable((arrays["asinh_f1"],))
-        self.grid = self.lookup.grid
-
-    def prepare(self, theta_i, phi_i, theta_r, phi_r) -> Callable[[float], np.ndarray]:
-        """Geometry [rad] -> function of psi [deg] returning F1 [1/sr]."""
-        shape = np.broadcast_shapes(*(np.shape(a) for a in (theta_i, phi_i, theta_r, phi_r)))
-        logs = self.lookup.prepare(theta_i, phi_i, theta_r, phi_r)
-
-        def factor(psi: float) -> np.ndarray:
-            (values,) = logs(float(PSI_MAP.coordinate(psi)))
-            return (np.sinh(values) * (PIT_SCALE / math.pi)).reshape(shape)
-
-        return factor
-
-
-_TABLE: list[PittedTable] = []
-
-
-def table() -> PittedTable:
-    """The pitted table (loaded on first use, then kept)."""
-    if not _TABLE:
-        _TABLE.append(PittedTable(load(PIT_TABLE_NAME)))
-    return _TABLE[0]
-
-
-def reset_table() -> None:
-    """Forget the loaded table (after ``gonio tables build`` or ``clear``)."""
-    _TABLE.clear()
-    load.cache_clear()
-
+__all__ = ["PITTED_TABULATED"]
 
 def _prepare(theta_i, phi_i, theta_r, phi_r):
     factor = table().prepare(theta_i, phi_i, theta_r, phi_r)

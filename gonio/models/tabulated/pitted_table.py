@@ -21,12 +21,18 @@ import os
 import time
 from concurrent.futures import ProcessPoolExecutor
 
+from typing import Callable
+
 import numpy as np
 
 from .coordinates import COORDINATES_VERSION, Y_OFFSET, Y_SLOPE, ParameterMap, geometry_from_coordinates
-from .lookup import TableGrid
+from .lookup import LogTable, TableGrid
+from .store import check_constants, load
 
-__all__ = ["PIT_SCALE", "PSI_SCALE_DEG", "PSI_MAP", "DEFAULT_PIT_GRID", "build_pitted_table"]
+__all__ = [
+    "PIT_SCALE", "PSI_SCALE_DEG", "PSI_MAP", "DEFAULT_PIT_GRID", "PIT_TABLE_NAME", "build_pitted_table",
+    "PittedTable", "table", "reset_table",
+]
 
 #: F1 is tabulated as asinh(pi F1 / PIT_SCALE).
 PIT_SCALE = 1e-3
@@ -92,3 +98,56 @@ def build_pitted_table(grid: TableGrid = DEFAULT_PIT_GRID, workers: int | None =
         "psi_scale_deg": np.array(PSI_SCALE_DEG),
         "build_seconds": np.array(time.perf_counter() - start),
     }
+
+
+#: File name (without ``.npz``) of the pitted table.
+PIT_TABLE_NAME = "pitted"
+
+_COORDINATE_CONSTANTS = {
+    "y_offset": Y_OFFSET, "psi_scale_deg": PSI_SCALE_DEG, "pit_scale": PIT_SCALE,
+    "y_slope": Y_SLOPE, "coordinates_version": COORDINATES_VERSION,
+}
+
+
+class PittedTable:
+    """The tabulated single-scattering factor (asinh-transformed) and its evaluation.
+
+    Parameters
+    ----------
+    arrays : dict
+        ``asinh_f1`` (shape (y, zeta, t, s)) and the constants it was built with.
+    """
+
+    def __init__(self, arrays: dict[str, np.ndarray]):
+        check_constants(arrays, _COORDINATE_CONSTANTS, PIT_TABLE_NAME)
+        self.lookup = LogTable((arrays["asinh_f1"],))
+        self.grid = self.lookup.grid
+
+    def prepare(self, theta_i, phi_i, theta_r, phi_r) -> Callable[[float], np.ndarray]:
+        """Geometry [rad] -> function of psi [deg] returning F1 [1/sr]."""
+        shape = np.broadcast_shapes(*(np.shape(a) for a in (theta_i, phi_i, theta_r, phi_r)))
+        logs = self.lookup.prepare(theta_i, phi_i, theta_r, phi_r)
+
+        def factor(psi: float) -> np.ndarray:
+            (values,) = logs(float(PSI_MAP.coordinate(psi)))
+            return (np.sinh(values) * (PIT_SCALE / math.pi)).reshape(shape)
+
+        return factor
+
+
+_TABLE: list[PittedTable] = []
+
+
+def table() -> PittedTable:
+    """The pitted table (loaded on first use, then kept)."""
+    if not _TABLE:
+        _TABLE.append(PittedTable(load(PIT_TABLE_NAME)))
+    return _TABLE[0]
+
+
+def reset_table() -> None:
+    """Forget the loaded table (after ``gonio tables build`` or ``clear``)."""
+    _TABLE.clear()
+    load.cache_clear()
+
+

@@ -54,11 +54,11 @@ def find(name: str) -> Path | None:
 
 
 def save(path: Path, arrays: Mapping[str, np.ndarray]) -> Path:
-    """Write ``arrays`` to ``path`` (compressed; float64 tables stored as float32)."""
+    """Write ``arrays`` to ``path`` (compressed; float64 tables (3-D and up) as float32)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     stored = {
-        key: (value.astype(np.float32) if value.dtype == np.float64 and value.ndim >= 2 else value)
+        key: (value.astype(np.float32) if value.dtype == np.float64 and value.ndim >= 3 else value)
         for key, value in ((k, np.asarray(v)) for k, v in arrays.items())
     }
     temporary = path.with_suffix(".tmp.npz")
