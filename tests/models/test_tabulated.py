@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 import gonio
 from gonio.cli import main as cli_main
 from gonio.models.oren_nayar.exact import exact_components
-from gonio.models.tabulated import build, describe, store
+from gonio.models.tabulated import describe, store
 from gonio.models.tabulated.coordinates import (
     geometry_coordinates,
     geometry_from_coordinates,
@@ -26,7 +26,7 @@ from gonio.models.tabulated.coordinates import (
     sigma_from_coordinate,
 )
 from gonio.models.tabulated.interpolation import Axis, axis_stencil, contract_last_axis, gather_3d, lagrange_weights
-from gonio.models.tabulated.oren_nayar import OrenNayarTable, table, tabulated_components
+from gonio.models.tabulated.oren_nayar import OrenNayarTable, table
 from gonio.models.tabulated.oren_nayar_table import OrenNayarGrid, build_oren_nayar_table
 
 TINY = OrenNayarGrid(4, 4, 4, 4)
@@ -191,9 +191,10 @@ def test_shipped_table_matches_the_exact_model_on_a_random_sample():
 
 
 #: Bound for the 60-point sample above: the maximum over the benchmark's 4800 points is
-#: 2.6e-3 (docs/benchmarks/tabulated.json, 99th percentile 5.6e-4); a table that does not
-#: belong to the exact model (wrong grid, stale build, axis mix-up) is off by 1e-2 or more.
-SHIPPED_SAMPLE_BOUND = 3e-3
+#: 8.5e-4 (docs/benchmarks/tabulated.json, 99th percentile 5.4e-4), so 2e-3 leaves room
+#: for the sample; a table that does not belong to the exact model (wrong grid, stale
+#: build, axis mix-up) is off by 1e-2 or more.
+SHIPPED_SAMPLE_BOUND = 2e-3
 
 
 def test_special_geometries_are_finite_and_warning_free():

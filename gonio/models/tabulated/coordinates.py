@@ -27,16 +27,18 @@ accuracy study of docs/tabulated.md):
     alpha -> 90 deg.  Near the grazing corner alpha = beta = 90 deg both parts are
     functions of the ratio of the two distances from the horizon, on which the
     components depend there.
-``t``  = 1 - sqrt(1 - p),  p = (g - (alpha - beta)) / (2 beta) in [0, 1],  g the phase
-    angle between the two directions.  The V-cavity model has a cone-shaped peak at the
-    retro-reflection direction (g = 0): linear in g, not smooth in phi_r - phi_i.  p runs
-    over the phase angles that are possible for the given polar angles (from alpha - beta
-    at dphi = 0 to alpha + beta at dphi = 180 deg) and is linear in g; as beta -> 0 it
-    tends to (1 - cos dphi)/2.  Near the forward direction p is quadratic in
-    180 deg - dphi, while towards grazing the components there grow like
-    |180 deg - dphi|; the square root makes t linear in 180 deg - dphi at that end and
-    keeps it linear in g at the backward end.  (Tried and measured worse on the same
-    node budget: t = p, and t = (2/pi) arcsin(sqrt(p)); docs/tabulated.md.)
+``t``  = (1 - sqrt(1 - p) + (2/pi) arcsin(sqrt(p))) / 2,  p = (g - (alpha - beta)) / (2 beta)
+    in [0, 1],  g the phase angle between the two directions.  The V-cavity model has a
+    cone-shaped peak at the retro-reflection direction (g = 0): linear in g, not smooth
+    in phi_r - phi_i.  p runs over the phase angles that are possible for the given polar
+    angles (from alpha - beta at dphi = 0 to alpha + beta at dphi = 180 deg) and is linear
+    in g; as beta -> 0 it tends to (1 - cos dphi)/2.  Near the forward direction p is
+    quadratic in 180 deg - dphi, while towards grazing the components there grow like
+    |180 deg - dphi|: both terms of t are linear in sqrt(1 - p) at that end.  At the
+    backward end t = a sqrt(p) + b p + ..., so any smooth function of p (the cone) is
+    smooth in t, and the nodes crowd towards the backward peak, which narrows towards
+    grazing.  (Measured on the same node budget: t = p, t = 1 - sqrt(1 - p) and
+    t = (2/pi) arcsin(sqrt(p)) alone; docs/tabulated.md.)
 ``s``  = asinh(p / scale) / asinh(p_max / scale) in [0, 1] for the model parameter p
     (the roughness sigma of Oren-Nayar, the aperture psi of the pitted model), see
     :class:`ParameterMap`.  Linear in p for small p and logarithmic for large p: the
@@ -44,6 +46,8 @@ accuracy study of docs/tabulated.md):
     z_beta / p), which a logarithmic axis resolves uniformly.
 
 The tabulated quantities are logarithms of the components (:mod:`.oren_nayar_table`).
+The same geometry coordinates serve the single-scattering factor of the pitted model
+(:mod:`.pitted_table`), whose grazing and backward behaviour is alike.
 
 References
 ----------
@@ -60,7 +64,6 @@ __all__ = [
     "COORDINATES_VERSION",
     "Y_OFFSET",
     "Y_SLOPE",
-    "Z_CLAMP",
     "y_coordinate",
     "z_from_y",
     "SIGMA_SCALE_DEG",
@@ -76,12 +79,9 @@ __all__ = [
 #: Smallest resolved angular distance from the horizon [rad] (about 0.0006 deg).
 Y_OFFSET = 1.0e-5
 #: Version of the coordinate maps (stored in tables; a table of another version is refused).
-COORDINATES_VERSION = 4
+COORDINATES_VERSION = 5
 #: Weight of the linear term of the y coordinate [1/rad].
 Y_SLOPE = 2.0
-#: Distance from the horizon [rad] at which the exact model evaluates directions on the
-#: horizon (its limit theta -> 90 deg); table nodes on the horizon use the same.
-Z_CLAMP = 1.0e-9
 #: Roughness [deg] where the sigma coordinate turns from linear to logarithmic.
 SIGMA_SCALE_DEG = 0.5
 #: Largest roughness [deg] (the physical bound of ``sigma``).
@@ -125,6 +125,21 @@ def _z_alpha_from_zeta(zeta: np.ndarray, z_beta: np.ndarray) -> np.ndarray:
     for _ in range(64):
         mid = 0.5 * (lo + hi)
         above = _zeta(mid, z_beta) > zeta
+        hi, lo = np.where(above, mid, hi), np.where(above, lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def _t_from_p(p: np.ndarray) -> np.ndarray:
+    """The t coordinate (module notes) of p in [0, 1]."""
+    return 0.5 * (1.0 - np.sqrt(1.0 - p) + np.arcsin(np.sqrt(p)) * (2.0 / math.pi))
+
+
+def _p_from_t(t: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`_t_from_p` (bisection; used to place nodes)."""
+    lo, hi = np.zeros(np.shape(t)), np.ones(np.shape(t))
+    for _ in range(64):
+        mid = 0.5 * (lo + hi)
+        above = _t_from_p(mid) > t
         hi, lo = np.where(above, mid, hi), np.where(above, lo, mid)
     return 0.5 * (lo + hi)
 
@@ -197,8 +212,7 @@ def geometry_coordinates(
     phase = 2.0 * np.arcsin(np.sqrt(np.clip(half, 0.0, 1.0)))
     limit = np.sin(0.5 * delta_phi) ** 2  # (1 - cos dphi)/2, the beta -> 0 limit of t
     p = np.divide(phase - (alpha - beta), 2.0 * beta, out=np.array(np.broadcast_to(limit, beta.shape)), where=beta > 1e-6)
-    t = 1.0 - np.sqrt(1.0 - np.clip(p, 0.0, 1.0))
-    return y, zeta, t, z_beta
+    return y, zeta, _t_from_p(np.clip(p, 0.0, 1.0)), z_beta
 
 
 def geometry_from_coordinates(
@@ -209,7 +223,7 @@ def geometry_from_coordinates(
     z_beta = np.asarray(z_from_y(y))
     beta = _HALF_PI - z_beta
     alpha = _HALF_PI - _z_alpha_from_zeta(zeta, z_beta)
-    p = 1.0 - (1.0 - t) ** 2
+    p = _p_from_t(t)
     phase = (alpha - beta) + 2.0 * beta * p
     denominator = np.sin(alpha) * np.sin(beta)
     cos_dphi = np.divide(

@@ -70,11 +70,12 @@ class LogTable:
     """
 
     def __init__(self, tables: Sequence[np.ndarray]):
-        self.tables = tuple(np.ascontiguousarray(t, dtype=float) for t in tables)
-        shapes = {t.shape for t in self.tables}
+        shapes = {np.shape(t) for t in tables}
         if len(shapes) != 1 or len(next(iter(shapes))) != 4:
             raise ValueError(f"tables must share one 4-D shape, got {sorted(shapes)}")
-        self.grid = TableGrid(*self.tables[0].shape)
+        # components last, so that one gather reads every component of a cell
+        self.values = np.ascontiguousarray(np.stack([np.asarray(t, float) for t in tables], axis=-1))
+        self.grid = TableGrid(*self.values.shape[:4])
         self.axes = self.grid.axes()
 
     def prepare(self, theta_i, phi_i, theta_r, phi_r) -> Callable[[float], tuple[np.ndarray, ...]]:
@@ -83,25 +84,26 @@ class LogTable:
         y, zeta, t, _ = geometry_coordinates(ti.ravel(), tr.ravel(), (pr - pi_).ravel())
         stencils = tuple(axis_stencil(axis, x) for axis, x in zip(self.axes[:3], (y, zeta, t)))
         s_axis = self.axes[3]
-        columns: dict[int, tuple[np.ndarray, ...]] = {}
+        columns: dict[int, np.ndarray] = {}
         first_call: dict[float, tuple[np.ndarray, ...]] = {}
+        components = self.values.shape[-1]
 
-        def column(node: int) -> tuple[np.ndarray, ...]:
+        def column(node: int) -> np.ndarray:
             if node not in columns:
-                columns[node] = tuple(gather_3d(table[..., node], stencils) for table in self.tables)
+                columns[node] = np.ascontiguousarray(gather_3d(self.values[..., node, :], stencils).T)
             return columns[node]
 
         def evaluate(s: float) -> tuple[np.ndarray, ...]:
             s = float(s)
             if not first_call:  # one-off evaluation: reduce along s first
-                first_call[s] = tuple(gather_3d(contract_last_axis(t, s_axis, s), stencils) for t in self.tables)
+                reduced = contract_last_axis(np.moveaxis(self.values, 3, -1), s_axis, s)  # (y, zeta, t, C)
+                first_call[s] = tuple(np.ascontiguousarray(gather_3d(reduced, stencils).T))
             if s in first_call:  # the same s again gives the same bits
                 return first_call[s]
             first, weights = axis_stencil(s_axis, np.asarray(float(s)))
-            sums = [np.zeros(y.shape) for _ in self.tables]
+            sums = np.zeros((components, y.shape[0]))
             for node, weight in zip(range(int(first), int(first) + 4), weights):
-                for total, values in zip(sums, column(node)):
-                    total += weight * values
+                sums += weight * column(node)
             return tuple(sums)
 
         return evaluate

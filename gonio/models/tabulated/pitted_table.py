@@ -41,7 +41,7 @@ PSI_SCALE_DEG = 0.5
 #: The aperture coordinate: s = asinh(psi / 0.5 deg) / asinh(90 deg / 0.5 deg).
 PSI_MAP = ParameterMap(PSI_SCALE_DEG, 90.0)
 #: Node counts of the shipped pitted table.
-DEFAULT_PIT_GRID = TableGrid(y=45, zeta=12, t=16, s=28)
+DEFAULT_PIT_GRID = TableGrid(y=55, zeta=16, t=32, s=32)
 
 
 def _psi_slice(args) -> np.ndarray:
