@@ -26,7 +26,7 @@ demo: $(STAMP)
 	$(BIN)/gonio demo --out $(OUT)
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -n $(JOBS)
+	$(BIN)/python -m pytest -n $(JOBS) tests --doctest-modules gonio drivers
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
