@@ -19,6 +19,8 @@ Nuisance parameters
 """
 from __future__ import annotations
 
+import json
+
 import math
 from typing import Any, Mapping
 
@@ -98,6 +100,25 @@ def predict_quantity(
     return combine_prediction(quantity, brdf, normal, np.cos(np.radians(ti)), float(values.get("scale", 1.0)))
 
 
+def evaluated_model(model: str | Model, dataset: Dataset) -> Model:
+    """The model a fit of ``dataset`` evaluates: ``model`` itself, or its average over the
+    instrument's apertures when the dataset carries them (``metadata["aperture_sr"]`` =
+    [lamp, camera] solid angles [sr]; :func:`gonio.instrument.aperture_averaged`)."""
+    base = models.get(model) if isinstance(model, str) else model
+    aperture = dataset.metadata.get("aperture_sr") if dataset.metadata else None
+    if isinstance(aperture, str):  # read back from a CSV header line "# aperture_sr: [..]"
+        try:
+            aperture = json.loads(aperture)
+        except json.JSONDecodeError:
+            raise ValueError(f"dataset metadata aperture_sr = {aperture!r}: expected [lamp, camera] "
+                             "solid angles in sr, e.g. [0.003, 0.0009]") from None
+    if not aperture:
+        return base
+    from gonio.instrument import aperture_averaged
+
+    return aperture_averaged(base, *aperture)
+
+
 class FitProblem:
     """A model, a dataset, fixed parameters: prediction, residuals, log-likelihood.
 
@@ -143,12 +164,7 @@ class FitProblem:
         #: measured through finite apertures (``dataset.metadata["aperture_sr"]`` =
         #: [lamp, camera] solid angles [sr], set by gonio.acquisition for rig data; see
         #: gonio.instrument).  Fitting the point model to such data biases the roughness.
-        self.model = self.base_model
-        aperture = dataset.metadata.get("aperture_sr") if dataset.metadata else None
-        if aperture:
-            from gonio.instrument import aperture_averaged
-
-            self.model = aperture_averaged(self.base_model, *aperture)
+        self.model = evaluated_model(self.base_model, dataset)
         self.dataset = dataset
         self.options = dict(options or {})
         self.jitter = bool(jitter)

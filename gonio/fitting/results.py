@@ -30,7 +30,7 @@ from .dataset import Dataset
 from .least_squares import LeastSquaresResult, _with_unit
 from .mcmc import LogPosterior, McmcResult
 from .priors import Prior, prior_from_dict
-from .problem import FitProblem, predict_quantity
+from .problem import FitProblem, evaluated_model, predict_quantity
 from .selection import information_criteria
 
 __all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE"]
@@ -173,7 +173,8 @@ class FitResult:
     def predict(self, theta_i, phi_i, theta_r, phi_r, values: Mapping[str, float] | None = None) -> np.ndarray:
         """The fitted quantity at arbitrary geometries [deg] (best values by default)."""
         values = dict(self.best_values() if values is None else values)
-        return predict_quantity(self.model, self.dataset.quantity, theta_i, phi_i, theta_r, phi_r, values, self.options)
+        model = evaluated_model(self.model, self.dataset)  # through the apertures, as fitted
+        return predict_quantity(model, self.dataset.quantity, theta_i, phi_i, theta_r, phi_r, values, self.options)
 
     def posterior_predictive(
         self, theta_i, phi_i, theta_r, phi_r, n_draws: int = 200, seed: int = 0, percentiles=(2.5, 16, 50, 84, 97.5)

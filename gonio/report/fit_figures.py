@@ -169,11 +169,13 @@ def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
 
 
 def residual_figure(result: FitResult) -> Figure:
-    """Normalised residuals (data - posterior median model) / sigma against the viewing angle."""
+    """Normalised residuals (data - posterior median model) / sigma against the viewing angle
+    (sigma includes the fitted extra-noise term ``jitter`` in quadrature when there is one)."""
     data = result.dataset
     sources, index = data.incidences()
     model = result.predict(*data.geometry)
-    z = (data.value - model) / data.sigma
+    jitter = result.best_values().get("jitter", 0.0)  # fitted extra noise, in quadrature
+    z = (data.value - model) / np.hypot(data.sigma, jitter)
     x = np.where(data.in_plane, data.signed_view, data.theta_r)
     fig = Figure(figsize=(7.5, 3.8), layout="constrained")
     ax = fig.add_subplot()
@@ -195,7 +197,7 @@ def residual_figure(result: FitResult) -> Figure:
     limit = max(3.5, float(np.nanmax(np.abs(z))) * 1.1) if z.size else 3.5
     ax.set_ylim(-limit, limit)
     ax.set_xlabel("signed viewing angle theta_r [deg] (in plane; + source side)")
-    ax.set_ylabel("(data - model) / sigma [-]")
+    ax.set_ylabel("(data - model) / sigma [-]" if not jitter else "(data - model) / hypot(sigma, jitter) [-]")
     chi2 = float(np.sum(z**2))
     ax.set_title(f"Normalised residuals at the posterior median: chi2 = {chi2:.1f} for {data.n} points", fontsize=10)
     ax.legend(fontsize=8, ncol=2, loc="upper left")
