@@ -121,7 +121,7 @@ def speed() -> dict[str, float]:
         fixed = model.at(*geometry)
         fixed(**params, **extra)
         sigmas = iter(np.linspace(29.0, 31.0, 10_000))  # a fit moves sigma between calls
-        out[f"{name} plain"] = best_time(lambda: model(*geometry, **params, **extra), repeats=2) / N_SPEED
+        out[f"{name} plain"] = best_time(lambda: model(*geometry, **params, **extra), repeats=7) / N_SPEED
         out[f"{name} fixed"] = best_time(lambda: fixed(rho=0.8, sigma=next(sigmas), **extra), repeats=5) / N_SPEED
     small = tuple(a[:200] for a in geometry)
     for rtol in (1e-6, 1e-3):
@@ -129,6 +129,57 @@ def speed() -> dict[str, float]:
         gonio.brdf("oren-nayar-exact", *small, rho=0.8, sigma=30.0, rtol=rtol)
         out[f"oren-nayar-exact rtol={rtol:g}"] = (time.perf_counter() - start) / small[0].size
     return out
+
+
+def plain_call_stages(n: int = N_SPEED) -> dict[str, float]:
+    """Seconds per geometry of each stage of a one-off call (what the plain call does).
+
+    The stages run as the model runs them, chunk by chunk (``lookup._STREAM_CHUNK``
+    geometries at a time, so temporaries stay in cache): table coordinates (y, zeta, t),
+    cubic stencils (first nodes and Lagrange weights), the 64-value gather and
+    contraction, and everything else of the plain call (degree conversion and domain
+    checks in ``Model``, the sigma reduction of the table, exponentials) as the remainder,
+    from a plain call timed between the stage runs.
+    """
+    from gonio.models.tabulated import lookup
+    from gonio.models.tabulated.coordinates import geometry_coordinates
+    from gonio.models.tabulated.interpolation import CellRows, axis_stencil, contract_last_axis
+    from gonio.models.tabulated.oren_nayar import table
+
+    ti, pi_, tr, pr = (np.radians(a) for a in random_geometries(n, seed=1, max_theta=90.0))
+    dphi = pr - pi_
+    logs = table().lookup
+    rows = CellRows(contract_last_axis(np.moveaxis(logs.values, 3, -1), logs.axes[3], 0.5))
+    out = np.empty((n, logs.values.shape[-1]))
+    chunk = lookup._STREAM_CHUNK
+
+    def run() -> np.ndarray:
+        spent = np.zeros(3)
+        for start in range(0, n, chunk):
+            part = slice(start, start + chunk)
+            t0 = time.perf_counter()
+            y, zeta, t, _ = geometry_coordinates(ti[part], tr[part], dphi[part])
+            t1 = time.perf_counter()
+            stencils = tuple(axis_stencil(axis, x) for axis, x in zip(logs.axes[:3], (y, zeta, t)))
+            t2 = time.perf_counter()
+            rows(stencils, chunk=chunk, out=out[part])
+            spent += (t1 - t0, t2 - t1, time.perf_counter() - t2)
+        return spent / n
+
+    geometry = random_geometries(n, seed=1, max_theta=90.0)
+    model = gonio.models.get("oren-nayar-tabulated")
+
+    def whole() -> float:
+        start = time.perf_counter()
+        model(*geometry, rho=0.8, sigma=30.0)
+        return (time.perf_counter() - start) / n
+
+    # interleaved, best of 5: on a shared machine both see the same conditions
+    stages, calls = zip(*((run(), whole()) for _ in range(5)))
+    best = np.min(stages, axis=0)
+    result = dict(zip(("coordinates", "stencils", "gather"), (float(v) for v in best)))
+    result["rest of the plain call"] = min(calls) - float(best.sum())
+    return result
 
 
 def closed_form_error(s: dict[str, np.ndarray]) -> float:
@@ -207,6 +258,9 @@ def main() -> dict:
     times = speed()
     for key, value in times.items():
         print(f"  {key:<32} {1 / value:11.3e} evaluations/s")
+    stages = plain_call_stages()
+    for key, value in stages.items():
+        print(f"  plain call stage: {key:<24} {value * 1e9:6.0f} ns per geometry")
     p99 = accuracy["full_domain"]["brdf"]["p99"]
     reference = "oren-nayar-exact (rtol 1e-6)"
     records = [
@@ -233,7 +287,9 @@ def main() -> dict:
         "records": records,
         "accuracy": accuracy,
         "evaluations_per_second": {k: 1.0 / v for k, v in times.items()},
+        "plain_call_stages_seconds_per_evaluation": stages,
         "speed_ratio_fixed_vs_closed_form": times["oren-nayar fixed"] / times["oren-nayar-tabulated fixed"],
+        "speed_ratio_plain_vs_closed_form_plain": times["oren-nayar plain"] / times["oren-nayar-tabulated plain"],
         "speed_ratio_fixed_vs_exact": times["oren-nayar-exact rtol=1e-06"] / times["oren-nayar-tabulated fixed"],
         "table": {k: v for k, v in describe("oren-nayar").items()},
     }

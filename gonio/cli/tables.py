@@ -34,7 +34,8 @@ def _run_build(args: argparse.Namespace) -> int:
         print(f"\r  {done}/{total} roughness nodes, {time.perf_counter() - start:.0f} s", end="", file=sys.stderr, flush=True)
 
     for name in names:
-        print(f"building table {name!r} (rtol {args.rtol:g})", file=sys.stderr)
+        detail = f" (rtol {args.rtol:g})" if name == "oren-nayar" else ""
+        print(f"building table {name!r}{detail}", file=sys.stderr)
         path = tabulated.build(name, output=args.output, rtol=args.rtol, workers=args.workers,
                                progress=None if args.quiet else progress, **options)
         print("", file=sys.stderr)

@@ -27,6 +27,7 @@ MODEL_MODULES = (
     "oren_nayar.functional",
     "oren_nayar.exact",
     "tabulated.oren_nayar",
+    "tabulated.pitted",
     "torrance_sparrow",
     "pitted.model",
     "wolff",
