@@ -531,7 +531,7 @@ class Plan:
             f"  points refused: {len(self.refused)}",
             f"  dark frames: {self.dark_frames}",
             f"  exposure: {self.protocol.exposure.mode}",
-            f"  estimated instrument time: {_duration(self.estimated_seconds)}",
+            f"  estimated instrument time: {_duration(self.estimated_seconds)} (lamp warm-up not included)",
         ]
         if self.protocol.reference:
             lines.append(f"  reference standard: {self.protocol.reference.label} "
