@@ -9,8 +9,10 @@ Three families of geometries, each with its reference measured in the same run:
 * ``pitted psi=45``: shallow pits at random azimuths; reference the cap quadrature of
   gonio.models.pitted.quadrature at 128 nodes per panel.
 
-Methods: the closed form (in-plane only), the eq 21 integral and the cap quadrature (what
-the registered ``pitted`` model evaluates) at several orders, and the Monte Carlo
+Methods: the closed form of eq 26-29 (in-plane only), the general closed form of
+gonio.models.pitted.closed_form (Stokes' theorem over the boundary arcs of the lit and
+visible cavity: what the registered ``pitted`` model evaluates), the eq 21 integral and the
+cap quadrature at several orders, and the Monte Carlo
 estimator of section 4.1 at 1e2 ... 1e6 samples.  For each: time per BRDF evaluation
 (vectorised over the geometries for the deterministic methods; one call per geometry for
 Monte Carlo) and the RMS relative error over the geometries; Monte Carlo records also
@@ -31,8 +33,11 @@ from matplotlib.figure import Figure
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import OUT, best_time, machine, write_json  # noqa: E402
 
+import gonio  # noqa: E402
+
 from gonio.models.pitted.hemispherical import in_plane_brdf, integral_brdf  # noqa: E402
 from gonio.models.pitted.interreflection import diffuse_brdf  # noqa: E402
+from gonio.models.pitted.model import single_scattering  # noqa: E402
 from gonio.models.pitted.quadrature import DEFAULT_ORDER, single_scattering_factor  # noqa: E402
 from gonio.models.pitted.shallow import monte_carlo_brdf  # noqa: E402
 
@@ -40,11 +45,19 @@ RHO = 0.8
 N_GEOMETRIES = 200
 N_MC_GEOMETRIES = 12
 MC_SAMPLES = (100, 1_000, 10_000, 100_000, 1_000_000)
+#: Geometries for timing the closed form (vectorised, so its per-call overhead is spread)
+N_CLOSED_TIMING = 200_000
 
 
 def quadrature_brdf(alpha, beta, eps, psi, order):
     """Pit BRDF [1/sr] via the cap quadrature (alpha, beta, eps, psi in deg)."""
     f1 = single_scattering_factor(np.radians(alpha), np.radians(beta), np.radians(eps), np.radians(psi), order)
+    return RHO * f1 + diffuse_brdf(RHO, psi)
+
+
+def closed_brdf(alpha, beta, eps, psi):
+    """Pit BRDF [1/sr] with F1 in closed form (the model's default; angles in deg)."""
+    f1 = single_scattering(np.radians(alpha), np.radians(beta), np.radians(eps), np.radians(psi))
     return RHO * f1 + diffuse_brdf(RHO, psi)
 
 
@@ -100,10 +113,16 @@ def run_family(family: str, psi: float, seed: int) -> list[dict]:
             err = rms_relative(eq21_brdf(alpha, beta, eps, order), reference)
             records.append(record(family, f"eq 21 integral n={order}", t, err, ref_name,
                                   f"time ratio to reference {t / ref_time:.3g}", time_ratio_to_reference=t / ref_time))
+    tiled = tuple(np.resize(a, N_CLOSED_TIMING) for a in (alpha, beta, eps))
+    t = best_time(lambda: closed_brdf(*tiled, psi)) / N_CLOSED_TIMING
+    err = rms_relative(closed_brdf(alpha, beta, eps, psi), reference)
+    records.append(record(family, "closed form, boundary arcs (model default)", t, err, ref_name,
+                          f"time ratio to reference {t / ref_time:.3g}; timed on {N_CLOSED_TIMING} geometries",
+                          time_ratio_to_reference=t / ref_time))
     for order in (4, 8, 12, DEFAULT_ORDER, 24, 32):
         t = best_time(lambda: quadrature_brdf(alpha, beta, eps, psi, order)) / n
         err = rms_relative(quadrature_brdf(alpha, beta, eps, psi, order), reference)
-        label = f"cap quadrature n={order}" + (" (model default)" if order == DEFAULT_ORDER else "")
+        label = f"cap quadrature n={order}"
         records.append(record(family, label, t, err, ref_name, f"time ratio to reference {t / ref_time:.3g}",
                               time_ratio_to_reference=t / ref_time))
     subset = np.arange(min(N_MC_GEOMETRIES, n))
@@ -131,7 +150,7 @@ def chart(records: list[dict], path: Path) -> None:
     families = sorted({r["family"] for r in records})
     fig = Figure(figsize=(5.2 * len(families), 4.4), layout="constrained")
     axes = fig.subplots(1, len(families), squeeze=False)[0]
-    styles = {"eq 21": ("C0", "o"), "cap": ("C1", "s"), "Monte": ("C2", "^")}
+    styles = {"closed form, boundary": ("C3", "D"), "eq 21": ("C0", "o"), "cap": ("C1", "s"), "Monte": ("C2", "^")}
     for ax, family in zip(axes, families):
         reference = [r for r in records if r["family"] == family and r["notes"] == "reference"]
         for r in reference:
@@ -146,7 +165,7 @@ def chart(records: list[dict], path: Path) -> None:
             ax.loglog(x, y, marker=marker, color=color, ls="-" if len(rows) > 1 else "", label=key)
             for r, xi, yi in zip(rows, x, y):
                 tokens = r["method"].split()
-                label = next((tok for tok in tokens if tok.startswith("n=")), tokens[-1])
+                label = next((tok for tok in tokens if tok.startswith("n=")), "" if key.startswith("closed") else tokens[-1])
                 ax.annotate(label, (xi, yi), fontsize=6,
                             xytext=(3, 2), textcoords="offset points")
         ax.set_title(family, fontsize=10)
@@ -154,8 +173,24 @@ def chart(records: list[dict], path: Path) -> None:
         ax.set_ylabel("RMS relative error [-] (1e-16 = exact)")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
-    fig.suptitle(f"Pitted surfaces: closed form, eq 21 integral, cap quadrature, Monte Carlo (rho = {RHO})")
+    fig.suptitle(f"Pitted surfaces: closed forms, eq 21 integral, cap quadrature, Monte Carlo (rho = {RHO})")
     fig.savefig(path, dpi=110)
+
+
+def model_speed(n: int = 1_000_000) -> dict[str, float]:
+    """Evaluations/s of the registered ``pitted`` model (plain call, new psi every call,
+    random geometries over the whole hemisphere) and of the cap quadrature it used before,
+    measured in the same run on 2e4 of the geometries."""
+    rng = np.random.default_rng(7)
+    geometry = (rng.uniform(0, 90, n), rng.uniform(-180, 180, n), rng.uniform(0, 90, n), rng.uniform(-180, 180, n))
+    psis = iter(np.linspace(30.0, 89.0, 1000))
+    model = gonio.models.get("pitted")
+    plain = best_time(lambda: model(*geometry, rho=RHO, psi=float(next(psis)), coverage=0.5), repeats=5) / n
+    m = 20_000
+    a, b, e = (np.radians(x[:m]) for x in (geometry[0], geometry[2], geometry[3] - geometry[1]))
+    quadrature = best_time(lambda: single_scattering_factor(a, b, e, np.radians(60.0), DEFAULT_ORDER), repeats=3) / m
+    return {"pitted plain call (closed form)": 1.0 / plain, "cap quadrature n=16 (F1 only)": 1.0 / quadrature,
+            "speed_ratio_closed_form_vs_quadrature": quadrature / plain}
 
 
 def main() -> None:
@@ -167,7 +202,10 @@ def main() -> None:
         records += run_family(family, psi, seed)
         print(f"{family}: done ({time.perf_counter() - start:.1f} s)", flush=True)
     for r in records:
-        print(f"{r['family']:26s} {r['method']:34s} {r['seconds_per_evaluation']:.3e} s  err {r['relative_error']:.2e}")
+        print(f"{r['family']:26s} {r['method']:44s} {r['seconds_per_evaluation']:.3e} s  err {r['relative_error']:.2e}")
+    speed = model_speed()
+    for key, value in speed.items():
+        print(f"  {key}: {value:.3g}" + (" evaluations/s" if "ratio" not in key else ""))
     payload = {
         "benchmark": "pitted",
         "command": "python benchmarks/bench_pitted.py",
@@ -176,7 +214,8 @@ def main() -> None:
         "rho": RHO,
         "n_geometries": N_GEOMETRIES,
         "n_monte_carlo_geometries": N_MC_GEOMETRIES,
-        "model_default_order": DEFAULT_ORDER,
+        "quadrature_default_order": DEFAULT_ORDER,
+        "model_speed": speed,
         "total_seconds": time.perf_counter() - start,
     }
     path = write_json("pitted", payload)

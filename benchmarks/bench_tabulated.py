@@ -3,7 +3,9 @@
 Accuracy: random geometries over the whole hemisphere (theta_i, theta_r uniform in
 [0, 90] deg, azimuth difference uniform), roughness uniform in [0, 90] deg and albedo
 uniform in [0, 1], compared with ``oren-nayar-exact`` at its default rtol 1e-6; plus a
-grazing stratum (both polar angles in [85, 90] deg) and the horizon itself (theta = 90).
+grazing stratum (both polar angles in [85, 90] deg), the grazing backward peak (both polar
+angles in [80, 90] deg, dphi in [0, 15] deg: where the error is largest) and the horizon
+itself (theta = 90).
 Reported: max, 99th percentile and median relative error of the BRDF, of f1 alone (the
 BRDF as rho -> 0) and of f2 relative to f1 + f2.
 
@@ -38,7 +40,8 @@ from gonio.models.tabulated.oren_nayar import tabulated_components  # noqa: E402
 
 N_SPEED = 1_000_000
 N_SIGMA, PER_SIGMA = 60, 80          # full-domain sample: 4800 geometries
-N_GRAZING_SIGMA, PER_GRAZING = 12, 50  # grazing stratum: 600 geometries
+N_GRAZING_SIGMA, PER_GRAZING = 24, 100  # grazing stratum: 2400 geometries
+N_PEAK_SIGMA, PER_PEAK = 24, 100  # grazing backward peak: 2400 geometries
 SEED = 2024
 
 
@@ -47,11 +50,13 @@ def _exact(args):
     return exact_components(ti, 0.0, tr, dphi, sigma, rtol=rtol)
 
 
-def sample(rng: np.random.Generator, n_sigma: int, per: int, theta_lo: float) -> dict[str, np.ndarray]:
-    """Random geometries (theta in [theta_lo, 90]) at random roughnesses, with exact f1, f2."""
+def sample(rng: np.random.Generator, n_sigma: int, per: int, theta_lo: float,
+           dphi_hi: float = 180.0) -> dict[str, np.ndarray]:
+    """Random geometries (theta in [theta_lo, 90], dphi in [0, dphi_hi]) at random
+    roughnesses, with exact f1, f2."""
     sigma = rng.uniform(0.0, 90.0, n_sigma)
     ti, tr = rng.uniform(theta_lo, 90.0, (2, n_sigma, per))
-    dphi = rng.uniform(0.0, 180.0, (n_sigma, per))
+    dphi = rng.uniform(0.0, dphi_hi, (n_sigma, per))
     with ProcessPoolExecutor(max_workers=os.cpu_count()) as pool:
         exact = list(pool.map(_exact, [(ti[k], tr[k], dphi[k], sigma[k], 1e-6) for k in range(n_sigma)]))
     f1 = np.array([e[0] for e in exact])
@@ -134,52 +139,40 @@ def speed() -> dict[str, float]:
 def plain_call_stages(n: int = N_SPEED) -> dict[str, float]:
     """Seconds per geometry of each stage of a one-off call (what the plain call does).
 
-    The stages run as the model runs them, chunk by chunk (``lookup._STREAM_CHUNK``
-    geometries at a time, so temporaries stay in cache): table coordinates (y, zeta, t),
-    cubic stencils (first nodes and Lagrange weights), the 64-value gather and
-    contraction, and everything else of the plain call (degree conversion and domain
-    checks in ``Model``, the sigma reduction of the table, exponentials) as the remainder,
-    from a plain call timed between the stage runs.
+    The compiled kernel (``gonio.models.tabulated.kernel``) is timed on the table reduced
+    along sigma twice: from given table coordinates (the tricubic sum: stencils and the
+    64 x 2 values) and from the geometries (adding the coordinates y, zeta, t); the rest
+    of a plain call (degree conversion and domain checks in ``Model``, the reduction of
+    the table along sigma, exponentials, the rho combination) is the remainder of a
+    whole call timed between those runs.
     """
-    from gonio.models.tabulated import lookup
     from gonio.models.tabulated.coordinates import geometry_coordinates
-    from gonio.models.tabulated.interpolation import CellRows, axis_stencil, contract_last_axis
+    from gonio.models.tabulated.kernel import interpolate_geometries, interpolate_points
     from gonio.models.tabulated.oren_nayar import table
 
     ti, pi_, tr, pr = (np.radians(a) for a in random_geometries(n, seed=1, max_theta=90.0))
     dphi = pr - pi_
     logs = table().lookup
-    rows = CellRows(contract_last_axis(np.moveaxis(logs.values, 3, -1), logs.axes[3], 0.5))
-    out = np.empty((n, logs.values.shape[-1]))
-    chunk = lookup._STREAM_CHUNK
-
-    def run() -> np.ndarray:
-        spent = np.zeros(3)
-        for start in range(0, n, chunk):
-            part = slice(start, start + chunk)
-            t0 = time.perf_counter()
-            y, zeta, t, _ = geometry_coordinates(ti[part], tr[part], dphi[part])
-            t1 = time.perf_counter()
-            stencils = tuple(axis_stencil(axis, x) for axis, x in zip(logs.axes[:3], (y, zeta, t)))
-            t2 = time.perf_counter()
-            rows(stencils, chunk=chunk, out=out[part])
-            spent += (t1 - t0, t2 - t1, time.perf_counter() - t2)
-        return spent / n
-
+    slab = logs.slab_at(0.5)
+    lo, step = logs._lo, logs._step
+    y, zeta, t, _ = (np.ascontiguousarray(a) for a in geometry_coordinates(ti, tr, dphi))
+    out = np.empty((logs.values.shape[-1], n))
     geometry = random_geometries(n, seed=1, max_theta=90.0)
     model = gonio.models.get("oren-nayar-tabulated")
 
-    def whole() -> float:
+    def timed(function, *args) -> float:
         start = time.perf_counter()
-        model(*geometry, rho=0.8, sigma=30.0)
+        function(*args)
         return (time.perf_counter() - start) / n
 
-    # interleaved, best of 5: on a shared machine both see the same conditions
-    stages, calls = zip(*((run(), whole()) for _ in range(5)))
-    best = np.min(stages, axis=0)
-    result = dict(zip(("coordinates", "stencils", "gather"), (float(v) for v in best)))
-    result["rest of the plain call"] = min(calls) - float(best.sum())
-    return result
+    # interleaved, best of 7: on a shared machine all three see the same conditions
+    runs = [(timed(interpolate_points, slab, lo, step, y, zeta, t, out),
+             timed(interpolate_geometries, slab, lo, step, ti, tr, dphi, out),
+             timed(lambda: model(*geometry, rho=0.8, sigma=30.0))) for _ in range(7)]
+    points, geometries, whole = (min(column) for column in zip(*runs))
+    return {"tricubic sum (stencils and 64 x 2 values)": points,
+            "coordinates y, zeta, t": geometries - points,
+            "rest of the plain call": whole - geometries}
 
 
 def closed_form_error(s: dict[str, np.ndarray]) -> float:
@@ -204,7 +197,8 @@ def exact_low_error(rng: np.random.Generator) -> float:
     return float(np.percentile(np.concatenate(worst), 99))
 
 
-def chart(full: dict[str, np.ndarray], full_err: dict, grazing_err: dict, records: list[dict]) -> Path:
+def chart(full: dict[str, np.ndarray], full_err: dict, grazing_err: dict, peak_err: dict,
+          records: list[dict]) -> Path:
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(13, 4.2), layout="constrained")
@@ -218,7 +212,8 @@ def chart(full: dict[str, np.ndarray], full_err: dict, grazing_err: dict, record
     ax1.set(xlabel="time per evaluation [s] (one core)", ylabel="99th-percentile relative error [-]",
             title="Oren-Nayar: time vs error (ref. oren-nayar-exact)")
     bins = np.logspace(-9, 0, 46)
-    for label, err in (("full domain", full_err["brdf"]), ("grazing stratum", grazing_err["brdf"])):
+    for label, err in (("full domain", full_err["brdf"]), ("grazing stratum", grazing_err["brdf"]),
+                       ("grazing backward peak", peak_err["brdf"])):
         ax2.hist(np.maximum(err, 1e-9), bins=bins, histtype="step", label=label)
     ax2.axvline(1e-3, color="grey", lw=0.8, ls="--")
     ax2.set(xscale="log", xlabel="relative error of the BRDF [-]", ylabel="geometries",
@@ -238,18 +233,21 @@ def main() -> dict:
     start = time.perf_counter()
     full = sample(rng, N_SIGMA, PER_SIGMA, 0.0)
     grazing = sample(rng, N_GRAZING_SIGMA, PER_GRAZING, 85.0)
-    full_err, grazing_err = errors(full), errors(grazing)
+    peak = sample(rng, N_PEAK_SIGMA, PER_PEAK, 80.0, dphi_hi=15.0)
+    full_err, grazing_err, peak_err = errors(full), errors(grazing), errors(peak)
     accuracy = {
         "full_domain": {k: summary(v) for k, v in full_err.items()},
         "grazing_stratum_85_90": {k: summary(v) for k, v in grazing_err.items()},
+        "grazing_backward_peak_80_90_dphi_0_15": {k: summary(v) for k, v in peak_err.items()},
         "horizon_theta_90": horizon_check(),
         "worst_full_domain": worst_cases(full, full_err["brdf"]),
         "worst_grazing": worst_cases(grazing, grazing_err["brdf"]),
+        "worst_backward_peak": worst_cases(peak, peak_err["brdf"]),
     }
     print(f"accuracy sample done in {time.perf_counter() - start:.0f} s")
-    for stratum in ("full_domain", "grazing_stratum_85_90"):
+    for stratum in ("full_domain", "grazing_stratum_85_90", "grazing_backward_peak_80_90_dphi_0_15"):
         for key, value in accuracy[stratum].items():
-            print(f"  {stratum:<22} {key:<5} max {value['max']:.2e}  p99 {value['p99']:.2e}  "
+            print(f"  {stratum:<38} {key:<5} max {value['max']:.2e}  p99 {value['p99']:.2e}  "
                   f"p90 {value['p90']:.2e}  median {value['median']:.2e}  (n={value['n']})")
     horizon = accuracy["horizon_theta_90"]
     print(f"  horizon (theta = 90): max {horizon['max_brdf_rho1']:.2e}; forward corner (90, 90, 180): "
@@ -260,7 +258,7 @@ def main() -> dict:
         print(f"  {key:<32} {1 / value:11.3e} evaluations/s")
     stages = plain_call_stages()
     for key, value in stages.items():
-        print(f"  plain call stage: {key:<24} {value * 1e9:6.0f} ns per geometry")
+        print(f"  plain call stage: {key:<44} {value * 1e9:6.0f} ns per geometry")
     p99 = accuracy["full_domain"]["brdf"]["p99"]
     reference = "oren-nayar-exact (rtol 1e-6)"
     records = [
@@ -294,7 +292,7 @@ def main() -> dict:
         "table": {k: v for k, v in describe("oren-nayar").items()},
     }
     print(f"wrote {write_json('tabulated', payload)}")
-    print(f"wrote {chart(full, full_err, grazing_err, records)}")
+    print(f"wrote {chart(full, full_err, grazing_err, peak_err, records)}")
     return payload
 
 

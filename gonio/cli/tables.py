@@ -82,7 +82,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     build = actions.add_parser("build", help="compute a table with the exact model (slow: minutes)")
     build.add_argument("name", nargs="*", help="table names (default: all)")
     build.add_argument("--output", help="file to write instead of the user cache")
-    build.add_argument("--rtol", type=float, default=1e-5, help="accuracy of oren-nayar-exact at the nodes (the pitted table always uses its default quadrature)")
+    build.add_argument("--rtol", type=float, default=1e-5, help="accuracy of oren-nayar-exact at the nodes")
     build.add_argument("--workers", type=int, default=None, help="processes (default: all CPUs)")
     build.add_argument("--grid", help="node counts 'y,zeta,t,s' (default: the shipped grid)")
     build.add_argument("--quiet", action="store_true", help="no progress output")

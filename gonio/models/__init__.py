@@ -27,7 +27,6 @@ MODEL_MODULES = (
     "oren_nayar.functional",
     "oren_nayar.exact",
     "tabulated.oren_nayar",
-    "tabulated.pitted",
     "torrance_sparrow",
     "pitted.model",
     "wolff",

@@ -2,31 +2,30 @@
 
 The exact Oren-Nayar model is ``rho f1 + rho^2 f2`` with f1, f2 depending on geometry and
 roughness only.  This package tabulates f1, f2 with the exact method on a grid in
-coordinates where they are smooth, and interpolates the table with a vectorised cubic
-rule.  The registered model is ``oren-nayar-tabulated`` (its table is shipped).
+coordinates where they are smooth, and interpolates the table with a cubic rule in a
+compiled loop.  The registered model is ``oren-nayar-tabulated`` (its table is shipped).
 
-The single-scattering integral of the pitted model (Koenderink et al. 1999) is tabulated
-as its ratio to a coarse quadrature that carries every kink (``pitted_table``;
-``gonio tables build pitted``), registered as ``pitted-tabulated`` with a shipped table:
-it reproduces ``pitted`` to 1.2e-4 but is no faster than it when psi changes, because the
-coarse divisor costs as much as the full quadrature (docs/tabulated.md).
+The pitted model (Koenderink et al. 1999) separates in rho the same way, but needs no
+table: its single-scattering integral has a closed form
+(:mod:`gonio.models.pitted.closed_form`), exact and as fast as a table lookup
+(docs/tabulated.md, section "Pitted surfaces").
 
 Modules
 -------
 coordinates
     The smooth table coordinates and their inverse.
 interpolation
-    Tensor-product cubic Lagrange interpolation on regular grids (numpy).
+    Tensor-product cubic Lagrange interpolation on regular grids (the rule, numpy).
+kernel
+    The compiled evaluation: table coordinates and tricubic sum per geometry (numba).
 oren_nayar_table
     Building the table from ``oren-nayar-exact``.
 store
     Shipped tables, the user cache, loading and saving.
 lookup
-    The table grid and the two-path evaluation shared by the tabulated models.
+    The table grid and the two-path evaluation (one-off call, fixed geometries).
 oren_nayar
     The registered model ``oren-nayar-tabulated``.
-pitted_table, pitted
-    The same for the single-scattering factor of the pitted model.
 
 Tables are built by ``gonio tables build`` (or :func:`build`) and the one gonio ships is
 read from package data; see docs/tabulated.md for the accuracy and why it is shipped.
@@ -69,16 +68,9 @@ def _build_oren_nayar(rtol: float, workers: int | None, progress=None, grid=None
     return build_oren_nayar_table(grid or DEFAULT_GRID, rtol=rtol, workers=workers, progress=progress)
 
 
-def _build_pitted(rtol: float, workers: int | None, progress=None, grid=None) -> dict:
-    from .pitted_table import DEFAULT_PIT_GRID, build_pitted_table
-
-    return build_pitted_table(grid or DEFAULT_PIT_GRID, workers=workers, progress=progress)
-
-
 #: Every table gonio knows how to build, by name.
 TABLES: dict[str, TableSpec] = {
     "oren-nayar": TableSpec("oren-nayar", "oren-nayar-tabulated", "oren-nayar-exact", _build_oren_nayar),
-    "pitted": TableSpec("pitted", "pitted-tabulated", "pitted", _build_pitted),
 }
 
 
@@ -148,7 +140,7 @@ def _forget_loaded() -> None:
     from . import store
 
     store.load.cache_clear()
-    for name in ("oren_nayar", "pitted_table"):
+    for name in ("oren_nayar",):
         module = sys.modules.get(f"{__name__}.{name}")
         if module is not None:
             module.reset_table()

@@ -17,7 +17,7 @@ accuracy study of docs/tabulated.md):
     interpolated between the horizon itself and that distance).  The linear term keeps
     the nodes a few degrees apart near the normal, where a rough surface's BRDF still
     changes by tens of percent (a pure logarithm would space them 20 deg apart there).
-``zeta`` = (r + l) / 2 in [0, 1],  r = z_alpha / z_beta,
+``zeta`` = 1 - sqrt(1 - (r + l) / 2) in [0, 1],  r = z_alpha / z_beta,
     l = (y(z_alpha) - y(0)) / (y(z_beta) - y(0)),  alpha = max(theta_i, theta_r), y(z) the
     map of the y coordinate.  Reciprocity (the model is symmetric in source and viewer)
     halves the domain to alpha >= beta; the kink of the components at theta_i = theta_r
@@ -26,28 +26,35 @@ accuracy study of docs/tabulated.md):
     grazing boundary layer of the upper direction (width ~ sigma, like beta's) when
     alpha -> 90 deg.  Near the grazing corner alpha = beta = 90 deg both parts are
     functions of the ratio of the two distances from the horizon, on which the
-    components depend there.
-``t``  = (1 - sqrt(1 - p) + (2/pi) arcsin(sqrt(p))) / 2,  p = (g - (alpha - beta)) / (2 beta)
+    components depend there.  The outer square root crowds the nodes towards the edge
+    zeta = 1 (alpha - beta ~ (1 - zeta)^2 there): near grazing the retro-reflection peak
+    is a cone whose slope differs in and out of the plane (elevation differences matter
+    far more than azimuth differences there), so the components are not smooth at the
+    corner zeta = 1, t = 0, and the cells next to it must be small in alpha - beta
+    (without it the error there reached 3e-3; docs/tabulated.md).
+``t``  = (sqrt(p) + 1 - (1 - p)^(1/4)) / 2,  p = (g - (alpha - beta)) / (2 beta)
     in [0, 1],  g the phase angle between the two directions.  The V-cavity model has a
     cone-shaped peak at the retro-reflection direction (g = 0): linear in g, not smooth
     in phi_r - phi_i.  p runs over the phase angles that are possible for the given polar
     angles (from alpha - beta at dphi = 0 to alpha + beta at dphi = 180 deg) and is linear
-    in g; as beta -> 0 it tends to (1 - cos dphi)/2.  Near the forward direction p is
-    quadratic in 180 deg - dphi, while towards grazing the components there grow like
-    |180 deg - dphi|: both terms of t are linear in sqrt(1 - p) at that end.  At the
-    backward end t = a sqrt(p) + b p + ..., so any smooth function of p (the cone) is
-    smooth in t, and the nodes crowd towards the backward peak, which narrows towards
-    grazing.  (Measured on the same node budget: t = p, t = 1 - sqrt(1 - p) and
-    t = (2/pi) arcsin(sqrt(p)) alone; docs/tabulated.md.)
+    in g; as beta -> 0 it tends to (1 - cos dphi)/2.  At the backward end
+    t = sqrt(p)/2 + O(p), so p is a polynomial in t there and any smooth function of p
+    (the cone) is smooth in t, with the nodes crowded towards the backward peak.  At the
+    forward end 1 - t = (1 - p)^(1/4)/2 + O(1 - p), so sqrt(1 - p) is a polynomial in t:
+    away from grazing p is quadratic in 180 deg - dphi and the components are smooth in
+    dphi, while near grazing (alpha + beta -> 180 deg) g becomes linear in 180 deg - dphi
+    inside a layer of width ~ z_alpha + z_beta and the components grow like
+    |180 deg - dphi| there; the fourth root crowds the nodes into that layer (with a
+    square root in its place the error there reached 2.7e-3).  Measured on the same node
+    budget: t = p, 1 - sqrt(1 - p), (2/pi) arcsin(sqrt(p)), their average, and
+    (sqrt(p) + 1 - sqrt(1 - p))/2; docs/tabulated.md.
 ``s``  = asinh(p / scale) / asinh(p_max / scale) in [0, 1] for the model parameter p
-    (the roughness sigma of Oren-Nayar, the aperture psi of the pitted model), see
+    (the roughness sigma of Oren-Nayar), see
     :class:`ParameterMap`.  Linear in p for small p and logarithmic for large p: the
     grazing behaviour changes on the angular scale p (the similarity variable is
     z_beta / p), which a logarithmic axis resolves uniformly.
 
 The tabulated quantities are logarithms of the components (:mod:`.oren_nayar_table`).
-The same geometry coordinates serve the single-scattering factor of the pitted model
-(:mod:`.pitted_table`), whose grazing and backward behaviour is alike.
 
 References
 ----------
@@ -79,7 +86,7 @@ __all__ = [
 #: Smallest resolved angular distance from the horizon [rad] (about 0.0006 deg).
 Y_OFFSET = 1.0e-5
 #: Version of the coordinate maps (stored in tables; a table of another version is refused).
-COORDINATES_VERSION = 5
+COORDINATES_VERSION = 6
 #: Weight of the linear term of the y coordinate [1/rad].
 Y_SLOPE = 2.0
 #: Roughness [deg] where the sigma coordinate turns from linear to logarithmic.
@@ -119,7 +126,7 @@ def _zeta(z_alpha: np.ndarray, z_beta: np.ndarray) -> np.ndarray:
     safe = np.where(positive, z_beta, 1.0)
     ratio = z_alpha / safe
     logratio = (y_coordinate(z_alpha) - _Y_FLOOR) / (y_coordinate(safe) - _Y_FLOOR)
-    return np.where(positive, 0.5 * (ratio + logratio), 1.0)
+    return np.where(positive, 1.0 - np.sqrt(np.maximum(1.0 - 0.5 * (ratio + logratio), 0.0)), 1.0)
 
 
 def _z_alpha_from_zeta(zeta: np.ndarray, z_beta: np.ndarray) -> np.ndarray:
@@ -134,7 +141,7 @@ def _z_alpha_from_zeta(zeta: np.ndarray, z_beta: np.ndarray) -> np.ndarray:
 
 def _t_from_p(p: np.ndarray) -> np.ndarray:
     """The t coordinate (module notes) of p in [0, 1]."""
-    return 0.5 * (1.0 - np.sqrt(1.0 - p) + np.arcsin(np.sqrt(p)) * (2.0 / math.pi))
+    return 0.5 * (np.sqrt(p) + 1.0 - np.sqrt(np.sqrt(np.maximum(1.0 - p, 0.0))))
 
 
 def _p_from_t(t: np.ndarray) -> np.ndarray:
@@ -210,9 +217,10 @@ def geometry_coordinates(
     z_alpha = np.maximum(_HALF_PI - alpha, 0.0)
     y = y_coordinate(z_beta)
     zeta = _zeta(z_alpha, z_beta)
-    # phase angle by the haversine formula (accurate near the retro-reflection direction)
+    # phase angle by the haversine formula (accurate near the retro-reflection direction),
+    # with sin(alpha) sin(beta) = sin^2((alpha + beta)/2) - sin^2((alpha - beta)/2)
     limit = np.sin(0.5 * delta_phi) ** 2  # (1 - cos dphi)/2, also the beta -> 0 limit of p
-    half = np.sin(0.5 * (alpha - beta)) ** 2 + np.sin(alpha) * np.sin(beta) * limit
+    half = np.sin(0.5 * (alpha - beta)) ** 2 * (1.0 - limit) + np.sin(0.5 * (alpha + beta)) ** 2 * limit
     phase = 2.0 * np.arcsin(np.sqrt(np.clip(half, 0.0, 1.0)))
     away = beta > 1e-6
     p = np.where(away, (phase - (alpha - beta)) / np.where(away, 2.0 * beta, 1.0), limit)

@@ -1,14 +1,13 @@
 """Tables of logarithms on the grid (y, zeta, t, s) and their fast evaluation.
 
 A :class:`LogTable` holds one or more 4-D arrays of tabulated logarithms (one per model
-component) on a :class:`TableGrid`.  :meth:`LogTable.prepare` maps fixed geometries to
-their table coordinates and cubic stencils once and returns a function of the parameter
-coordinate ``s`` giving the interpolated logarithms:
+component) on a :class:`TableGrid`.  :meth:`LogTable.prepare` takes fixed geometries and
+returns a function of the parameter coordinate ``s`` giving the interpolated logarithms:
 
 * on its first call it reduces each table along s (4 slices) and interpolates the
-  remaining 3-D table at every geometry (64 values each), streaming the geometries
-  through coordinates, stencils and gather a few thousand at a time so that every
-  temporary stays in cache (the plain call of a model is this path);
+  remaining 3-D table at every geometry (the compiled loop of :mod:`.kernel`: table
+  coordinates, cubic stencils and the 64-value sum per geometry; the plain call of a
+  model is this path);
 * from the second call on (the same geometries evaluated again: fitting, ``Model.at``) it
   keeps the 3-D interpolation of each s node it has needed, so a call only combines four
   stored columns: a few operations per geometry.
@@ -24,15 +23,12 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .coordinates import geometry_coordinates, y_coordinate
-from .interpolation import Axis, CellRows, axis_stencil, contract_last_axis, gather_3d
+from .coordinates import y_coordinate
+from .interpolation import Axis, axis_stencil
+from .kernel import interpolate_geometries
 
 __all__ = ["TableGrid", "LogTable"]
 
-#: Geometries taken together by a one-off evaluation, from coordinates to values: small
-#: enough that every temporary stays in cache (measured: 4096 is ~1.5 times faster than
-#: whole-array steps on 1e6 geometries).
-_STREAM_CHUNK = 4096
 
 
 @dataclass(frozen=True)
@@ -80,46 +76,63 @@ class LogTable:
         shapes = {np.shape(t) for t in tables}
         if len(shapes) != 1 or len(next(iter(shapes))) != 4:
             raise ValueError(f"tables must share one 4-D shape, got {sorted(shapes)}")
-        # components last, so that one gather reads every component of a cell
-        self.values = np.ascontiguousarray(np.stack([np.asarray(t, float) for t in tables], axis=-1))
-        self.grid = TableGrid(*self.values.shape[:4])
+        if not 1 <= len(tables) <= 2:
+            raise ValueError(f"a LogTable interpolates one or two components, got {len(tables)}")
+        # stored (s, y, zeta, t, component): every s node is one contiguous (y, zeta, t, C)
+        # slab (what the compiled loop reads), and reducing along s reads four slabs only;
+        # components last, so that the values of one node are adjacent in memory
+        stacked = np.stack([np.asarray(t, float) for t in tables], axis=-1)
+        self.values = np.ascontiguousarray(np.moveaxis(stacked, 3, 0))
+        self.grid = TableGrid(*stacked.shape[:4])
         self.axes = self.grid.axes()
+        self._lo = np.array([axis.lo for axis in self.axes[:3]])
+        self._step = np.array([axis.step for axis in self.axes[:3]])
+
+    def interpolate(self, slab: np.ndarray, theta_i: np.ndarray, theta_r: np.ndarray,
+                    delta_phi: np.ndarray) -> np.ndarray:
+        """Tricubic interpolation of a (y, zeta, t, component) slab at geometries [rad].
+
+        Returns an array of shape (C, m) for m geometries (1-D float arrays).
+        """
+        out = np.empty((slab.shape[-1], theta_i.shape[0]))
+        interpolate_geometries(slab, self._lo, self._step, theta_i, theta_r, delta_phi, out)
+        return out
+
+    def slab_at(self, s: float) -> np.ndarray:
+        """The table reduced along s at coordinate ``s``: shape (y, zeta, t, C), contiguous."""
+        first, weights = axis_stencil(self.axes[3], np.asarray(float(s)))
+        first = int(first)
+        slab = weights[0] * self.values[first]
+        for offset in range(1, 4):
+            slab += weights[offset] * self.values[first + offset]
+        return slab
+
+    def node_slab(self, node: int) -> np.ndarray:
+        """The table at s node ``node``: shape (y, zeta, t, C), contiguous (a view)."""
+        return self.values[node]
 
     def prepare(self, theta_i, phi_i, theta_r, phi_r) -> Callable[[float], tuple[np.ndarray, ...]]:
         """Geometries [rad] -> function of s returning the interpolated logs (flattened)."""
         ti, pi_, tr, pr = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))
-        theta_i, theta_r, delta_phi = ti.ravel(), tr.ravel(), (pr - pi_).ravel()
-        m = theta_i.shape[0]
+        theta_i, theta_r = np.ascontiguousarray(ti.ravel()), np.ascontiguousarray(tr.ravel())
+        delta_phi = np.ascontiguousarray((pr - pi_).ravel())
         s_axis = self.axes[3]
         columns: dict[int, np.ndarray] = {}
         first_call: dict[float, tuple[np.ndarray, ...]] = {}
-        kept_stencils: list[tuple[tuple[np.ndarray, np.ndarray], ...]] = []
-        components = self.values.shape[-1]
-
-        def stencils(part: slice = slice(None)) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
-            y, zeta, t, _ = geometry_coordinates(theta_i[part], theta_r[part], delta_phi[part])
-            return tuple(axis_stencil(axis, x) for axis, x in zip(self.axes[:3], (y, zeta, t)))
 
         def column(node: int) -> np.ndarray:
-            if not kept_stencils:
-                kept_stencils.append(stencils())
             if node not in columns:
-                columns[node] = np.ascontiguousarray(gather_3d(self.values[..., node, :], kept_stencils[0]).T)
+                columns[node] = self.interpolate(self.node_slab(node), theta_i, theta_r, delta_phi)
             return columns[node]
 
         def evaluate(s: float) -> tuple[np.ndarray, ...]:
             s = float(s)
-            if not first_call:  # one-off evaluation: reduce along s first, then stream the geometries
-                reduced = CellRows(contract_last_axis(np.moveaxis(self.values, 3, -1), s_axis, s))  # (y, zeta, t, C)
-                out = np.empty((m, components))
-                for start in range(0, m, _STREAM_CHUNK):  # coordinates to values, chunk by chunk in cache
-                    part = slice(start, start + _STREAM_CHUNK)
-                    reduced(stencils(part), chunk=_STREAM_CHUNK, out=out[part])
-                first_call[s] = tuple(np.ascontiguousarray(out.T))
+            if not first_call:  # one-off evaluation: reduce along s first, then the geometries
+                first_call[s] = tuple(self.interpolate(self.slab_at(s), theta_i, theta_r, delta_phi))
             if s in first_call:  # the same s again gives the same bits
                 return first_call[s]
             first, weights = axis_stencil(s_axis, np.asarray(float(s)))
-            sums = np.zeros((components, m))
+            sums = np.zeros((self.values.shape[-1], theta_i.shape[0]))
             for node, weight in zip(range(int(first), int(first) + 4), weights):
                 sums += weight * column(node)
             return tuple(sums)

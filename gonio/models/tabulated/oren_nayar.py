@@ -63,9 +63,12 @@ class OrenNayarTable:
             if sigma == 0.0:  # footnote 10: Lambert, exactly (as the exact model does)
                 return np.full(shape, 1.0 / math.pi), np.zeros(shape)
             log_f1, log_f2 = logs(float(sigma_coordinate(sigma)))
-            f1 = np.exp(log_f1) * (1.0 / math.pi)
+            f1, f2 = np.exp(log_f1), np.exp(log_f2)  # pi f1 and pi (f2 + F2_FLOOR f1)
             # the floor is removed exactly; rounding can leave -1e-20 where f2 = 0
-            f2 = np.maximum(np.exp(log_f2) * (1.0 / math.pi) - F2_FLOOR * f1, 0.0)
+            f2 -= F2_FLOOR * f1
+            np.maximum(f2, 0.0, out=f2)
+            f1 *= 1.0 / math.pi
+            f2 *= 1.0 / math.pi
             return f1.reshape(shape), f2.reshape(shape)
 
         return components
@@ -132,7 +135,10 @@ def _prepare(theta_i, phi_i, theta_r, phi_r):
 
     def evaluate(rho: float, sigma: float) -> np.ndarray:
         f1, f2 = components(sigma)
-        return rho * f1 + (rho * rho) * f2
+        f1 *= rho  # fresh arrays from components(): updated in place
+        f2 *= rho * rho
+        f1 += f2
+        return f1
 
     return evaluate
 

@@ -39,7 +39,7 @@ OrenNayarGrid = TableGrid
 
 
 #: Node counts of the shipped table (accuracy study: docs/tabulated.md).
-DEFAULT_GRID = OrenNayarGrid(y=55, zeta=16, t=36, s=26)
+DEFAULT_GRID = OrenNayarGrid(y=55, zeta=20, t=44, s=26)
 
 
 def _node_geometry(grid: OrenNayarGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
