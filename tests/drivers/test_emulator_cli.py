@@ -48,7 +48,7 @@ def test_gonio_emulator_serves_a_registry_model_and_stops_on_interrupt(tmp_path)
             camera.write(b"*IDN?\n")
             assert camera.readline() == b"GONIO,CCD-512,SN0001,1.0\n"
         process.send_signal(signal.SIGINT)
-        out, err = process.communicate(timeout=20)
+        out, err = process.communicate(timeout=60)
         assert process.returncode == 0, err
         assert "stopped" in out
         assert not (tmp_path / "gonio-stage").exists()

@@ -6,9 +6,12 @@ interreflection
     Closed-form interreflection inside a spherical pit (eq 3-13).
 cavity
     Geometry of one pit: the point seen through the orifice, cast shadow (section 4.1).
+closed_form
+    The single-scattering integral for any aperture (eq 14-15) in closed form, compiled:
+    what the registered model evaluates.
 quadrature
-    Deterministic single-scattering integral for any aperture (eq 14-15): what the
-    registered model evaluates.
+    The same integral by deterministic quadrature: the reference for the closed form,
+    used by the model at horizon slivers.
 hemispherical
     The hemispherical pit: eq 21-25 (1-D integral) and eq 26-31 (plane of incidence).
 shallow

@@ -14,10 +14,13 @@ or complete, the two boundary circles crossing), with a cosine substitution that
 the square-root behaviour at the panel ends, so the rule converges spectrally (16 nodes
 per panel: ~1e-9 RMS relative error; docs/pitted.md).
 
-This is the deterministic evaluation gonio uses for the registered ``pitted`` model at
-every aperture: the same integral that the Monte Carlo method of section 4.1 estimates,
-and for psi = 90 deg the same integral as eq 21 (there with the polar axis in the
-surface, here along the normal, which makes the shallow-pit boundaries simple).
+The registered ``pitted`` model evaluates the same integral in closed form
+(:mod:`.closed_form`); this quadrature is the independent reference it is tested
+against, and the model uses it where the closed form's absolute accuracy is not enough
+(directions within ~1e-5 rad of the horizon).  It is the same integral that the Monte
+Carlo method of section 4.1 estimates, and for psi = 90 deg the same integral as eq 21
+(there with the polar axis in the surface, here along the normal, which makes the
+shallow-pit boundaries simple).
 
 References
 ----------

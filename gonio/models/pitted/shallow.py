@@ -8,8 +8,9 @@ radiance is the Lambertian micro-radiance of the primary plus the diffuse irradi
 BRDF of the pit (eq 15); its standard error comes from the sample variance.
 
 This is a stochastic *estimator* with a seed, used to check the deterministic
-quadrature of :mod:`.quadrature` (which the registered ``pitted`` model evaluates) and
-to render textons (:mod:`.textons`).
+evaluations (the quadrature of :mod:`.quadrature` and the closed form of
+:mod:`.closed_form` that the registered ``pitted`` model uses) and to render textons
+(:mod:`.textons`).
 
 References
 ----------
