@@ -126,6 +126,13 @@ view = {start = -80, stop = 80, step = 2}
 INTERRUPTED = LONG.replace("theta_i = [20, 50]", "theta_i = [20, 35, 50, 65]").replace("step = 2", "step = 1")
 
 
+def _default_sigint() -> None:
+    """Child side of Popen: SIGINT back to its default and unblocked, whatever the test
+    process inherited from its runner, so that Python installs KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def _count_rows(path: Path) -> int:
     try:
         return max(0, path.read_text().count("\n") - 1)
@@ -169,7 +176,8 @@ def test_ctrl_c_marks_the_recording_interrupted_and_says_how_to_resume(tmp_path)
     protocol_file.write_text(INTERRUPTED)
     out = tmp_path / "rec"
     process = subprocess.Popen([sys.executable, "-m", "gonio", "run", str(protocol_file), "--out", str(out),
-                                "--quiet", "--no-warm-up"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                "--quiet", "--no-warm-up"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=_default_sigint)
     deadline = time.monotonic() + 60
     while _count_rows(out / "points.csv") < 10 and process.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)

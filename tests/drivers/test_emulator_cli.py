@@ -24,11 +24,18 @@ def test_parser_defaults_and_port_specs():
     assert text.splitlines() == ["stage   pty  /dev/pts/9", "stage   tcp  socket://127.0.0.1:1"]
 
 
+def _default_sigint() -> None:
+    """Child side of Popen: SIGINT back to its default and unblocked, whatever the test
+    process inherited from its runner, so that Python installs KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def test_gonio_emulator_serves_a_registry_model_and_stops_on_interrupt(tmp_path):
     process = subprocess.Popen(
         [sys.executable, "-m", "gonio", "emulator", "--sample", "oren-nayar:sigma=30,rho=0.9", "--tcp",
          "--link-dir", str(tmp_path), "--seed", "3"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint,
     )
     try:
         lines = []
