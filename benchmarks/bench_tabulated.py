@@ -154,7 +154,7 @@ def plain_call_stages(n: int = N_SPEED) -> dict[str, float]:
     dphi = pr - pi_
     logs = table().lookup
     slab = logs.slab_at(0.5)
-    lo, step = logs._lo, logs._step
+    lo, step = logs.lo, logs.step
     y, zeta, t, _ = (np.ascontiguousarray(a) for a in geometry_coordinates(ti, tr, dphi))
     out = np.empty((logs.values.shape[-1], n))
     geometry = random_geometries(n, seed=1, max_theta=90.0)

@@ -25,7 +25,7 @@ from gonio.models.tabulated.coordinates import (
     sigma_coordinate,
     sigma_from_coordinate,
 )
-from gonio.models.tabulated.interpolation import Axis, axis_stencil, contract_last_axis, lagrange_weights
+from gonio.models.tabulated.interpolation import Axis, axis_stencil, contract_first_axis, lagrange_weights
 from gonio.models.tabulated.kernel import (
     cubic_stencil,
     interpolate_geometries,
@@ -76,7 +76,7 @@ def test_tensor_cubic_interpolation_is_exact_for_cubic_polynomials():
     rng = np.random.default_rng(3)
     points = [rng.uniform(ax.lo, ax.hi, 500) for ax in axes[:3]]
     d = 0.37
-    reduced = contract_last_axis(values, axes[3], d)
+    reduced = contract_first_axis(np.moveaxis(values, 3, 0), axes[3], d)
     result = _interpolate(reduced, axes[:3], points)[:, 0]
     # rounding only: values are O(10), 64 + 4 terms
     np.testing.assert_allclose(result, cubic(*points, d), rtol=0, atol=1e-11)
@@ -163,7 +163,7 @@ def test_interpolate_geometries_matches_coordinates_then_points(tiny_arrays):
     rng = np.random.default_rng(9)
     ti, tr, dphi = (np.ascontiguousarray(np.radians(rng.uniform(0, 90, 400))) for _ in range(3))
     out = np.empty((2, 400))
-    interpolate_geometries(slab, logs._lo, logs._step, ti, tr, dphi, out)
+    interpolate_geometries(slab, logs.lo, logs.step, ti, tr, dphi, out)
     y, zeta, t, _ = geometry_coordinates(ti, tr, dphi)
     np.testing.assert_allclose(out.T, _interpolate(slab, logs.axes[:3], (y, zeta, t)), rtol=0, atol=1e-11)
 

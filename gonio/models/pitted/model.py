@@ -26,8 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._core import Model, Param, register
-from .closed_form import single_scattering_factor_closed
-from .quadrature import single_scattering_factor
+from .quadrature import FLAT_LIMIT, single_scattering_factor
 from .validation import check_pit_parameters
 
 __all__ = ["PitTerms", "single_scattering", "pitted_terms", "pitted_brdf", "aperture_mixture_brdf", "PITTED"]
@@ -106,10 +105,22 @@ def single_scattering(alpha: np.ndarray, beta: np.ndarray, epsilon: np.ndarray, 
     alpha, beta, epsilon = np.broadcast_arrays(*(np.asarray(a, float) for a in (alpha, beta, epsilon)))
     if order is not None:
         return single_scattering_factor(alpha, beta, epsilon, psi, order)
+    from .closed_form import single_scattering_factor_closed  # numba loads on first use
+
     factor = np.asarray(single_scattering_factor_closed(alpha, beta, epsilon, psi), float).copy()
-    sliver = np.sin(psi) ** 2 * np.cos(alpha) * np.cos(beta) < SLIVER_LIMIT
-    if np.any(sliver):
-        factor[sliver] = single_scattering_factor(alpha[sliver], beta[sliver], epsilon[sliver], psi, SLIVER_ORDER)
+    sin2_psi = np.sin(psi) ** 2
+    if sin2_psi < FLAT_LIMIT:  # a flat pit: 1/pi from the closed form, nowhere a sliver
+        return factor
+    limit = SLIVER_LIMIT / sin2_psi
+    # cos(x) >= (2/pi)(pi/2 - x) on [0, pi/2]: only geometries with a small product of the
+    # distances from the horizon can be slivers, and only those need the cosines
+    half_pi = 0.5 * np.pi
+    candidate = np.flatnonzero((half_pi - alpha) * (half_pi - beta) < (half_pi**2) * limit)
+    if candidate.size:
+        a, b, e = alpha.ravel()[candidate], beta.ravel()[candidate], epsilon.ravel()[candidate]
+        sliver = np.cos(a) * np.cos(b) < limit
+        flat = factor.reshape(-1)
+        flat[candidate[sliver]] = single_scattering_factor(a[sliver], b[sliver], e[sliver], psi, SLIVER_ORDER)
     return factor
 
 

@@ -6,7 +6,7 @@ interpolation error is O(h^4) in every cell, boundary cells included; the interp
 continuous, with derivative jumps of O(h^3) at grid lines.
 
 :func:`axis_stencil` gives the stencil of many coordinates on one axis and
-:func:`contract_last_axis` reduces a table along its last axis at one coordinate (the
+:func:`contract_first_axis` reduces a table along its first axis at one coordinate (the
 roughness of one call), leaving a smaller table.  The 3-D evaluation at scattered
 geometries is compiled (:func:`.kernel.interpolate_geometries`, the same rule per point;
 :func:`.kernel.cubic_stencil` is :func:`axis_stencil` for one coordinate).
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Axis", "axis_stencil", "lagrange_weights", "contract_last_axis"]
+__all__ = ["Axis", "axis_stencil", "lagrange_weights", "contract_first_axis"]
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,15 @@ def axis_stencil(axis: Axis, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, np.moveaxis(_lagrange_rows(u - first), 0, -1)
 
 
-def contract_last_axis(table: np.ndarray, axis: Axis, x: float) -> np.ndarray:
-    """Interpolate ``table`` (last axis along ``axis``) at the scalar coordinate ``x``."""
+def contract_first_axis(table: np.ndarray, axis: Axis, x: float) -> np.ndarray:
+    """Interpolate ``table`` (first axis along ``axis``) at the scalar coordinate ``x``.
+
+    Reads the four slices of the stencil only (contiguous when ``table`` is C-ordered) and
+    returns a new C-contiguous array of shape ``table.shape[1:]``.
+    """
     first, weights = axis_stencil(axis, np.asarray(float(x)))
-    return table[..., int(first) : int(first) + 4] @ weights
+    first = int(first)
+    result = weights[0] * table[first]
+    for offset in range(1, 4):
+        result += weights[offset] * table[first + offset]
+    return result

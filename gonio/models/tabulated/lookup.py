@@ -24,8 +24,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .coordinates import y_coordinate
-from .interpolation import Axis, axis_stencil
-from .kernel import interpolate_geometries
+from .interpolation import Axis, axis_stencil, contract_first_axis
 
 __all__ = ["TableGrid", "LogTable"]
 
@@ -85,8 +84,9 @@ class LogTable:
         self.values = np.ascontiguousarray(np.moveaxis(stacked, 3, 0))
         self.grid = TableGrid(*stacked.shape[:4])
         self.axes = self.grid.axes()
-        self._lo = np.array([axis.lo for axis in self.axes[:3]])
-        self._step = np.array([axis.step for axis in self.axes[:3]])
+        #: First node and node spacing of the three geometry axes (what the kernel reads)
+        self.lo = np.array([axis.lo for axis in self.axes[:3]])
+        self.step = np.array([axis.step for axis in self.axes[:3]])
 
     def interpolate(self, slab: np.ndarray, theta_i: np.ndarray, theta_r: np.ndarray,
                     delta_phi: np.ndarray) -> np.ndarray:
@@ -94,18 +94,15 @@ class LogTable:
 
         Returns an array of shape (C, m) for m geometries (1-D float arrays).
         """
+        from .kernel import interpolate_geometries  # numba loads on first use, not at import
+
         out = np.empty((slab.shape[-1], theta_i.shape[0]))
-        interpolate_geometries(slab, self._lo, self._step, theta_i, theta_r, delta_phi, out)
+        interpolate_geometries(slab, self.lo, self.step, theta_i, theta_r, delta_phi, out)
         return out
 
     def slab_at(self, s: float) -> np.ndarray:
         """The table reduced along s at coordinate ``s``: shape (y, zeta, t, C), contiguous."""
-        first, weights = axis_stencil(self.axes[3], np.asarray(float(s)))
-        first = int(first)
-        slab = weights[0] * self.values[first]
-        for offset in range(1, 4):
-            slab += weights[offset] * self.values[first + offset]
-        return slab
+        return contract_first_axis(self.values, self.axes[3], s)
 
     def node_slab(self, node: int) -> np.ndarray:
         """The table at s node ``node``: shape (y, zeta, t, C), contiguous (a view)."""
