@@ -5,8 +5,10 @@ factor (system gain K = K0 * factor [DN/e-]), ``SHUT OPEN|CLOSE``/``SHUT?``, ``R
 x0,y0,w,h``/``ROI?`` [pixel], ``ACQ`` (one exposure), ``ROI:STAT?`` (mean, std, pixel count,
 saturated count of the last frame inside the ROI), ``FRAME?`` (the last frame as an
 IEEE 488.2 definite-length block of little-endian uint16, row-major), ``SENS:INFO?``
-(width, height, bits, pixel pitch [um], focal length [mm], working distance [mm]) and
-``TEMP?``.
+(width, height, bits, pixel pitch [um], focal length [mm], working distance [mm]),
+``TEMP?``, ``ROI:DATA?`` (the ROI's pixels of the last frame as a block), ``*OPT?``
+(installed options: ``MON`` when the lamp monitor is fitted) and ``MON?`` (the lamp
+monitor reading integrated over the last exposure [V]).
 """
 from __future__ import annotations
 
@@ -161,6 +163,30 @@ class Camera(ScpiInstrument):
         """Sensor temperature (``TEMP?``) [deg C]."""
         return self.query("TEMP?", float)
 
+    def options(self) -> tuple[str, ...]:
+        """Installed options (IEEE 488.2 ``*OPT?``; ``0`` means none), e.g. ``("MON",)``.
+
+        A camera that does not implement ``*OPT?`` is taken to have no options (its error
+        is drained from the queue).
+        """
+        try:
+            reply = self.query("*OPT?", retries=0)
+        except CameraError as error:
+            if error.code != -113:
+                raise
+            return ()
+        names = tuple(part.strip().upper() for part in reply.split(",") if part.strip())
+        return () if names == ("0",) else names
+
+    def monitor(self) -> float:
+        """Lamp monitor reading integrated over the last exposure (``MONitor?``) [V].
+
+        The monitor photodiode looks at the lamp through a beam splitter and is triggered
+        with every ``ACQ``, dark frames included (the shutter is in front of the camera,
+        not of the monitor).
+        """
+        return self.query("MON?", float)
+
     # -- settings -----------------------------------------------------------------------------
     def exposure(self) -> float:
         """Exposure time (``EXP?``) [s]."""
@@ -225,6 +251,32 @@ class Camera(ScpiInstrument):
         """Statistics of the last frame inside the ROI (``ROI:STAT?``)."""
         return self.query("ROI:STAT?", RoiStats.parse)
 
+    def roi_frame(self, roi: Roi, timeout: float | None = None) -> np.ndarray:
+        """The pixels of the last frame inside the current ROI (``ROI:DATA?``) [DN].
+
+        ``roi`` is the region set with :meth:`set_roi` (it gives the array's shape); the
+        block holds ``height x width`` little-endian uint16 values, row-major. Reading a
+        window instead of the whole frame cuts the transfer time by the area ratio.
+        """
+        nbytes = roi.width * roi.height * 2
+        if timeout is None:
+            timeout = self.line.timeout + 2 * nbytes * 10 / self.BAUDRATE
+        payload = self._read_block("ROI:DATA?", timeout)
+        if len(payload) != nbytes:
+            raise ProtocolError(f"camera: ROI:DATA? block has {len(payload)} bytes, expected {nbytes} "
+                                f"({roi.height} x {roi.width} uint16)")
+        return np.frombuffer(payload, dtype="<u2").reshape(roi.height, roi.width).copy()
+
+    def _read_block(self, command: str, timeout: float) -> bytes:
+        self.line.write(command)
+        self.line.exchanges += 1
+        try:
+            return self.line.read_block(timeout=timeout, command=command)
+        except Exception:
+            if self.check_errors:
+                self.raise_error(command)
+            raise
+
     def frame(self, timeout: float | None = None) -> np.ndarray:
         """The last full frame (``FRAME?``) as a ``(height, width)`` uint16 array [DN].
 
@@ -235,14 +287,7 @@ class Camera(ScpiInstrument):
         nbytes = info.width * info.height * 2
         if timeout is None:
             timeout = self.line.timeout + 2 * nbytes * 10 / self.BAUDRATE
-        self.line.write("FRAME?")
-        self.line.exchanges += 1
-        try:
-            payload = self.line.read_block(timeout=timeout, command="FRAME?")
-        except Exception:
-            if self.check_errors:
-                self.raise_error("FRAME?")
-            raise
+        payload = self._read_block("FRAME?", timeout)
         if len(payload) != nbytes:
             raise ProtocolError(
                 f"camera: FRAME? block has {len(payload)} bytes, expected {nbytes} "

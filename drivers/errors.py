@@ -12,6 +12,8 @@ whole family at once; the subclasses tell *where* the failure happened:
         ``CameraError``           camera SCPI error queue entry (``SYST:ERR?``)
         ``LampError``             lamp supply SCPI error queue entry, or a lamp fault
     ``MotionTimeout``             the stage did not report "motion done" in time
+    ``PositionError``             the stage did not reach the commanded geometry, or its
+                                  readback could not confirm it (after bounded retries)
     ``GeometryError``             a requested geometry refused before anything was sent
                                   (also a ``ValueError``: it is bad input)
     ``ExposureError``             automatic exposure could not reach a usable signal
@@ -32,6 +34,7 @@ __all__ = [
     "LampError",
     "MotionTimeout",
     "GeometryError",
+    "PositionError",
     "ExposureError",
 ]
 
@@ -125,6 +128,14 @@ class LampError(DeviceError):
 
 class MotionTimeout(DriverError, TimeoutError):
     """The stage did not report motion done (``MD?`` -> 1) within the allowed time."""
+
+
+class PositionError(DriverError):
+    """The stage did not reach the commanded geometry, or its readback could not confirm it.
+
+    Raised by :meth:`drivers.rig.Rig.move_to` after its bounded retries; the message
+    names each attempt's failure (limit stop, garbled reply, readback off target).
+    """
 
 
 class GeometryError(DriverError, ValueError):

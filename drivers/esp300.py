@@ -7,8 +7,8 @@ error codes read with ``TE?``/``TB?``, axis-specific codes being ``axis*100 + n`
 settings: 19200 baud, 8N1; commands end in CR, replies in CR LF.
 
 Only the subset the gonio rig needs is wrapped: absolute/relative moves, position and
-motion-done queries, motor on/off, homing, software travel limits, units, velocity,
-acceleration, stop, identity and the error queue. :meth:`ESP300.send` and
+motion-done queries, motor on/off, homing, software travel limits, units, encoder
+resolution, velocity, acceleration, stop, identity and the error queue. :meth:`ESP300.send` and
 :meth:`ESP300.ask` pass any other command through.
 
 A command that the controller rejects produces no reply; the error waits in the
@@ -18,6 +18,7 @@ controller's queue. The driver therefore reads ``TB?`` after every command (unle
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Iterable, TypeVar
 
@@ -229,6 +230,41 @@ class ESP300:
         if unit not in codes:
             raise ValueError(f"unit={unit!r} is not one of {sorted(codes)}")
         self.send(f"{self._axis(axis)}SN{codes[unit]}")
+
+    def encoder_resolution(self, axis: int) -> float:
+        """Encoder resolution of an axis (``xxSU?``): one encoder count [axis units].
+
+        Parameters
+        ----------
+        axis : int
+            Axis number.
+
+        Returns
+        -------
+        float
+            Distance of one encoder count, in the axis's units (``xxSN?``) [axis units];
+            it is the step of the positions :meth:`position` reads back.
+
+        Raises
+        ------
+        ProtocolError
+            If the controller replies a resolution that is not a positive number.
+
+        Notes
+        -----
+        The ESP300 manual's ``SU`` command (section 3, "Remote Mode") sets and reads the
+        encoder resolution; the driver only reads it, since the resolution is a
+        property of the stage's encoder.
+
+        Examples
+        --------
+        >>> stage.encoder_resolution(1)                  # doctest: +SKIP
+        0.001
+        """
+        value = self.ask(f"{self._axis(axis)}SU?", float)
+        if not (value > 0 and math.isfinite(value)):
+            raise ProtocolError(f"stage: encoder resolution {value!r} of axis {axis} is not a positive number")
+        return value
 
     def travel_limits(self, axis: int) -> tuple[float, float]:
         """Software travel limits (left ``xxSL?``, right ``xxSR?``) [axis units]."""

@@ -47,11 +47,17 @@ QUANTIZATION_VARIANCE = 1.0 / 12.0
 
 @dataclass(frozen=True)
 class PairStatistics:
-    """Mean and temporal variance of a pair of frames over a region [DN], [DN^2]."""
+    """Mean and temporal variance of a pair of frames over a region [DN], [DN^2].
+
+    ``spatial_variance`` is the variance over the region of the pair's mean image
+    ``(A + B) / 2`` [DN^2]: fixed patterns (PRNU, DSNU, illumination) plus half the
+    temporal variance (EMVA 1288, section 8: spatial non-uniformity).
+    """
 
     mean: float
     variance: float
     pixels: int
+    spatial_variance: float = float("nan")
 
 
 def pair_statistics(frame_a: np.ndarray, frame_b: np.ndarray) -> PairStatistics:
@@ -73,7 +79,8 @@ def pair_statistics(frame_a: np.ndarray, frame_b: np.ndarray) -> PairStatistics:
     if a.shape != b.shape or a.size < 2:
         raise ValueError(f"frame shapes {a.shape} and {b.shape} must match and hold >= 2 pixels")
     diff = a - b
-    return PairStatistics(float(0.5 * (a.mean() + b.mean())), float(diff.var(ddof=1) / 2.0), int(a.size))
+    return PairStatistics(float(0.5 * (a.mean() + b.mean())), float(diff.var(ddof=1) / 2.0), int(a.size),
+                          float((0.5 * (a + b)).var(ddof=1)))
 
 
 @dataclass(frozen=True)
@@ -99,6 +106,14 @@ class PhotonTransferResult:
         dark signal range ``rate * (t_max - t_min)`` [-] (0 when it is exactly linear).
     saturation_mean : float
         Mean grey value at the variance peak (or the largest mean) [DN].
+    dark_variance_rate : float
+        Growth of the temporal dark variance with exposure (dark-current shot noise)
+        [DN^2/s]: ``sigma_y.dark^2(t) = dark_noise_dn^2 + dark_variance_rate * t``.
+    prnu : float
+        Photo-response non-uniformity: rms of the pixel-to-pixel response relative to the
+        mean [-], from the spatial variance of the brightest fitted pair after removing
+        its temporal part and the dark pair's fixed pattern (EMVA 1288, section 8); NaN
+        without spatial statistics. A textured target makes it an upper bound.
     exposures, mean, variance, dark_mean, dark_variance : numpy.ndarray
         The per-exposure points [s], [DN], [DN^2].
     used : numpy.ndarray of bool
@@ -119,6 +134,8 @@ class PhotonTransferResult:
     dark_mean: np.ndarray
     dark_variance: np.ndarray
     used: np.ndarray
+    dark_variance_rate: float = float("nan")
+    prnu: float = float("nan")
 
 
 def photon_transfer(
@@ -193,31 +210,52 @@ def photon_transfer(
         dark_offset=float(offset), dark_rate=float(rate), dark_linearity=linearity,
         saturation_mean=saturation_mean,
         exposures=t, mean=mean, variance=var, dark_mean=dmean, dark_variance=dvar, used=used,
+        dark_variance_rate=float(var_slope), prnu=_prnu(light, dark, used),
     )
+
+
+def _prnu(light: Sequence[PairStatistics], dark: Sequence[PairStatistics], used: np.ndarray) -> float:
+    """PRNU from the brightest used pair: sqrt(light fixed-pattern var - dark fixed-pattern var) / signal."""
+    k = int(np.flatnonzero(used)[np.argmax([light[i].mean for i in np.flatnonzero(used)])])
+    fixed_light = light[k].spatial_variance - 0.5 * light[k].variance
+    fixed_dark = dark[k].spatial_variance - 0.5 * dark[k].variance
+    signal = light[k].mean - dark[k].mean
+    if not (np.isfinite(fixed_light) and np.isfinite(fixed_dark) and signal > 0):
+        return float("nan")
+    return float(np.sqrt(max(fixed_light - fixed_dark, 0.0)) / signal)
 
 
 def acquire_photon_transfer(rig, exposures: Sequence[float], region=None, *, fit_fraction: float = 0.7) -> PhotonTransferResult:
     """Run a photon-transfer measurement through a :class:`~drivers.rig.Rig`.
 
-    At each exposure two illuminated and two dark (shutter closed) full frames are read
-    with ``FRAME?`` and reduced over ``region`` (a :class:`~drivers.camera.Roi`; default:
-    the rig's current ROI). The rig must look at a steadily lit, non-saturating part of
-    the sample.
+    At each exposure two illuminated and two dark (shutter closed) frames are read and
+    reduced over ``region`` (a :class:`~drivers.camera.Roi`). With the default
+    ``region=None`` the rig's current ROI is used and only its pixels are transferred
+    (``ROI:DATA?``); another region is cut from full frames (``FRAME?``, slower). The rig
+    must look at a steadily lit, non-saturating part of the sample.
 
     Returns
     -------
     PhotonTransferResult
     """
-    roi = region if region is not None else rig._roi
-    if roi is None:
+    if region is None and rig._roi is None:
         raise ValueError("region is None and the rig has no ROI yet; move the rig first")
-    rows, cols = roi.slices()
+    if region is None or region == rig._roi:
+        def light_pixels(t=None):
+            return rig.roi_frame(t)
+
+        def dark_pixels():
+            return rig.dark_frame(roi_pixels=True).frame
+    else:
+        rows, cols = region.slices()
+
+        def light_pixels(t=None):
+            return rig.frame(t)[rows, cols]
+
+        def dark_pixels():
+            return rig.dark_frame(full=True).frame[rows, cols]
     light, dark = [], []
     for t in exposures:
-        a = rig.frame(float(t))[rows, cols]
-        b = rig.frame()[rows, cols]
-        light.append(pair_statistics(a, b))
-        da = rig.dark_frame(full=True).frame[rows, cols]
-        db = rig.dark_frame(full=True).frame[rows, cols]
-        dark.append(pair_statistics(da, db))
+        light.append(pair_statistics(light_pixels(float(t)), light_pixels()))
+        dark.append(pair_statistics(dark_pixels(), dark_pixels()))
     return photon_transfer(exposures, light, dark, fit_fraction=fit_fraction)

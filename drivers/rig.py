@@ -45,15 +45,28 @@ import dataclasses
 import logging
 import math
 import time
-from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Mapping
 
 import numpy as np
 
 from .camera import Camera, Roi, RoiStats, SensorInfo
-from .errors import DriverError, ExposureError, GeometryError, LampError, StageError
+from .errors import (
+    DriverError,
+    ExposureError,
+    GeometryError,
+    LampError,
+    MotionTimeout,
+    PositionError,
+    ProtocolError,
+    StageError,
+    TransportError,
+)
 from .esp300 import ESP300
 from .lamp import Lamp
+from .measurement import DarkLevel, Measurement
+from .monitor import MonitorDark, characterise
+from .rig_checks import exposure_ladder_floor, exposure_window, position_problem, steadiness
+from .roi import SAMPLE_SIZE_MM, roi_for_view, roi_problem, sample_image_size
 from .rig_geometry import (
     AXES,
     AXIS_PHI_I,
@@ -65,216 +78,12 @@ from .rig_geometry import (
     plan_moves,
 )
 
-__all__ = ["Rig", "Measurement", "DarkLevel", "roi_for_view", "sample_image_size"]
+__all__ = ["Rig", "Measurement", "DarkLevel", "roi_for_view", "roi_problem", "sample_image_size", "exposure_ladder_floor"]
 
 _log = logging.getLogger(__name__)
 
-#: Side of the square sample (2 inch) [mm].
-SAMPLE_SIZE_MM = 50.8
 #: Home positions of the axes (docs/protocol.md) [deg].
 HOME = {AXIS_VIEW: 0.0, AXIS_THETA_I: 45.0, AXIS_PHI_I: 0.0}
-
-
-def sample_image_size(info: SensorInfo, view: float, sample_size_mm: float = SAMPLE_SIZE_MM) -> tuple[float, float]:
-    """Width (along the swing plane, image x) and height of the sample's image [pixel].
-
-    ``s cos(theta_r) m / p`` by ``s m / p`` with the far-field magnification ``m = f / D``
-    and pixel pitch ``p`` (docs/protocol.md, "Image geometry").
-
-    Examples
-    --------
-    >>> info = SensorInfo(512, 480, 12, 15.0, 150.0, 1828.8)
-    >>> [round(v, 1) for v in sample_image_size(info, 60.0)]
-    [138.9, 277.8]
-    """
-    scale = info.focal_length_mm / info.distance_mm / (info.pixel_pitch_um * 1e-3)
-    theta_r = abs(float(view))
-    return sample_size_mm * math.cos(math.radians(theta_r)) * scale, sample_size_mm * scale
-
-
-def roi_for_view(
-    info: SensorInfo,
-    view: float,
-    *,
-    fraction: float = 0.5,
-    sample_size_mm: float = SAMPLE_SIZE_MM,
-    margin_px: float = 2.0,
-) -> Roi:
-    """ROI covering the central ``fraction`` x ``fraction`` of the sample at camera angle ``view``.
-
-    The window is ``fraction * s`` on the sample in both directions; in the image it is
-    foreshortened by ``cos(theta_r)`` along x. It is centred on the image centre (where
-    the sample centre is imaged), with even pixel sizes.
-
-    Raises
-    ------
-    GeometryError
-        If the ROI would not lie inside the sample's image with ``margin_px`` pixels to
-        spare on each side, or would be narrower than 2 pixels (grazing view).
-    ValueError
-        If ``fraction`` is not in (0, 1].
-
-    Examples
-    --------
-    >>> info = SensorInfo(512, 480, 12, 15.0, 150.0, 1828.8)
-    >>> roi_for_view(info, 0.0)
-    Roi(x0=187, y0=171, width=138, height=138)
-    """
-    if not 0 < fraction <= 1:
-        raise ValueError(f"fraction={fraction!r} is invalid; it must be in (0, 1]")
-    sample_w, sample_h = sample_image_size(info, view, sample_size_mm)
-    # Even sizes keep the ROI symmetric about the image centre, which lies on a pixel
-    # edge for the even sensor dimensions (docs/protocol.md); pixel quantisation changes
-    # the covered sample area by at most one pixel column/row.
-    width = max(2, 2 * int(round(fraction * sample_w / 2.0)))
-    height = max(2, 2 * int(round(fraction * sample_h / 2.0)))
-    x0 = int(round(info.width / 2.0 - width / 2.0))
-    y0 = int(round(info.height / 2.0 - height / 2.0))
-    roi = Roi(x0, y0, width, height)
-    reason = roi_problem(info, view, roi, sample_size_mm=sample_size_mm, margin_px=margin_px)
-    if reason:
-        raise GeometryError(reason)
-    return roi
-
-
-def roi_problem(
-    info: SensorInfo, view: float, roi: Roi, *, sample_size_mm: float = SAMPLE_SIZE_MM, margin_px: float = 2.0
-) -> str | None:
-    """Why ``roi`` is not a valid radiance window on the sample's image at ``view``, or None."""
-    sample_w, sample_h = sample_image_size(info, view, sample_size_mm)
-    cx, cy = info.width / 2.0, info.height / 2.0
-    left, right = cx - sample_w / 2 + margin_px, cx + sample_w / 2 - margin_px
-    top, bottom = cy - sample_h / 2 + margin_px, cy + sample_h / 2 - margin_px
-    if roi.width < 2 or roi.height < 2:
-        return (
-            f"the ROI at view={view:g} deg would be {roi.width} x {roi.height} pixels; the "
-            "sample's image is too narrow at this grazing angle (at least 2 x 2 needed)"
-        )
-    if roi.x0 < left or roi.x0 + roi.width > right or roi.y0 < top or roi.y0 + roi.height > bottom:
-        return (
-            f"ROI {roi} is not inside the sample's image at view={view:g} deg "
-            f"(x {left:.1f}..{right:.1f}, y {top:.1f}..{bottom:.1f} with a {margin_px:g}-pixel margin)"
-        )
-    if roi.x0 < 0 or roi.y0 < 0 or roi.x0 + roi.width > info.width or roi.y0 + roi.height > info.height:
-        return f"ROI {roi} extends beyond the {info.width} x {info.height} sensor"
-    return None
-
-
-def exposure_ladder_floor(seconds: float, steps_per_decade: int = 12) -> float:
-    """Largest exposure of the ladder ``10**(k / steps_per_decade)`` not above ``seconds`` [s]."""
-    k = math.floor(math.log10(seconds) * steps_per_decade + 1e-9)
-    return float(f"{10 ** (k / steps_per_decade):.4g}")
-
-
-@dataclass(frozen=True)
-class DarkLevel:
-    """Dark (shutter closed) ROI statistics at one exposure and gain.
-
-    Attributes
-    ----------
-    exposure : float
-        Exposure time [s].
-    gain : float
-        Analog gain factor [-].
-    stats : RoiStats
-        ROI statistics of the dark frame [DN].
-    source : str
-        ``"measured"``, ``"cached"`` or ``"model"`` (from :meth:`Rig.calibrate_dark`).
-    frame : numpy.ndarray or None
-        The full dark frame when requested [DN].
-    """
-
-    exposure: float
-    gain: float
-    stats: RoiStats
-    source: str = "measured"
-    frame: np.ndarray | None = field(default=None, repr=False, compare=False)
-
-    @property
-    def level(self) -> float:
-        """Mean dark level in the ROI [DN]."""
-        return self.stats.mean
-
-
-@dataclass(frozen=True)
-class Measurement:
-    """One radiance measurement at one geometry (all angles in degrees).
-
-    Attributes
-    ----------
-    theta_i, phi_i, view : float
-        Requested geometry: lamp polar angle, lamp azimuth, signed camera angle [deg].
-    theta_r, phi_r : float
-        Camera direction implied by ``view`` [deg].
-    stage_position : dict
-        Encoder readback ``{1: view, 2: theta_i, 3: phi_i}`` after the move [deg].
-    roi : Roi
-        Region of interest [pixel].
-    roi_mean, roi_std : float
-        Raw ROI mean and standard deviation of the light frame [DN].
-    roi_pixels, roi_saturated : int
-        Pixel count and saturated pixel count of the ROI [-].
-    exposure : float
-        Exposure time [s].
-    gain : float
-        Analog gain factor [-].
-    dark_level, dark_std : float
-        Dark ROI mean and standard deviation at the same exposure and gain [DN].
-    dark_source : str
-        How the dark level was obtained (see :class:`DarkLevel`).
-    signal : float
-        ``roi_mean - dark_level`` [DN].
-    radiance : float
-        Relative radiance: ``signal / (exposure * gain) * radiance_scale`` [DN/s per
-        ROI pixel at unit gain, times the scale].
-    radiance_error : float
-        One-sigma uncertainty of ``radiance`` from the ROI statistics (spatial standard
-        deviation over the square root of the pixel count, light and dark) [same unit].
-    lamp_voltage, lamp_current : float
-        Lamp supply readings taken just before the exposure [V], [A].
-    time_start, time_end : float
-        Wall-clock times (``time.time()``) around the measurement [s].
-    attempts : int
-        Exposures taken to settle the automatic exposure [-].
-    """
-
-    theta_i: float
-    phi_i: float
-    view: float
-    theta_r: float
-    phi_r: float
-    stage_position: dict
-    roi: Roi
-    roi_mean: float
-    roi_std: float
-    roi_pixels: int
-    roi_saturated: int
-    exposure: float
-    gain: float
-    dark_level: float
-    dark_std: float
-    dark_source: str
-    signal: float
-    radiance: float
-    radiance_error: float
-    lamp_voltage: float
-    lamp_current: float
-    time_start: float
-    time_end: float
-    attempts: int = 1
-
-    def to_dict(self) -> dict[str, Any]:
-        """Flat dictionary of plain numbers and strings (for CSV/JSON records)."""
-        out = dataclasses.asdict(self)
-        roi = out.pop("roi")
-        out.update({f"roi_{k}": v for k, v in roi.items()})
-        position = out.pop("stage_position")
-        out.update({
-            "stage_view": position.get(AXIS_VIEW, math.nan),
-            "stage_theta_i": position.get(AXIS_THETA_I, math.nan),
-            "stage_phi_i": position.get(AXIS_PHI_I, math.nan),
-        })
-        return out
 
 
 class Rig:
@@ -311,6 +120,23 @@ class Rig:
         Factor from DN/s per pixel at unit gain to the reported radiance unit.
     home : mapping
         Home positions of the axes [deg] (docs/protocol.md).
+    position_tolerance : float
+        Largest accepted difference between an axis's encoder readback and its target
+        after a move [deg]. The default 0.01 deg is five times the emulated stage's
+        repeatability (0.002 deg, 1 sigma) and ten encoder steps.
+    move_retries : int
+        Further attempts of a move whose readback, limit stop or garbled reply left the
+        geometry unconfirmed; the stage state is re-read from the controller before each.
+
+    Notes
+    -----
+    Every move is verified: the encoder readback of all three axes must agree with the
+    targets within ``position_tolerance`` (read twice before it counts as a mismatch, so
+    a garbled reply that still parses as a number is not taken for the position). A
+    mismatch, a stage error (a tripped limit switch), a reply that cannot be parsed or a
+    timeout re-reads the controller's targets (``DP?``) and retries the move; when the
+    retries are used up :class:`~drivers.errors.PositionError` says why, and nothing is
+    measured at a geometry the rig did not confirm.
     """
 
     def __init__(
@@ -329,6 +155,8 @@ class Rig:
         exposure_window: tuple[float, float] = (0.3, 0.75),
         radiance_scale: float = 1.0,
         home: Mapping[int, float] = HOME,
+        position_tolerance: float = 0.01,
+        move_retries: int = 2,
     ) -> None:
         if not min_separation >= 0:
             raise ValueError(f"min_separation={min_separation!r} deg must be >= 0")
@@ -340,6 +168,10 @@ class Rig:
             )
         if not 0 < exposure_limits[0] < exposure_limits[1]:
             raise ValueError(f"exposure_limits={exposure_limits!r} must be 0 < min < max [s]")
+        if not position_tolerance > 0:
+            raise ValueError(f"position_tolerance={position_tolerance!r} deg must be > 0")
+        if int(move_retries) < 0:
+            raise ValueError(f"move_retries={move_retries!r} must be >= 0")
         self.stage = stage
         self.camera = camera
         self.lamp = lamp
@@ -364,6 +196,16 @@ class Rig:
         self._dark_model: tuple[float, float, float] | None = None  # gain, offset, rate
         self._velocity: dict[int, float] = {}
         self._acceleration: dict[int, float] = {}
+        self.position_tolerance = float(position_tolerance)
+        self.move_retries = int(move_retries)
+        self.encoder_resolution: dict[int, float] = {}
+        #: Whether the camera has the lamp monitor option (``*OPT?`` lists ``MON``).
+        self.has_monitor = False
+        #: Dark characterisation of the lamp monitor (:meth:`measure_monitor_dark`).
+        self.monitor_dark: MonitorDark | None = None
+        self._last_monitor = math.nan
+        #: Identity strings of the instruments (read by :meth:`initialize`).
+        self.identities: dict[str, str] = {}
 
     # -- life cycle -----------------------------------------------------------------------
     @classmethod
@@ -440,8 +282,11 @@ class Rig:
             self.limits[axis] = self.stage.travel_limits(axis)
             self._velocity[axis] = self.stage.velocity(axis)
             self._acceleration[axis] = self.stage.acceleration(axis)
+            self.encoder_resolution[axis] = self.stage.encoder_resolution(axis)
         self._targets = {a: self.stage.desired_position(a) for a in AXES}
         self.info = self.camera.sensor_info()
+        self.has_monitor = "MON" in self.camera.options()
+        self.identities = dict(identities)
         self.camera.set_gain(self.gain)
         self.camera.open_shutter()
         self._exposure = self.camera.exposure()
@@ -473,37 +318,120 @@ class Rig:
         """Switch the lamp output off."""
         self.lamp.output_off()
 
-    def wait_lamp_stable(self, settle_time: float = 600.0, tolerance: float = 2e-3) -> dict[str, float]:
-        """Wait for the lamp to warm up, then check that its supply readings are steady.
+    def lamp_is_on(self) -> bool:
+        """Whether the lamp supply's output is on (``OUTP?``)."""
+        return self.lamp.output_is_on()
 
-        The lamp output settles with the filament's thermal time constant (120 s for the
-        rig's lamp, docs/protocol.md); the default wait of 600 s leaves less than 0.02 %
-        of a 2 % warm-up deficit. Afterwards the current is read twice, 1 s apart, and
-        must agree within ``tolerance`` (relative).
+    def wait_lamp_stable(
+        self, settle_time: float = 600.0, *, readings: int = 10, interval: float = 30.0, limit_sigma: float = 6.0
+    ) -> dict[str, float]:
+        """Wait for the lamp to warm up, then check that it no longer changes.
+
+        The lamp output settles with the filament's thermal time constant and then the
+        bulb's warm-up (120 s for the rig's lamp, docs/protocol.md); the default wait of
+        600 s leaves less than 0.02 % of a 2 % warm-up deficit. Afterwards ``readings``
+        supply-current readings (and, with a lamp monitor, as many monitor readings of
+        10 ms exposures) are taken, then again after ``interval`` seconds; the change of
+        their means must stay within ``limit_sigma`` standard errors estimated from the
+        readings' own scatter (:func:`~drivers.rig_checks.steadiness`), so the tolerance
+        follows the read-back noise of the instrument at hand.
+
+        The current reveals a cold filament (the inrush of the first second) and an
+        unsteady supply; only the monitor sees the bulb's slow warm-up.
 
         Returns
         -------
         dict
-            ``voltage`` [V] and ``current`` [A] after the wait.
+            ``voltage`` [V] and ``current`` [A] after the wait, the relative changes
+            ``current_change`` and (with a monitor) ``monitor_change`` [-].
 
         Raises
         ------
         LampError
-            If the output is off, the lamp reports a fault, or the current is unsteady.
+            If the output is off, the lamp reports a fault, or a reading changed by more
+            than its noise allows.
         """
         if not self.lamp.output_is_on():
             raise LampError(0, "lamp output is off; call lamp_on() first", "OUTP?")
         self.wait(settle_time)
-        first = self.lamp.measured_current()
-        self.wait(1.0)
-        second = self.lamp.measured_current()
+        first = self._lamp_readings(readings)
+        self.wait(interval)
+        second = self._lamp_readings(readings)
         self.lamp.check_lamp()
-        if first <= 0 or abs(second - first) > tolerance * first:
-            raise LampError(
-                0, f"lamp current not steady after {settle_time:g} s: {first:.5g} A then {second:.5g} A",
-                "MEAS:CURR?",
-            )
-        return {"voltage": self.lamp.measured_voltage(), "current": second}
+        result = {"voltage": self.lamp.measured_voltage(), "current": float(np.mean(second["current"]))}
+        for name, values in first.items():
+            change, tolerance = steadiness(values, second[name], limit_sigma)
+            result[f"{name}_change"] = change
+            if not abs(change) <= tolerance:
+                raise LampError(
+                    0, f"lamp not steady after {settle_time:g} s: the {name} changed by {change:.2e} (relative) "
+                       f"in {interval:g} s, more than {limit_sigma:g} standard errors of its readings ({tolerance:.2e})",
+                    "MEAS:CURR?" if name == "current" else "MON?",
+                )
+        return result
+
+    def _lamp_readings(self, count: int) -> dict[str, list[float]]:
+        """``count`` supply-current readings [A] and, with a monitor, 10 ms monitor readings [V]."""
+        out = {"current": [self.lamp.measured_current() for _ in range(count)]}
+        if self.has_monitor:
+            saved = self._exposure
+            out["monitor"] = []
+            for _ in range(count):
+                self._set_exposure(0.01)
+                self.camera.acquire()
+                out["monitor"].append(self.camera.monitor())
+            if saved is not None:
+                self._set_exposure(saved)
+        return out
+
+    def measure_monitor_dark(self, exposures: tuple[float, float] = (0.01, 0.1), readings: int = 16) -> MonitorDark:
+        """Measure the lamp monitor's offset and noise with the lamp off.
+
+        Takes ``readings`` exposures with the shutter closed at each of the two
+        ``exposures`` [s] and reads the monitor after each (:func:`drivers.monitor.characterise`).
+        The result is kept in :attr:`monitor_dark`.
+
+        Raises
+        ------
+        DriverError
+            If the rig has no lamp monitor.
+        LampError
+            If the lamp output is on (switch it off and let the filament cool first).
+        """
+        if not self.has_monitor:
+            raise DriverError("the camera reports no lamp monitor option (*OPT? has no MON)")
+        if self.lamp.output_is_on():
+            raise LampError(0, "the monitor's dark reading needs the lamp off; call lamp_off() first", "OUTP?")
+        saved = self._exposure
+        values: dict[float, list[float]] = {}
+        self.camera.close_shutter()
+        try:
+            for t in exposures:
+                self._set_exposure(float(t))
+                values[float(t)] = []
+                for _ in range(readings):
+                    self.camera.acquire()
+                    values[float(t)].append(self.camera.monitor())
+        finally:
+            self.camera.open_shutter()
+            if saved is not None:
+                self._set_exposure(saved)
+        self.monitor_dark = characterise(values)
+        return self.monitor_dark
+
+    def set_motion(self, velocity: float | None = None, acceleration: float | None = None) -> None:
+        """Program every stage axis with one velocity [deg/s] and/or acceleration [deg/s^2].
+
+        ``None`` leaves the controller's setting. The controller refuses values above an
+        axis's maximum (``x10``/``x11``), which raises :class:`StageError`.
+        """
+        for axis in AXES:
+            if velocity is not None:
+                self.stage.set_velocity(axis, float(velocity))
+                self._velocity[axis] = self.stage.velocity(axis)
+            if acceleration is not None:
+                self.stage.set_acceleration(axis, float(acceleration))
+                self._acceleration[axis] = self.stage.acceleration(axis)
 
     # -- geometry -------------------------------------------------------------------------
     def _require_initialized(self) -> None:
@@ -540,10 +468,12 @@ class Rig:
         return 1.2 * longest + self.stage.line.timeout + 1.0
 
     def move_to(self, theta_i: float, phi_i: float, view: float) -> dict[int, float]:
-        """Move lamp and camera to a measurement geometry and wait until stopped.
+        """Move lamp and camera to a measurement geometry, wait until stopped, verify.
 
         The geometry is checked first (:meth:`check_geometry`); a refused geometry raises
-        :class:`GeometryError` and nothing is sent.
+        :class:`GeometryError` and nothing is sent. After the move the encoder readback
+        must confirm every target within :attr:`position_tolerance`; otherwise the stage
+        state is re-read and the move retried (see the class notes).
 
         Returns
         -------
@@ -554,36 +484,75 @@ class Rig:
         ------
         GeometryError
             Outside the travel limits, too close to the lamp, or no ROI on the sample.
-        StageError
-            If the controller refuses a command or reports an error during the move.
+        PositionError
+            If no attempt reached and confirmed the geometry (limit stops, stage errors,
+            garbled or missing replies, readback off target).
         """
         reason = self.check_geometry(theta_i, phi_i, view)
         if reason:
             raise GeometryError(reason)
         end = axis_targets(theta_i, phi_i, view)
+        failures: list[str] = []
+        for attempt in range(1 + self.move_retries):
+            try:
+                self._run_moves(end)
+                position = self._confirmed_position(end)
+            except (StageError, ProtocolError, TransportError, MotionTimeout, PositionError) as error:
+                failures.append(f"attempt {attempt + 1}: {type(error).__name__}: {error}")
+                _log.warning("stage: move to %s not confirmed (%s); re-reading the controller", end, error)
+                self._resynchronise()
+                continue
+            self._targets = dict(end)
+            self._position = position
+            self._set_view(view)
+            return dict(position)
+        raise PositionError(
+            f"the stage did not reach theta_i={theta_i:g}, phi_i={phi_i:g}, view={view:g} deg "
+            f"in {1 + self.move_retries} attempt(s): " + "; ".join(failures)
+        )
+
+    def _run_moves(self, end: Mapping[int, float]) -> None:
+        """Send the axis commands from the known targets to ``end`` and wait for each stage."""
         start = dict(self._targets) if self._targets else {a: self.stage.desired_position(a) for a in AXES}
         plan = plan_moves(start, end, self.min_separation, self.limits)
         if plan is None:
             raise GeometryError(
-                f"no sequence of axis moves reaches theta_i={theta_i:g}, phi_i={phi_i:g}, "
-                f"view={view:g} from {start} without violating the {self.min_separation:g}-deg separation"
+                f"no sequence of axis moves reaches {dict(end)} from {start} without violating "
+                f"the {self.min_separation:g}-deg separation"
             )
+        self._targets = None  # unknown until the moves are confirmed
         current = dict(start)
+        for stage in plan.stages:
+            self.stage.send(";".join(f"{axis}PA{target:.5f}" for axis, target in stage))
+            goal = dict(current)
+            goal.update(dict(stage))
+            self.stage.wait(0.0, timeout=self._move_timeout(current, goal))
+            current = goal
+
+    def _confirmed_position(self, targets: Mapping[int, float]) -> dict[int, float]:
+        """Encoder readback agreeing with ``targets``, read twice before a mismatch counts."""
+        problem = None
+        for _ in range(2):
+            position = self.stage.positions(AXES)
+            problem = position_problem(position, targets, self.position_tolerance)
+            if problem is None:
+                return position
+        raise PositionError(problem)
+
+    def _resynchronise(self) -> None:
+        """After a failed move: drop stale input, drain errors, wait, re-read the targets.
+
+        A failure here is logged, not raised: the next attempt (or the caller) meets it.
+        """
         try:
-            for stage in plan.stages:
-                line = ";".join(f"{axis}PA{target:.5f}" for axis, target in stage)
-                self.stage.send(line)
-                goal = dict(current)
-                goal.update(dict(stage))
-                self.stage.wait(0.0, timeout=self._move_timeout(current, goal))
-                current = goal
-        except StageError:
-            self._targets = None  # re-read the targets before the next move
-            raise
-        self._targets = dict(end)
-        self._position = self.stage.positions(AXES)
-        self._set_view(view)
-        return dict(self._position)
+            self.stage.line.discard_input()
+            for entry in self.stage.errors():
+                _log.warning("stage: error %d after a failed move: %s", entry.code, entry.message)
+            self.stage.wait(0.0, timeout=self._move_timeout({a: 0.0 for a in AXES}, {a: 370.0 for a in AXES}))
+            self._targets = {a: self.stage.desired_position(a) for a in AXES}
+        except DriverError as error:
+            _log.warning("stage: could not re-read its state: %s", error)
+            self._targets = None
 
     def position(self) -> dict[int, float]:
         """Encoder readback ``{1: view, 2: theta_i, 3: phi_i}`` [deg]."""
@@ -631,8 +600,10 @@ class Rig:
             self._exposure = seconds
 
     def _expose(self, seconds: float) -> RoiStats:
+        """One exposure: ROI statistics, and the lamp monitor's reading kept for it."""
         self._set_exposure(seconds)
         self.camera.acquire()
+        self._last_monitor = self.camera.monitor() if self.has_monitor else math.nan
         return self.camera.roi_stats()
 
     def frame(self, exposure: float | None = None) -> np.ndarray:
@@ -642,7 +613,14 @@ class Rig:
         self.camera.acquire()
         return self.camera.frame()
 
-    def dark_frame(self, exposure: float | None = None, *, full: bool = False) -> DarkLevel:
+    def roi_frame(self, exposure: float | None = None) -> np.ndarray:
+        """Take one exposure (current or given exposure [s]) and return the ROI's pixels [DN]."""
+        if exposure is not None:
+            self._set_exposure(float(exposure))
+        self.camera.acquire()
+        return self.camera.roi_frame(self._roi)
+
+    def dark_frame(self, exposure: float | None = None, *, full: bool = False, roi_pixels: bool = False) -> DarkLevel:
         """Take a dark exposure (shutter closed) at the current gain.
 
         Parameters
@@ -651,17 +629,20 @@ class Rig:
             Exposure time [s] (default: the current one).
         full : bool
             Also transfer the full frame (``FRAME?``) into ``DarkLevel.frame``.
+        roi_pixels : bool
+            Also transfer the ROI's pixels (``ROI:DATA?``) into ``DarkLevel.frame``.
         """
         if exposure is not None:
             self._set_exposure(float(exposure))
         self.camera.close_shutter()
         try:
             self.camera.acquire()
+            monitor = self.camera.monitor() if self.has_monitor else math.nan
             stats = self.camera.roi_stats()
-            frame = self.camera.frame() if full else None
+            frame = self.camera.frame() if full else (self.camera.roi_frame(self._roi) if roi_pixels else None)
         finally:
             self.camera.open_shutter()
-        dark = DarkLevel(self._exposure, self.gain, stats, "measured", frame)
+        dark = DarkLevel(self._exposure, self.gain, stats, "measured", frame, monitor)
         self._darks[(self._exposure, self.gain, self._roi)] = dark
         return dark
 
@@ -699,14 +680,31 @@ class Rig:
             return self.dark_frame(exposure)
         raise ValueError(f"dark={mode!r} is not one of 'auto', 'measure', 'model', 'none'")
 
-    def _auto_exposure(self, max_attempts: int = 8) -> tuple[float, RoiStats, int]:
-        """Find a ladder exposure with the ROI mean in the window and nothing saturated."""
+    def _auto_exposure(self, target_fraction: float | None = None, max_exposure: float | None = None,
+                       start: float | None = None, max_attempts: int = 8) -> tuple[float, RoiStats, int]:
+        """Find a ladder exposure with the ROI mean in the window and nothing saturated.
+
+        ``target_fraction`` (default :attr:`target_fraction`, window :attr:`exposure_window`;
+        another aim gets the window of :func:`~drivers.rig_checks.exposure_window`),
+        ``max_exposure`` [s] (default the upper exposure limit; never above it) and the
+        first exposure tried ``start`` [s] (default the current exposure) override the
+        rig's settings for this call.
+        """
         max_dn = self.info.max_dn
-        low, high = (f * max_dn for f in self.exposure_window)
-        target = self.target_fraction * max_dn
+        if target_fraction is None or target_fraction == self.target_fraction:
+            fraction, window = self.target_fraction, self.exposure_window
+        else:
+            fraction, window = float(target_fraction), exposure_window(float(target_fraction))
+        low, high = (f * max_dn for f in window)
+        target = fraction * max_dn
         t_min, t_max = self.exposure_limits
+        if max_exposure is not None:
+            if not max_exposure >= t_min:
+                raise ValueError(f"max_exposure={max_exposure!r} s is below the shortest exposure {t_min:g} s")
+            t_max = min(t_max, float(max_exposure))
         offset = self._dark_model[1] if self._dark_model else None
-        t = exposure_ladder_floor(min(max(self._exposure or 0.01, t_min), t_max))
+        first = start if start is not None else (self._exposure or 0.01)
+        t = exposure_ladder_floor(min(max(first, t_min), t_max))
         tried: dict[float, RoiStats] = {}
         for attempt in range(1, max_attempts + 1):
             stats = self._expose(t)
@@ -747,6 +745,10 @@ class Rig:
         *,
         exposure: float | str = "auto",
         dark: str = "auto",
+        target_fraction: float | None = None,
+        max_exposure: float | None = None,
+        start_exposure: float | None = None,
+        settle_time: float = 0.0,
     ) -> Measurement:
         """Measure the sample radiance at a geometry (moving there first if given).
 
@@ -760,6 +762,12 @@ class Rig:
             Dark level: ``"auto"`` uses the dark model of :meth:`calibrate_dark` if there
             is one, else a dark frame at the same exposure, gain and ROI (cached);
             ``"measure"`` always takes a dark frame.
+        target_fraction, max_exposure, start_exposure : float, optional
+            Automatic exposure only: aim of the raw ROI mean as a fraction of full scale
+            [-], longest exposure [s] and first exposure tried [s] (defaults: the rig's
+            ``target_fraction``, its upper exposure limit and the current exposure).
+        settle_time : float
+            Wait after the move before exposing [s] (in the instruments' time).
 
         Returns
         -------
@@ -771,6 +779,8 @@ class Rig:
         time_start = time.time()
         if all(given):
             self.move_to(theta_i, phi_i, view)
+            if settle_time > 0:
+                self.wait(settle_time)
         elif self._targets is None or self._view is None:
             raise DriverError("the rig has no known geometry; call move_to() or measure(theta_i, phi_i, view)")
         else:
@@ -783,7 +793,7 @@ class Rig:
             self.lamp.check_lamp()  # raises LampError on a burnt-out lamp
             raise LampError(0, "lamp current is 0 A: the output is off or the lamp is open", "MEAS:CURR?")
         if exposure == "auto":
-            t, stats, attempts = self._auto_exposure()
+            t, stats, attempts = self._auto_exposure(target_fraction, max_exposure, start_exposure)
         else:
             t = float(exposure)
             stats, attempts = self._expose(t), 1
@@ -802,5 +812,6 @@ class Rig:
             dark_level=dark_level.level, dark_std=dark_level.stats.std, dark_source=dark_level.source,
             signal=signal, radiance=signal * per_second, radiance_error=error * per_second,
             lamp_voltage=voltage, lamp_current=current,
-            time_start=time_start, time_end=time.time(), attempts=attempts,
+            time_start=time_start, time_end=time.time(), attempts=attempts, monitor=self._last_monitor,
+            dark_monitor=dark_level.monitor if dark_level.source == "measured" else math.nan,
         )

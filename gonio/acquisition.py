@@ -1,19 +1,29 @@
 """Run a sweep protocol on a rig, record every point as it is measured, and resume.
 
 :func:`run_protocol` executes the plan of a :class:`~gonio.protocols.Protocol` on any
-object with the Rig interface of ``drivers.rig.Rig`` (the emulator or a real instrument:
-``lamp_on``, ``wait_lamp_stable``, ``check_geometry``, ``measure``), appending each point to
-a recording (:mod:`gonio.data`) and flushing it to disk before the next move.  An
-interrupted run (Ctrl-C, a crash, a dead lamp) is continued with ``resume=True``: points
-already recorded are skipped, nothing is measured twice and nothing is lost.
+object with the Rig interface of ``drivers.rig.Rig`` (the emulator or a real instrument),
+appending each point to a recording (:mod:`gonio.data`) and flushing it to disk before the
+next move.  An interrupted run (Ctrl-C, a crash, a dead lamp) is continued with
+``resume=True``: points already recorded are skipped, nothing is measured twice and
+nothing is lost; a resume that would mix experiments is refused.
 
-:func:`reduce_recording` turns a recording into radiance per geometry with uncertainties,
-and into the datasets fitting uses: relative radiance, normalised radiance
-L(theta_r)/L(0) as Oren & Nayar plot it (section 5, Figs 16-22), and absolute BRDF when
-a reference standard was measured.
+Besides the protocol's points a run records what the reduction needs to state honest
+uncertainties (:mod:`gonio.reduction`, docs/acquisition.md):
+
+- the camera's photon-transfer characterisation (EMVA 1288: system gain, dark noise,
+  PRNU), measured once per recording at the first point;
+- with a lamp monitor, its dark offset and noise, measured once per recording with the
+  lamp off; every exposure then carries the monitor's reading;
+- without one, the protocol's lamp checks: a fixed geometry re-measured with several
+  frames at the start, every ``checks.every`` points, around the reference standard and
+  at the start of every resumed session.
+
+:func:`reduce_recording` and the other reduction names are re-exported from
+:mod:`gonio.reduction`.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import platform
 import time
@@ -25,29 +35,35 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from . import __version__
-from .data import RecordingWriter, point_key, read_metadata, read_points
-from .protocols import PlannedPoint, Protocol, load, loads, plan
+from .data import RecordingError, RecordingWriter, point_key
+from .protocols import PlannedPoint, Protocol, load, plan
+from .reduction import (
+    CHECK_BLOCK,
+    LOW_SIGNAL_SIGMAS,
+    REFERENCE_BLOCK,
+    Reduced,
+    combine_reduced,
+    reduce_recording,
+)
 
 __all__ = [
     "RunResult",
     "Progress",
     "AcquisitionError",
     "run_protocol",
+    "combine_frames",
     "Reduced",
     "reduce_recording",
     "combine_reduced",
-    "LAMP_STABILITY",
     "REFERENCE_BLOCK",
+    "CHECK_BLOCK",
 ]
 
-#: A typical relative instability of a 300 W incandescent lamp on a regulated supply over a
-#: run (the emulated lamp drifts by up to 0.1 %, docs/emulator.md).  Not added by default:
-#: :func:`reduce_recording` reports the uncertainty of the CCD noise model and of repeats,
-#: and a fit learns any extra scatter with its jitter term; pass
-#: ``lamp_stability=LAMP_STABILITY`` to add it in quadrature instead.
-LAMP_STABILITY = 1e-3
-#: Block name under which reference-standard points are recorded.
-REFERENCE_BLOCK = "reference standard"
+#: Wait after switching the lamp off before the monitor's dark reading [s] (the filament
+#: cools with 0.15 s; 3 s leave 2e-9 of its light).
+MONITOR_DARK_COOLING_S = 3.0
+#: Metadata keys of a hardware rig that may change between sessions (port paths).
+_PORT_KEYS = ("stage", "camera", "lamp")
 
 
 class AcquisitionError(RuntimeError):
@@ -80,17 +96,28 @@ class RunResult:
     refused: int = 0
     errors: int = 0
     skipped: int = 0
+    flagged: int = 0
     wall_seconds: float = 0.0
     instrument_seconds: float = 0.0
     messages: list[str] = field(default_factory=list)
 
     def summary(self) -> str:
+        flagged = f", {self.flagged} flagged (saturated or low signal)" if self.flagged else ""
         return (
-            f"{self.status}: {self.measured} points measured, {self.refused} refused, "
+            f"{self.status}: {self.measured} points measured{flagged}, {self.refused} refused, "
             f"{self.errors} failed, {self.skipped} already recorded; "
             f"{self.wall_seconds:.1f} s wall, {self.instrument_seconds:.1f} s instrument time; "
             f"recording in {self.folder}"
         )
+
+
+@dataclass(frozen=True)
+class Job:
+    """One thing to record: a planned point, a plan refusal, a reference or a check point."""
+
+    point: PlannedPoint
+    kind: str = "sample"  # "sample", "reference" or "check"
+    refusal: str | None = None
 
 
 def _now_iso() -> str:
@@ -110,32 +137,127 @@ def _software_versions() -> dict[str, str]:
     }
 
 
-def _point_row(point: PlannedPoint, status: str, message: str = "") -> dict[str, Any]:
+def experiment_description(protocol: Protocol, lamp_voltage: float, rig: Any,
+                           metadata: Mapping[str, Any] | None) -> dict[str, Any]:
+    """What must stay the same for a recording to be resumed (``metadata["experiment"]``).
+
+    The protocol by the SHA-256 of its text, the lamp voltage, the rig's configuration as
+    the caller describes it (emulated sample, model parameters, seed; port paths of a real
+    rig excluded, they may change between sessions), the instruments' identities and
+    whether a lamp monitor is fitted.
+    """
+    rig_meta = dict((metadata or {}).get("rig", {}))
+    for key in _PORT_KEYS:
+        rig_meta.pop(key, None)
+    return {
+        "protocol_sha256": hashlib.sha256(protocol.text.encode("utf-8")).hexdigest(),
+        "protocol_name": protocol.name,
+        "sample": protocol.sample,
+        "lamp_voltage": float(lamp_voltage),
+        "rig": rig_meta,
+        "instruments": dict(getattr(rig, "identities", {}) or {}),
+        "lamp_monitor": bool(getattr(rig, "has_monitor", False)),
+    }
+
+
+def _check_geometry(protocol: Protocol, the_plan) -> tuple[float, float, float]:
+    """The lamp-check geometry: the protocol's, else the first measurable planned point."""
+    if protocol.checks.geometry is not None:
+        return tuple(float(x) for x in protocol.checks.geometry)
+    if not the_plan.points:
+        raise AcquisitionError(f"{protocol.source}: lamp checks need a measurable point, and the plan has none")
+    p = the_plan.points[0]
+    return (p.theta_i, p.phi_i, p.view)
+
+
+def _characterisation_point(rig, the_plan) -> PlannedPoint | None:
+    """The planned point with the largest ROI (smallest |view|) the rig accepts."""
+    for point in sorted(the_plan.points, key=lambda p: (abs(p.view), p.index)):
+        if rig.check_geometry(point.theta_i, point.phi_i, point.view) is None:
+            return point
+    return None
+
+
+def build_jobs(protocol: Protocol, the_plan, session: int = 0) -> list[Job]:
+    """Every job of a run in order: refusals, checks and sample points, reference, checks.
+
+    With ``checks.every = N > 0`` a lamp check precedes the first sample point, follows
+    every N sample points and the last one (before the reference standard), follows the
+    reference block, and (``session > 0``, a resumed run) starts the session.
+    """
+    jobs = [Job(r.point, "sample", r.reason) for r in the_plan.refused]
+    every = protocol.checks.every
+    geometry = _check_geometry(protocol, the_plan) if every > 0 else None
+    count = 0
+
+    def check() -> Job:
+        nonlocal count
+        job = Job(PlannedPoint(-1000 - count, CHECK_BLOCK, count, *geometry), "check")
+        count += 1
+        return job
+
+    if geometry is not None and session > 0:
+        jobs.append(Job(PlannedPoint(-900 - session, CHECK_BLOCK, -session, *geometry), "check"))
+    for k, point in enumerate(the_plan.points):
+        if geometry is not None and k % every == 0:
+            jobs.append(check())
+        jobs.append(Job(point))
+    if geometry is not None and the_plan.points:
+        jobs.append(check())
+    if protocol.reference is not None:
+        for k, (ti, pi_, view) in enumerate(protocol.reference.geometries):
+            jobs.append(Job(PlannedPoint(-1 - k, REFERENCE_BLOCK, 0, ti, pi_, view), "reference"))
+        if geometry is not None:
+            jobs.append(check())
+    return jobs
+
+
+def _point_row(point: PlannedPoint, status: str, message: str = "", session: int = 0) -> dict[str, Any]:
     return {
         "index": point.index, "block": point.block, "repeat": point.repeat,
         "theta_i": point.theta_i, "phi_i": point.phi_i, "view": point.view,
         "theta_r": point.theta_r, "phi_r": point.phi_r, "status": status, "message": message,
+        "session": session,
     }
 
 
-def _combine(measurements: list) -> dict[str, Any]:
-    """Combine several measurements of one point (frames or HDR brackets).
+def combine_frames(measurements: list) -> dict[str, Any]:
+    """The recording row of one point from its exposures (``drivers.rig.Measurement``).
 
-    Unsaturated measurements are averaged with inverse-variance weights (HDR: the longer,
-    less noisy exposures dominate); if all are saturated the shortest is kept and the row
-    says so through its ``saturated`` count.
+    The frames of the longest exposure whose frames are all unsaturated are averaged (for
+    HDR brackets that is the bracket with the best signal-to-noise ratio; the shorter
+    ones add little and are not mixed in, so that the row describes one exposure time);
+    exposures left out for saturation are counted in ``frames_saturated``. When every
+    exposure saturated, the shortest is kept and the row is flagged ``saturated``.
     """
-    usable = [m for m in measurements if m.roi_saturated == 0] or [min(measurements, key=lambda m: m.exposure)]
-    weights = np.array([1.0 / max(m.radiance_error, 1e-300) ** 2 for m in usable])
-    rates = np.array([m.radiance for m in usable])
-    rate = float(np.sum(weights * rates) / np.sum(weights))
-    sigma = float(1.0 / math.sqrt(np.sum(weights)))
-    last = usable[-1]
+    by_exposure: dict[float, list] = {}
+    for m in measurements:
+        by_exposure.setdefault(m.exposure, []).append(m)
+    clean = [t for t, ms in by_exposure.items() if all(m.roi_saturated == 0 for m in ms)]
+    chosen = max(clean) if clean else min(by_exposure)
+    used = by_exposure[chosen]
+    rates = np.array([m.radiance for m in used])
+    sigmas = np.array([m.radiance_error for m in used])
+    monitor = np.array([m.monitor for m in used])
+    last = used[-1]
+    saturated = max(m.roi_saturated for m in used)
+    rate = float(rates.mean())
+    sigma = float(np.sqrt(np.sum(sigmas**2)) / len(used))
+    flags = []
+    if saturated:
+        flags.append("saturated")
+    if rate <= LOW_SIGNAL_SIGMAS * sigma:
+        flags.append("low_signal")
     return {
-        "roi_mean": last.roi_mean, "roi_std": last.roi_std, "roi_pixels": last.roi_pixels,
-        "saturated": max(m.roi_saturated for m in measurements), "exposure": last.exposure,
-        "gain": last.gain, "frames": len(usable), "dark_mean": last.dark_level, "dark_std": last.dark_std,
+        "flags": ";".join(flags),
+        "roi_mean": float(np.mean([m.roi_mean for m in used])),
+        "roi_std": float(np.sqrt(np.mean([m.roi_std**2 for m in used]))),
+        "roi_pixels": last.roi_pixels, "saturated": saturated, "exposure": chosen, "gain": last.gain,
+        "frames": len(used), "frames_saturated": sum(len(ms) for t, ms in by_exposure.items() if t not in clean),
+        "dark_mean": float(np.mean([m.dark_level for m in used])), "dark_std": last.dark_std,
         "signal_rate": rate, "signal_rate_sigma": sigma,
+        "frame_rate_std": float(rates.std(ddof=1)) if len(used) > 1 else math.nan,
+        "monitor": float(monitor.mean()) if np.isfinite(monitor).all() else math.nan,
         "lamp_voltage": last.lamp_voltage, "lamp_current": last.lamp_current,
         "stage_camera": last.stage_position.get(1, math.nan),
         "stage_lamp_theta": last.stage_position.get(2, math.nan),
@@ -143,23 +265,32 @@ def _combine(measurements: list) -> dict[str, Any]:
     }
 
 
-def _measure_point(rig, protocol: Protocol, point: PlannedPoint, dark_due: bool) -> tuple[dict, list]:
+def _exposure_times(protocol: Protocol, frames: int) -> list[float | str]:
     exposure = protocol.exposure
-    dark = "measure" if dark_due else "auto"
     if exposure.mode == "hdr":
-        times: list[float | str] = list(exposure.brackets) * exposure.frames
-    elif exposure.mode == "fixed":
-        times = [exposure.time] * exposure.frames
-    else:
-        times = ["auto"] * exposure.frames
+        return [t for t in exposure.brackets for _ in range(frames)]
+    if exposure.mode == "fixed":
+        return [exposure.time] * frames
+    return ["auto"] + ["same"] * (frames - 1)
+
+
+def _measure_point(rig, protocol: Protocol, point: PlannedPoint, dark_due: bool, frames: int) -> tuple[dict, list]:
+    """Move, settle and expose one point as the protocol's exposure policy says."""
+    exposure = protocol.exposure
+    auto = {"target_fraction": exposure.target_fraction, "max_exposure": exposure.max_time,
+            "start_exposure": exposure.time}
     measurements = []
-    for k, t in enumerate(times):
+    for k, t in enumerate(_exposure_times(protocol, frames)):
+        if t == "same":
+            t = measurements[0].exposure
+        options = auto if t == "auto" else {}
         if k == 0:
-            m = rig.measure(point.theta_i, point.phi_i, point.view, exposure=t, dark=dark)
+            m = rig.measure(point.theta_i, point.phi_i, point.view, exposure=t,
+                            dark="measure" if dark_due else "auto", settle_time=protocol.rig.settle_time, **options)
         else:
-            m = rig.measure(exposure=t, dark="auto")
+            m = rig.measure(exposure=t, dark="auto", **options)
         measurements.append(m)
-    return _combine(measurements), measurements
+    return combine_frames(measurements), measurements
 
 
 def _dark_due(protocol: Protocol, measured_since_dark: int | None, resume: bool) -> bool:
@@ -172,6 +303,156 @@ def _dark_due(protocol: Protocol, measured_since_dark: int | None, resume: bool)
     if measured_since_dark is None:
         return protocol.darks.at_start or resume
     return protocol.darks.every > 0 and measured_since_dark >= protocol.darks.every
+
+
+def characterise_camera(rig, point: PlannedPoint, protocol: Protocol) -> dict[str, Any]:
+    """Photon-transfer characterisation of the camera at ``point`` (EMVA 1288).
+
+    The automatic exposure at the point sets the brightest exposure; six exposures from
+    10 % to 100 % of it give pairs of light and dark ROI frames
+    (:func:`drivers.ptc.acquire_photon_transfer`). Returns the system gain, the temporal
+    dark variance law and the PRNU for metadata["camera"].
+    """
+    from drivers.ptc import acquire_photon_transfer
+
+    first = rig.measure(point.theta_i, point.phi_i, point.view, exposure="auto",
+                        target_fraction=protocol.exposure.target_fraction, max_exposure=protocol.exposure.max_time,
+                        start_exposure=protocol.exposure.time)
+    exposures = [round(first.exposure * f, 9) for f in (0.1, 0.28, 0.46, 0.64, 0.82, 1.0)]
+    result = acquire_photon_transfer(rig, exposures)
+    return {
+        "method": "EMVA 1288 photon transfer, pairs of ROI frames at the first point",
+        "geometry": [point.theta_i, point.phi_i, point.view],
+        "gain_factor": first.gain, "roi_pixels": first.roi_pixels,
+        "system_gain_dn_per_e": result.system_gain, "system_gain_error": result.system_gain_error,
+        "dark_variance_dn2": result.dark_noise_dn**2, "dark_variance_rate_dn2_per_s": result.dark_variance_rate,
+        "prnu": result.prnu, "exposures_s": [float(t) for t in result.exposures],
+    }
+
+
+class _Run:
+    """State of one session of :func:`run_protocol` (what was measured, darks, sample mounted)."""
+
+    def __init__(self, protocol, rig, writer, result, clock, change_sample, resume, session, progress,
+                 max_consecutive_errors):
+        self.protocol, self.rig, self.writer, self.result = protocol, rig, writer, result
+        self.clock, self.change_sample, self.resume, self.session = clock, change_sample, resume, session
+        self.progress, self.max_consecutive_errors = progress, max_consecutive_errors
+        self.measured_since_dark: int | None = None
+        self.consecutive_errors = 0
+        self.on_reference = False
+        self.start_wall = time.perf_counter()
+        self.start_instrument = clock()
+
+    # -- before the first point ----------------------------------------------------------
+    def prepare(self, lamp_voltage: float, warm_up: bool, first: PlannedPoint | None) -> None:
+        """Motion settings, monitor dark, lamp on and warm, camera characterisation."""
+        rig, stored = self.rig, self.writer.stored_metadata
+        limits = self.protocol.rig
+        if limits.velocity is not None or limits.acceleration is not None:
+            rig.set_motion(limits.velocity, limits.acceleration)
+        if getattr(rig, "has_monitor", False) and "monitor_dark" not in stored:
+            if rig.lamp_is_on():
+                rig.lamp_off()
+                rig.wait(MONITOR_DARK_COOLING_S)
+            self.writer.update(monitor_dark=rig.measure_monitor_dark().to_dict())
+        rig.lamp_on(lamp_voltage)
+        if warm_up:
+            rig.wait_lamp_stable()
+        if "camera" not in stored and first is not None and hasattr(rig, "roi_frame"):
+            self.writer.update(camera=self._characterise(first))
+
+    def _characterise(self, point: PlannedPoint) -> dict[str, Any]:
+        """The camera characterisation, or why it failed (the reduction then falls back)."""
+        try:
+            return characterise_camera(self.rig, point, self.protocol)
+        except KeyboardInterrupt:
+            raise
+        except Exception as error:  # an instrument problem shows again at the points
+            message = f"camera characterisation failed ({type(error).__name__}: {error})"
+            self.result.messages.append(message)
+            return {"error": message}
+
+    # -- one job ---------------------------------------------------------------------------
+    def do(self, count: int, total: int, job: Job) -> None:
+        point, reason = job.point, job.refusal
+        if reason is None and (job.kind == "reference") != self.on_reference:
+            self.change_sample("reference" if job.kind == "reference" else "sample")
+            self.on_reference = job.kind == "reference"
+        if reason is None:
+            reason = self.rig.check_geometry(point.theta_i, point.phi_i, point.view)
+        if reason is not None:
+            status, message, row = "refused", reason, {}
+            self.result.refused += 1
+        else:
+            status, message, row = self._measure(job)
+        self.writer.append_point({**_point_row(point, status, message, self.session), **row,
+                                  "instrument_time": self.clock(), "wall_time": _now_iso()})
+        self._report(count, total, point, status)
+        if self.consecutive_errors >= self.max_consecutive_errors:
+            raise AcquisitionError(
+                f"{self.consecutive_errors} points failed in a row (last: {message}); stopping. "
+                "Fix the instrument and resume the run."
+            )
+
+    def _measure(self, job: Job) -> tuple[str, str, dict]:
+        point = job.point
+        dark_due = _dark_due(self.protocol, self.measured_since_dark, self.resume)
+        frames = self.protocol.checks.frames if job.kind == "check" else self.protocol.exposure.frames
+        try:
+            row, raw = _measure_point(self.rig, self.protocol, point, dark_due, frames)
+        except KeyboardInterrupt:
+            raise
+        except Exception as error:  # an instrument error: record it, go on, or stop
+            message = f"{type(error).__name__}: {error}"
+            self.result.errors += 1
+            if type(error).__name__ == "LampError":
+                self.writer.append_point({**_point_row(point, "error", message, self.session),
+                                          "instrument_time": self.clock(), "wall_time": _now_iso()})
+                raise AcquisitionError(f"lamp failure at point {point.index}: {error}") from error
+            self.consecutive_errors += 1
+            return "error", message, {}
+        self.consecutive_errors = 0
+        self.result.measured += 1
+        self.result.flagged += bool(row["flags"])
+        self.measured_since_dark = 0 if dark_due else (self.measured_since_dark or 0) + 1
+        if dark_due:
+            first = raw[0]
+            self.writer.append_dark({
+                "after_index": point.index, "exposure": first.exposure, "gain": first.gain,
+                "roi_mean": first.dark_level, "roi_std": first.dark_std, "roi_pixels": first.roi_pixels,
+                "monitor": first.dark_monitor,
+                "instrument_time": self.clock(), "wall_time": _now_iso(),
+            })
+        return "ok", "", row
+
+    def _report(self, count: int, total: int, point: PlannedPoint, status: str) -> None:
+        if not self.progress:
+            return
+        elapsed = time.perf_counter() - self.start_wall
+        r = self.result
+        self.progress(Progress(
+            done=count, total=total, measured=r.measured, refused=r.refused, errors=r.errors,
+            elapsed_wall=elapsed, eta_wall=elapsed / count * (total - count),
+            instrument_time=self.clock() - self.start_instrument, point=point, status=status,
+        ))
+
+    def finish(self, status: str, error: str | None = None) -> None:
+        """Record the final status; a failure to write it is reported, never raised."""
+        r = self.result
+        r.status = status
+        r.wall_seconds = time.perf_counter() - self.start_wall
+        r.instrument_seconds = self.clock() - self.start_instrument
+        extra: dict[str, Any] = {"finished": _now_iso(), "last_run": {
+            "measured": r.measured, "refused": r.refused, "errors": r.errors, "skipped": r.skipped,
+            "flagged": r.flagged, "wall_seconds": r.wall_seconds, "instrument_seconds": r.instrument_seconds}}
+        if error:
+            extra["error"] = error
+        try:
+            self.writer.finish(status, **extra)
+        except OSError as failure:
+            r.messages.append(f"metadata.json could not be updated ({failure.strerror or failure}); "
+                              f"the points recorded so far are in {self.writer.points_path}")
 
 
 def run_protocol(
@@ -195,14 +476,17 @@ def run_protocol(
     protocol : Protocol, str or Path
         A loaded protocol or the path of a protocol file.
     rig : drivers.rig.Rig or compatible
-        An opened rig (``lamp_on``, ``wait_lamp_stable``, ``check_geometry``, ``measure``).
+        An opened rig.
     folder : path
         Recording folder (see :mod:`gonio.data`).
     resume : bool
         Continue an interrupted recording in ``folder``; points already recorded as ok or
-        refused are skipped, failed points are measured again.
+        refused are skipped, failed points are measured again. A different experiment
+        (protocol content, sample, rig settings, seed, lamp voltage, instruments) is
+        refused with a message naming what differs.
     metadata : mapping, optional
-        Extra metadata stored with the recording (rig and emulator configuration, seed).
+        Extra metadata stored with the recording (under ``"rig"``: the rig and emulator
+        configuration, seed); it takes part in the resume check.
     lamp_voltage : float
         Lamp supply voltage [V].
     warm_up : bool
@@ -229,6 +513,8 @@ def run_protocol(
         Re-raised after the recording is marked "interrupted" (resume it later).
     AcquisitionError
         The run could not start or stopped on repeated errors.
+    gonio.data.RecordingError
+        The folder cannot hold this recording (it holds another, or resume was refused).
     """
     if not isinstance(protocol, Protocol):
         protocol = load(protocol)
@@ -239,338 +525,45 @@ def run_protocol(
         )
     clock = clock or time.monotonic
     the_plan = plan(protocol)
+    if protocol.checks.every > 0:
+        _check_geometry(protocol, the_plan)  # refuse a protocol without a check point before writing
     info = {
         "protocol": {"name": protocol.name, "source": protocol.source, "text": protocol.text},
         "sample": {"label": protocol.sample, "metadata": dict(protocol.metadata)},
         "software": _software_versions(),
         "started": _now_iso(),
         "lamp_voltage": lamp_voltage,
+        "stage": {"encoder_resolution_deg": {str(a): r for a, r in getattr(rig, "encoder_resolution", {}).items()},
+                  "position_tolerance_deg": getattr(rig, "position_tolerance", None)},
         **dict(metadata or {}),
+        "experiment": experiment_description(protocol, lamp_voltage, rig, metadata),
     }
     writer = RecordingWriter(Path(folder), info, resume=resume)
+    session = len(writer.stored_metadata.get("resumes", []))
     done = writer.done_keys()
-    result = RunResult(folder=Path(folder))
-    jobs: list[tuple[PlannedPoint, str | None, bool]] = []
-    for refusal in the_plan.refused:
-        jobs.append((refusal.point, refusal.reason, False))
-    reference_points = []
-    if protocol.reference is not None:
-        for k, (ti, pi_, view) in enumerate(protocol.reference.geometries):
-            reference_points.append(PlannedPoint(-1 - k, REFERENCE_BLOCK, 0, ti, pi_, view))
-    for point in the_plan.points:
-        jobs.append((point, None, False))
-    for point in reference_points:
-        jobs.append((point, None, True))
-    todo = [job for job in jobs if point_key(*job[0].key) not in done]
-    result.skipped = len(jobs) - len(todo)
-    start_wall = time.perf_counter()
-    start_instrument = clock()
-    measured_since_dark = None  # None: no dark taken yet in this session
-    consecutive_errors = 0
-    on_reference = False
+    jobs = build_jobs(protocol, the_plan, session)
+    todo = [job for job in jobs if point_key(*job.point.key) not in done]
+    result = RunResult(folder=Path(folder), skipped=len(jobs) - len(todo))
+    run = _Run(protocol, rig, writer, result, clock, change_sample, resume, session, progress, max_consecutive_errors)
     try:
-        if any(reason is None for _, reason, _ in todo):
-            rig.lamp_on(lamp_voltage)
-            if warm_up:
-                rig.wait_lamp_stable()
-        for count, (point, reason, is_reference) in enumerate(todo, start=1):
-            if is_reference != on_reference and reason is None:
-                change_sample("reference" if is_reference else "sample")
-                on_reference = is_reference
-            status, message = "ok", ""
-            row: dict[str, Any] = {}
-            if reason is None:
-                reason = rig.check_geometry(point.theta_i, point.phi_i, point.view)
-            if reason is not None:
-                status, message = "refused", reason
-                result.refused += 1
-            else:
-                dark_due = _dark_due(protocol, measured_since_dark, resume)
-                try:
-                    row, raw = _measure_point(rig, protocol, point, dark_due)
-                except KeyboardInterrupt:
-                    raise
-                except Exception as error:  # an instrument error: record it, go on, or stop
-                    if type(error).__name__ == "LampError":
-                        writer.append_point({**_point_row(point, "error", f"{type(error).__name__}: {error}"),
-                                             "instrument_time": clock(), "wall_time": _now_iso()})
-                        result.errors += 1
-                        raise AcquisitionError(f"lamp failure at point {point.index}: {error}") from error
-                    status, message = "error", f"{type(error).__name__}: {error}"
-                    result.errors += 1
-                    consecutive_errors += 1
-                else:
-                    consecutive_errors = 0
-                    result.measured += 1
-                    measured_since_dark = 0 if dark_due else (measured_since_dark or 0) + 1
-                    if dark_due:
-                        first = raw[0]
-                        writer.append_dark({
-                            "after_index": point.index, "exposure": first.exposure, "gain": first.gain,
-                            "roi_mean": first.dark_level, "roi_std": first.dark_std,
-                            "roi_pixels": first.roi_pixels, "instrument_time": clock(), "wall_time": _now_iso(),
-                        })
-            writer.append_point({**_point_row(point, status, message), **row,
-                                 "instrument_time": clock(), "wall_time": _now_iso()})
-            if progress:
-                elapsed = time.perf_counter() - start_wall
-                progress(Progress(
-                    done=count, total=len(todo), measured=result.measured, refused=result.refused,
-                    errors=result.errors, elapsed_wall=elapsed,
-                    eta_wall=elapsed / count * (len(todo) - count),
-                    instrument_time=clock() - start_instrument, point=point, status=status,
-                ))
-            if consecutive_errors >= max_consecutive_errors:
-                raise AcquisitionError(
-                    f"{consecutive_errors} points failed in a row (last: {message}); stopping. "
-                    "Fix the instrument and resume the run."
-                )
-        if on_reference:
+        measurable = [job for job in todo if job.refusal is None]
+        if measurable:
+            run.prepare(lamp_voltage, warm_up, _characterisation_point(rig, the_plan))
+        for count, job in enumerate(todo, start=1):
+            run.do(count, len(todo), job)
+        if run.on_reference:
             change_sample("sample")
     except KeyboardInterrupt:
-        result.status = "interrupted"
-        _finish(writer, result, start_wall, start_instrument, clock)
+        run.finish("interrupted")
         raise
     except Exception as error:
-        result.status = "failed"
         result.messages.append(str(error))
-        _finish(writer, result, start_wall, start_instrument, clock, error=str(error))
-        if isinstance(error, AcquisitionError):
+        run.finish("failed", error=str(error))
+        if isinstance(error, (AcquisitionError, RecordingError)):
             raise
+        if isinstance(error, OSError):
+            raise AcquisitionError(f"run stopped: cannot write the recording: {error.strerror or error}"
+                                   + "".join(f"; {m}" for m in result.messages[1:])) from error
         raise AcquisitionError(f"run stopped: {type(error).__name__}: {error}") from error
-    result.status = "complete"
-    _finish(writer, result, start_wall, start_instrument, clock)
+    run.finish("complete")
     return result
-
-
-def _finish(writer: RecordingWriter, result: RunResult, start_wall: float, start_instrument: float,
-            clock: Callable[[], float], error: str | None = None) -> None:
-    result.wall_seconds = time.perf_counter() - start_wall
-    result.instrument_seconds = clock() - start_instrument
-    extra = {"finished": _now_iso(), "last_run": {
-        "measured": result.measured, "refused": result.refused, "errors": result.errors,
-        "skipped": result.skipped, "wall_seconds": result.wall_seconds,
-        "instrument_seconds": result.instrument_seconds}}
-    if error:
-        extra["error"] = error
-    writer.finish(result.status, **extra)
-
-
-# --------------------------------------------------------------------------- reduction
-@dataclass(frozen=True)
-class Reduced:
-    """Radiance per measured geometry, repeats combined.
-
-    Attributes
-    ----------
-    theta_i, phi_i, theta_r, phi_r : numpy.ndarray
-        Geometry in the sample frame [deg] (azimuth 0 = the camera's swing plane, + side).
-    view : numpy.ndarray
-        Signed camera angle [deg].
-    radiance, radiance_sigma : numpy.ndarray
-        Relative radiance [DN/s per pixel at unit gain] and its 1-sigma uncertainty.
-    repeats : numpy.ndarray
-        Number of measurements combined into each value.
-    reference_irradiance : float or None
-        Irradiance of the lamp E_0 in the same relative units per steradian, from the
-        reference standard (None when none was measured).
-    reference_irradiance_sigma : float or None
-        Its 1-sigma uncertainty.
-    label : str
-        Sample label.
-    """
-
-    theta_i: np.ndarray
-    phi_i: np.ndarray
-    theta_r: np.ndarray
-    phi_r: np.ndarray
-    view: np.ndarray
-    radiance: np.ndarray
-    radiance_sigma: np.ndarray
-    repeats: np.ndarray
-    reference_irradiance: float | None
-    reference_irradiance_sigma: float | None
-    label: str
-    metadata: Mapping[str, Any] = field(default_factory=dict)
-
-    def relative_radiance(self):
-        """Dataset of relative radiance (quantity ``'radiance'``: fit with a free scale)."""
-        from .fitting import Dataset
-
-        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, self.radiance,
-                       self.radiance_sigma, quantity="radiance", label=self.label, metadata=dict(self.metadata))
-
-    def normalised_radiance(self):
-        """Dataset of L(theta_r)/L(0) per incidence (Oren & Nayar section 5, Figs 16-22).
-
-        Each lamp direction is normalised by its own normal-view measurement (view = 0);
-        lamp directions without one are left out.  The uncertainty propagates both
-        measurements' uncertainties (the normal point's is shared across its incidence;
-        the correlation is neglected).
-        """
-        from .fitting import Dataset
-
-        keep = np.zeros(self.radiance.shape, bool)
-        value = np.zeros_like(self.radiance)
-        sigma = np.zeros_like(self.radiance)
-        for ti, pi_ in {(a, b) for a, b in zip(self.theta_i, self.phi_i)}:
-            same = (self.theta_i == ti) & (self.phi_i == pi_)
-            normal = same & (self.view == 0.0)
-            if not normal.any():
-                continue
-            k = int(np.flatnonzero(normal)[0])
-            l0, s0 = self.radiance[k], self.radiance_sigma[k]
-            value[same] = self.radiance[same] / l0
-            sigma[same] = np.abs(value[same]) * np.hypot(self.radiance_sigma[same] / self.radiance[same], s0 / l0)
-            sigma[normal] = np.maximum(sigma[normal], 1e-12)
-            keep |= same
-        return Dataset(self.theta_i[keep], self.phi_i[keep], self.theta_r[keep], self.phi_r[keep], value[keep],
-                       np.maximum(sigma[keep], 1e-12), quantity="normalised_radiance", label=self.label,
-                       metadata=dict(self.metadata))
-
-    def brdf(self):
-        """Dataset of absolute BRDF [1/sr], calibrated by the reference standard.
-
-        f_r = L / (E_0 cos theta_i) with E_0 from the reference measurement
-        (a Lambertian standard of albedo rho_ref: L_ref = rho_ref / pi E_0 cos theta_i).
-        """
-        from .fitting import Dataset
-
-        if self.reference_irradiance is None:
-            raise ValueError("no reference standard was measured in this recording: absolute BRDF "
-                             "is not available (use normalised_radiance() or relative_radiance())")
-        cos_i = np.cos(np.radians(self.theta_i))
-        value = self.radiance / (self.reference_irradiance * cos_i)
-        rel = np.hypot(self.radiance_sigma / self.radiance, self.reference_irradiance_sigma / self.reference_irradiance)
-        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.abs(value) * rel,
-                       quantity="brdf", label=self.label, metadata=dict(self.metadata))
-
-    def best_dataset(self):
-        """Absolute BRDF when calibrated, else normalised radiance."""
-        return self.brdf() if self.reference_irradiance is not None else self.normalised_radiance()
-
-    def fit_inputs(self, calibration_stability: float = LAMP_STABILITY):
-        """The dataset and priors a fit of this recording should use.
-
-        With a reference standard: relative radiance, whose ``scale`` (the lamp irradiance
-        E_0 in the recording's units) gets a Gaussian prior centred on the reference
-        estimate with its uncertainty and ``calibration_stability`` (lamp drift between
-        the reference and the sample) in quadrature.  The calibration error is common to
-        every point, so it belongs in one nuisance parameter, not in per-point
-        uncertainties (which would make the albedo's interval too narrow).  Without a
-        reference: normalised radiance L(theta_r)/L(0) and no extra prior.
-
-        Returns
-        -------
-        dataset : gonio.fitting.Dataset
-        priors : dict of name -> gonio.fitting.Prior
-        """
-        from .fitting import Normal
-
-        if self.reference_irradiance is None:
-            return self.normalised_radiance(), {}
-        e0 = self.reference_irradiance
-        sd = e0 * math.hypot(self.reference_irradiance_sigma / e0, calibration_stability)
-        return self.relative_radiance(), {"scale": Normal(e0, sd, 0.0, math.inf)}
-
-
-def _combine_repeats(values: np.ndarray, sigmas: np.ndarray, floor: float = 0.0) -> tuple[float, float]:
-    """Weighted mean of repeats; uncertainty = max(propagated, observed scatter / sqrt(n)),
-    with a relative ``floor`` added in quadrature."""
-    weights = 1.0 / np.maximum(sigmas, 1e-300) ** 2
-    mean = float(np.sum(weights * values) / np.sum(weights))
-    propagated = float(1.0 / math.sqrt(np.sum(weights)))
-    if len(values) > 1:
-        scatter = float(np.std(values, ddof=1) / math.sqrt(len(values)))
-        propagated = max(propagated, scatter)
-    return mean, math.hypot(propagated, floor * mean)
-
-
-def reduce_recording(folder: str | Path, lamp_stability: float = 0.0) -> Reduced:
-    """Reduce a recording to radiance per geometry with uncertainties.
-
-    Parameters
-    ----------
-    folder : path
-        Recording folder.
-    lamp_stability : float
-        Relative uncertainty [-] added in quadrature to every value for lamp drift and
-        flicker (e.g. :data:`LAMP_STABILITY`); 0 keeps the CCD-noise and repeat
-        uncertainties alone (fit with a jitter term to learn the rest from the data).
-
-    Notes
-    -----
-    Repeats of a geometry are combined (:func:`_combine_repeats`).  Points that were
-    refused or failed are ignored (they stay in the recording).  If the recording holds
-    reference-standard points, the lamp irradiance E_0 is estimated from them.
-    """
-    folder = Path(folder)
-    meta = read_metadata(folder)
-    points = read_points(folder)
-    ok = points["status"] == "ok"
-    ok &= np.isfinite(points["signal_rate"]) & (points["signal_rate"] > 0)
-    is_ref = points["block"] == REFERENCE_BLOCK
-    label = meta.get("sample", {}).get("label", folder.name)
-    protocol_text = meta.get("protocol", {}).get("text")
-    protocol = loads(protocol_text, source=str(folder / "metadata.json")) if protocol_text else None
-    aperture = meta.get("rig", {}).get("aperture_sr")
-    if aperture is None and protocol is not None:
-        aperture = [protocol.rig.lamp_solid_angle, protocol.rig.camera_solid_angle]
-    if aperture is not None and min(aperture) <= 0:
-        aperture = None  # ideal point apertures: fit the model itself
-    reference_irradiance = reference_sigma = None
-    if (ok & is_ref).any():
-        reflectance = protocol.reference.reflectance if protocol is not None and protocol.reference else None
-        if reflectance:
-            cos_i = np.cos(np.radians(points["theta_i"][ok & is_ref]))
-            e0 = np.pi * points["signal_rate"][ok & is_ref] / (reflectance * cos_i)
-            e0_sigma = np.pi * points["signal_rate_sigma"][ok & is_ref] / (reflectance * cos_i)
-            reference_irradiance, reference_sigma = _combine_repeats(e0, e0_sigma, lamp_stability)
-    sample = ok & ~is_ref
-    groups: dict[tuple, list[int]] = {}
-    for k in np.flatnonzero(sample):
-        key = (round(points["theta_i"][k], 6), round(points["phi_i"][k], 6), round(points["view"][k], 6))
-        groups.setdefault(key, []).append(int(k))
-    rows = []
-    for (ti, pi_, view), members in sorted(groups.items()):
-        mean, sigma = _combine_repeats(points["signal_rate"][members], points["signal_rate_sigma"][members], lamp_stability)
-        rows.append((ti, pi_, abs(view), 0.0 if view >= 0 else 180.0, view, mean, sigma, len(members)))
-    if not rows:
-        raise ValueError(f"{folder}: the recording holds no successfully measured sample points")
-    columns = [np.array(c, dtype=float) for c in zip(*rows)]
-    return Reduced(
-        theta_i=columns[0], phi_i=columns[1], theta_r=columns[2], phi_r=columns[3], view=columns[4],
-        radiance=columns[5], radiance_sigma=columns[6], repeats=columns[7].astype(int),
-        reference_irradiance=reference_irradiance, reference_irradiance_sigma=reference_sigma,
-        label=label, metadata={"recording": str(folder), "protocol": meta.get("protocol", {}).get("name"),
-                               **({"aperture_sr": [float(a) for a in aperture]} if aperture else {})},
-    )
-
-
-def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced:
-    """Join reduced recordings of one sample (e.g. in-plane and off-plane runs).
-
-    The geometries are concatenated; the reference irradiances, when present, are
-    combined by their inverse-variance weighted mean (the runs must share lamp, voltage
-    and camera settings for their relative radiances to be comparable).
-    """
-    if not parts:
-        raise ValueError("combine_reduced needs at least one reduced recording")
-    apertures = {tuple(p.metadata.get("aperture_sr", ())) for p in parts}
-    if len(apertures) > 1:
-        raise ValueError(f"cannot combine recordings measured through different apertures: {sorted(apertures)}")
-    cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
-    refs = [(p.reference_irradiance, p.reference_irradiance_sigma) for p in parts if p.reference_irradiance is not None]
-    irradiance = sigma = None
-    if refs:
-        weights = np.array([1.0 / s**2 for _, s in refs])
-        irradiance = float(np.sum(weights * np.array([e for e, _ in refs])) / np.sum(weights))
-        sigma = float(1.0 / math.sqrt(np.sum(weights)))
-    return Reduced(
-        theta_i=cat("theta_i"), phi_i=cat("phi_i"), theta_r=cat("theta_r"), phi_r=cat("phi_r"), view=cat("view"),
-        radiance=cat("radiance"), radiance_sigma=cat("radiance_sigma"), repeats=cat("repeats"),
-        reference_irradiance=irradiance, reference_irradiance_sigma=sigma,
-        label=label or parts[0].label,
-        metadata={"recordings": [p.metadata.get("recording") for p in parts],
-                  **({"aperture_sr": parts[0].metadata["aperture_sr"]} if "aperture_sr" in parts[0].metadata else {})},
-    )

@@ -24,13 +24,15 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
+
+from .files import write_atomic
 
 __all__ = [
     "COLUMNS",
@@ -41,35 +43,43 @@ __all__ = [
     "read_darks",
     "read_metadata",
     "point_key",
+    "experiment_differences",
+    "duplicated_rows",
+    "RECORDING_FILES",
 ]
 
 #: Columns of points.csv: (name, unit, description).
 COLUMNS: tuple[tuple[str, str, str], ...] = (
-    ("index", "-", "index of the point in the protocol's plan"),
-    ("block", "-", "name of the protocol block"),
-    ("repeat", "-", "repeat number within the block (0-based)"),
+    ("index", "-", "index of the point in the protocol's plan (negative: reference standard and lamp checks)"),
+    ("block", "-", "name of the protocol block ('reference standard', 'lamp check' for the extra measurements)"),
+    ("repeat", "-", "repeat number within the block (0-based; the check number for lamp checks)"),
     ("theta_i", "deg", "lamp polar angle (planned)"),
     ("phi_i", "deg", "lamp azimuth from the camera's swing plane (planned)"),
     ("view", "deg", "signed camera angle (planned; + on the azimuth-0 side)"),
-    ("theta_r", "deg", "viewing polar angle, sample frame"),
+    ("theta_r", "deg", "viewing polar angle, sample frame (planned)"),
     ("phi_r", "deg", "viewing azimuth, sample frame (0 or 180)"),
-    ("status", "-", "ok, refused (rig refused the move) or error"),
-    ("roi_mean", "DN", "mean pixel value in the region of interest"),
-    ("roi_std", "DN", "standard deviation of the pixels in the region of interest"),
+    ("status", "-", "ok, refused (rig refused the move) or error (measurement failed; see message)"),
+    ("flags", "-", "';'-separated quality flags of an ok point: saturated (excluded from fits), low_signal"),
+    ("roi_mean", "DN", "mean pixel value in the region of interest (mean over the frames)"),
+    ("roi_std", "DN", "standard deviation of the pixels in the region of interest (rms over the frames)"),
     ("roi_pixels", "-", "number of pixels in the region of interest"),
-    ("saturated", "-", "saturated pixels in the region of interest"),
+    ("saturated", "-", "saturated pixels in the region of interest of the frames used"),
     ("exposure", "s", "exposure time"),
     ("gain", "-", "camera analog gain factor"),
-    ("frames", "-", "frames averaged"),
+    ("frames", "-", "frames averaged (all at this exposure)"),
+    ("frames_saturated", "-", "exposures left out because they saturated (HDR brackets)"),
     ("dark_mean", "DN", "mean of the dark frame used (same exposure and ROI)"),
     ("dark_std", "DN", "standard deviation of that dark ROI"),
-    ("signal_rate", "DN/s", "dark-subtracted ROI mean per unit exposure time"),
-    ("signal_rate_sigma", "DN/s", "1-sigma uncertainty of signal_rate from the CCD noise model"),
+    ("signal_rate", "DN/s", "dark-subtracted ROI mean per unit exposure time and gain"),
+    ("signal_rate_sigma", "DN/s", "quick 1-sigma estimate of signal_rate from the ROI statistics alone"),
+    ("frame_rate_std", "DN/s", "standard deviation of the per-frame signal rates (frames > 1), else empty"),
+    ("monitor", "V", "lamp monitor reading over the exposure (mean over the frames); empty without a monitor"),
     ("lamp_voltage", "V", "measured lamp supply voltage"),
     ("lamp_current", "A", "measured lamp supply current"),
-    ("stage_camera", "deg", "camera axis read back after the move"),
+    ("stage_camera", "deg", "camera axis read back after the move (the reduction uses it)"),
     ("stage_lamp_theta", "deg", "lamp polar axis read back"),
     ("stage_lamp_phi", "deg", "lamp azimuth axis read back"),
+    ("session", "-", "0 for the first run of the recording, k for its k-th resume"),
     ("instrument_time", "s", "instrument clock at the end of the point"),
     ("wall_time", "-", "ISO 8601 wall-clock time at the end of the point"),
     ("message", "-", "reason for a refused or failed point, else empty"),
@@ -83,18 +93,26 @@ DARK_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("roi_mean", "DN", "mean of the dark ROI"),
     ("roi_std", "DN", "standard deviation of the dark ROI"),
     ("roi_pixels", "-", "pixels in the ROI"),
+    ("monitor", "V", "lamp monitor reading during the dark exposure (the lamp stays on); empty without one"),
     ("instrument_time", "s", "instrument clock"),
     ("wall_time", "-", "ISO 8601 wall-clock time"),
 )
 
+#: Files of a recording folder (a new recording refuses a folder holding any of them).
+RECORDING_FILES = ("metadata.json", "points.csv", "darks.csv", "points.partial", "darks.partial")
+
 _NAMES = tuple(c[0] for c in COLUMNS)
 _DARK_NAMES = tuple(c[0] for c in DARK_COLUMNS)
-_TEXT = {"block", "status", "wall_time", "message"}
-_INT = {"index", "repeat", "roi_pixels", "saturated", "frames", "after_index"}
+_TEXT = {"block", "status", "flags", "wall_time", "message"}
+_INT = {"index", "repeat", "roi_pixels", "saturated", "frames", "frames_saturated", "session", "after_index"}
+#: A text cell starting with one of these is prefixed with "'" so that a spreadsheet
+#: shows it as text instead of running it as a formula (OWASP, "CSV Injection"); the
+#: quote itself is escaped the same way, so reading strips exactly one.
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r", "'")
 
 
 class RecordingError(ValueError):
-    """A recording folder is missing files or holds rows that do not parse."""
+    """A recording folder is missing files, holds rows that do not parse, or cannot be written."""
 
 
 def point_key(block: str, repeat: int, theta_i: float, phi_i: float, view: float) -> tuple:
@@ -115,24 +133,63 @@ def _row_text(names: tuple[str, ...], row: Mapping[str, Any]) -> str:
         raise RecordingError(f"unknown recording columns {sorted(unknown)}; expected some of {list(names)}")
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(["" if row.get(n) is None else _format(row.get(n)) for n in names])
+    writer.writerow(["" if row.get(n) is None else _format(row.get(n), n in _TEXT) for n in names])
     return buffer.getvalue()
 
 
-def _format(value: Any) -> str:
+def _format(value: Any, text: bool = False) -> str:
     if isinstance(value, float):
-        return repr(value)  # shortest exact round-trip representation
-    return str(value)
+        return "" if math.isnan(value) else repr(value)  # shortest exact round-trip representation
+    out = str(value)
+    if text and out.startswith(_FORMULA_START):
+        out = "'" + out
+    return out
+
+
+def _unescape(value: str) -> str:
+    return value[1:] if value.startswith("'") else value
 
 
 def _write_json_atomic(path: Path, payload: Mapping) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".metadata-", suffix=".json")
-    with os.fdopen(fd, "w", encoding="utf-8") as handle:
-        json.dump(payload, handle, indent=2, default=str)
-        handle.write("\n")
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
+    write_atomic(path, json.dumps(payload, indent=2, default=str) + "\n")
+
+
+def experiment_differences(stored: Mapping[str, Any], current: Mapping[str, Any]) -> list[str]:
+    """What differs between two experiment descriptions (``metadata["experiment"]``).
+
+    Nested mappings are compared key by key; each difference is one phrase
+    ``"<key>: recorded <a>, now <b>"``.
+
+    Examples
+    --------
+    >>> experiment_differences({"seed": 0, "rig": {"sample": "a"}}, {"seed": 1, "rig": {"sample": "a"}})
+    ['seed: recorded 0, now 1']
+    """
+    out: list[str] = []
+    for key in sorted(set(stored) | set(current)):
+        a, b = stored.get(key), current.get(key)
+        if isinstance(a, Mapping) and isinstance(b, Mapping):
+            out += [f"{key}.{d}" for d in experiment_differences(a, b)]
+        elif a != b:
+            out.append(f"{key}: recorded {a!r}, now {b!r}")
+    return out
+
+
+def duplicated_rows(rows: Iterable[Mapping[str, Any]]) -> dict[tuple, list[int]]:
+    """Point keys recorded more than once with a final status (ok or refused), with their CSV lines."""
+    seen: dict[tuple, list[int]] = {}
+    for line, r in enumerate(rows, start=2):
+        if r["status"] in ("ok", "refused"):
+            seen.setdefault(point_key(r["block"], r["repeat"], r["theta_i"], r["phi_i"], r["view"]), []).append(line)
+    return {key: lines for key, lines in seen.items() if len(lines) > 1}
+
+
+def _describe_duplicates(folder: Path, duplicates: Mapping[tuple, list[int]]) -> str:
+    shown = "; ".join(f"{key[0]!r} repeat {key[1]} at theta_i={key[2]:g}, phi_i={key[3]:g}, view={key[4]:g} "
+                      f"on lines {', '.join(map(str, lines))}" for key, lines in list(duplicates.items())[:3])
+    more = f" and {len(duplicates) - 3} more" if len(duplicates) > 3 else ""
+    return (f"{folder / 'points.csv'}: {len(duplicates)} point(s) recorded more than once ({shown}{more}); "
+            "the recording mixes runs. Keep the rows you trust in a copy of the folder and reduce that")
 
 
 @dataclass
@@ -142,14 +199,18 @@ class RecordingWriter:
     Parameters
     ----------
     folder : path
-        Recording folder; created if missing.
+        Recording folder; created if missing. A new recording refuses a folder that
+        already holds any file of a recording (:data:`RECORDING_FILES`): gonio never
+        overwrites or appends to files it did not write in this recording.
     metadata : mapping
-        Run metadata (protocol text, configuration, versions).  On a new recording it is
-        written as metadata.json; on resume the stored metadata is kept and ``metadata``
-        is merged under ``"resumed"`` entries.
+        Run metadata (protocol text, configuration, versions, and under ``"experiment"``
+        what must not change within a recording).  On a new recording it is written as
+        metadata.json; on resume the stored metadata is kept and ``metadata`` is
+        appended under ``"resumes"``.
     resume : bool
-        Continue an existing recording.  Without it, an existing non-empty recording is an
-        error (nothing is ever overwritten).
+        Continue an existing recording.  It must hold the same experiment (protocol
+        content, sample, rig settings, seed, lamp voltage: ``metadata["experiment"]``);
+        any difference is refused with a message that names it.
     """
 
     folder: Path
@@ -161,27 +222,54 @@ class RecordingWriter:
         self.points_path = self.folder / "points.csv"
         self.darks_path = self.folder / "darks.csv"
         self.metadata_path = self.folder / "metadata.json"
-        exists = self.points_path.exists() and self.points_path.stat().st_size > 0
-        if exists and not self.resume:
-            raise RecordingError(
-                f"{self.folder} already holds a recording; use resume to continue it or choose "
-                "another folder (gonio never overwrites measured data)"
-            )
-        if self.resume and not exists:
-            raise RecordingError(f"{self.folder}: no recording to resume (points.csv missing or empty)")
-        self.folder.mkdir(parents=True, exist_ok=True)
-        if exists:
-            self._salvage_partial_line(self.points_path, "points.partial")
-            if self.darks_path.exists():
-                self._salvage_partial_line(self.darks_path, "darks.partial")
-            stored = read_metadata(self.folder)
-            stored.setdefault("resumes", []).append(dict(self.metadata))
-            self._metadata = stored
+        if self.folder.exists() and not self.folder.is_dir():
+            raise RecordingError(f"{self.folder} exists and is not a folder; give a folder for the recording")
+        if self.resume:
+            self._metadata = self._open_for_resume()
         else:
-            self._metadata = dict(self.metadata)
-            _fsync_append(self.points_path, ",".join(_NAMES) + "\n")
-            _fsync_append(self.darks_path, ",".join(_DARK_NAMES) + "\n")
+            self._metadata = self._create()
         self._metadata["status"] = "running"
+        self._write_metadata()
+
+    def _create(self) -> dict:
+        present = [name for name in RECORDING_FILES if (self.folder / name).exists()]
+        if present:
+            raise RecordingError(
+                f"{self.folder} already holds {', '.join(present)}; use resume to continue a recording or "
+                "choose another folder (gonio never overwrites measured data)"
+            )
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise RecordingError(f"cannot create the recording folder {self.folder}: {error.strerror or error}") from None
+        _fsync_append(self.points_path, ",".join(_NAMES) + "\n")
+        _fsync_append(self.darks_path, ",".join(_DARK_NAMES) + "\n")
+        return dict(self.metadata)
+
+    def _open_for_resume(self) -> dict:
+        if not (self.points_path.exists() and self.points_path.stat().st_size > 0):
+            raise RecordingError(f"{self.folder}: no recording to resume (points.csv missing or empty)")
+        stored = read_metadata(self.folder)
+        _check_header(self.points_path, _NAMES, for_writing=True)
+        differences = experiment_differences(stored.get("experiment", {}), self.metadata.get("experiment", {}))
+        if differences:
+            raise RecordingError(
+                f"cannot resume {self.folder}: this run is a different experiment from the recording ("
+                + "; ".join(differences) + "). Start a new recording in another folder"
+            )
+        self._salvage_partial_line(self.points_path, "points.partial")
+        if self.darks_path.exists():
+            _check_header(self.darks_path, _DARK_NAMES, for_writing=True)
+            self._salvage_partial_line(self.darks_path, "darks.partial")
+        else:
+            _fsync_append(self.darks_path, ",".join(_DARK_NAMES) + "\n")
+        duplicates = duplicated_rows(read_points(self.folder, as_arrays=False))
+        if duplicates:
+            raise RecordingError(_describe_duplicates(self.folder, duplicates))
+        stored.setdefault("resumes", []).append({k: v for k, v in self.metadata.items() if k != "experiment"})
+        return stored
+
+    def _write_metadata(self) -> None:
         _write_json_atomic(self.metadata_path, self._metadata)
 
     def _salvage_partial_line(self, path: Path, partial_name: str) -> None:
@@ -193,6 +281,11 @@ class RecordingWriter:
                 handle.truncate(cut)
                 handle.flush()
                 os.fsync(handle.fileno())
+
+    @property
+    def stored_metadata(self) -> Mapping[str, Any]:
+        """The recording's metadata as it is on disk (read-only view)."""
+        return dict(self._metadata)
 
     def done_keys(self) -> set[tuple]:
         """Keys of points already recorded with a final status (ok or refused)."""
@@ -211,11 +304,16 @@ class RecordingWriter:
         """Append one dark-frame row and flush it to disk."""
         _fsync_append(self.darks_path, _row_text(_DARK_NAMES, row))
 
+    def update(self, **entries: Any) -> None:
+        """Add entries to metadata.json (e.g. a characterisation measured during the run)."""
+        self._metadata.update(entries)
+        self._write_metadata()
+
     def finish(self, status: str, **extra: Any) -> None:
         """Record the run's final status ("complete", "interrupted", "failed") in metadata."""
         self._metadata["status"] = status
         self._metadata.update(extra)
-        _write_json_atomic(self.metadata_path, self._metadata)
+        self._write_metadata()
 
 
 def read_metadata(folder: str | Path) -> dict:
@@ -225,35 +323,69 @@ def read_metadata(folder: str | Path) -> dict:
         return json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise RecordingError(f"{folder}: not a recording (metadata.json missing)") from None
-    except json.JSONDecodeError as error:
-        raise RecordingError(f"{path}: not valid JSON ({error})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise RecordingError(f"{path}: not valid UTF-8 JSON ({error})") from None
+    except OSError as error:
+        raise RecordingError(f"{path}: cannot read ({error.strerror or error})") from None
+
+
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise RecordingError(f"{path.parent}: not a recording ({path.name} missing)") from None
+    except UnicodeDecodeError as error:
+        raise RecordingError(f"{path}: not a UTF-8 text file (byte {error.start}: {error.reason})") from None
+    except OSError as error:
+        raise RecordingError(f"{path}: cannot read ({error.strerror or error})") from None
+
+
+def _check_header(path: Path, names: tuple[str, ...], for_writing: bool = False,
+                  first_line: str | None = None) -> tuple[str, ...]:
+    """The header of a recording CSV; older formats (a subset of the columns) are readable
+    but cannot be appended to."""
+    if first_line is None:
+        first_line = _read_text(path).split("\n", 1)[0]
+    header = tuple(next(csv.reader([first_line]), []))
+    if header == names:
+        return header
+    unknown = [h for h in header if h not in names]
+    if for_writing or unknown or not header:
+        raise RecordingError(
+            f"{path}: header {list(header)} is not the expected {list(names)}"
+            + (" (a recording of another format cannot be resumed)" if for_writing and not unknown else "")
+        )
+    return header
+
+
+def _parse_cell(path: Path, number: int, name: str, value: str | None) -> Any:
+    if value is None:
+        raise RecordingError(f"{path}, line {number}: the row has fewer fields than the header (column '{name}' missing)")
+    if name in _TEXT:
+        return _unescape(value)
+    if value == "":
+        return -1 if name in _INT else np.nan
+    try:
+        return int(value) if name in _INT else float(value)
+    except ValueError:
+        raise RecordingError(f"{path}, line {number}, column '{name}': expected a number, got {value!r}") from None
 
 
 def _read_csv(path: Path, names: tuple[str, ...], as_arrays: bool):
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise RecordingError(f"{path.parent}: not a recording ({path.name} missing)") from None
+    text = _read_text(path)
     lines = text.splitlines(keepends=True)
     if lines and not lines[-1].endswith("\n"):
         lines = lines[:-1]  # a row still being written is not a measurement yet
+    header = _check_header(path, names, first_line=lines[0] if lines else "")
     reader = csv.DictReader(lines)
-    if reader.fieldnames is None or tuple(reader.fieldnames) != names:
-        raise RecordingError(f"{path}: header {reader.fieldnames} is not the expected {list(names)}")
     rows = []
     for number, raw in enumerate(reader, start=2):
-        row = {}
+        if None in raw:
+            raise RecordingError(f"{path}, line {number}: the row has more fields than the header")
+        row = {name: _parse_cell(path, number, name, raw[name]) for name in header}
         for name in names:
-            value = raw[name]
-            if name in _TEXT:
-                row[name] = value
-            elif value == "":
-                row[name] = np.nan if name not in _INT else -1
-            else:
-                try:
-                    row[name] = int(value) if name in _INT else float(value)
-                except ValueError:
-                    raise RecordingError(f"{path}, line {number}, column '{name}': expected a number, got {value!r}") from None
+            if name not in row:  # a column of a newer format: not available
+                row[name] = "" if name in _TEXT else (-1 if name in _INT else np.nan)
         rows.append(row)
     if not as_arrays:
         return rows

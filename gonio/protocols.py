@@ -1,11 +1,12 @@
 """Sweep protocols: the TOML files users write to script a measurement, and their plans.
 
 A protocol names the sample, the rig's limits, how to expose, how often to take dark
-frames, an optional reference-standard measurement, and blocks of lamp directions each
-with the camera angles to visit.  :func:`load` reads and validates a file (every error
-names the file, the field and what was expected); :func:`plan` turns a protocol into the
-ordered list of measurement points, lists every point the rig would refuse (travel
-limits, camera/lamp separation) with its reason, and estimates the instrument time.
+frames, an optional reference-standard measurement, optional lamp-stability checks, and
+blocks of lamp directions each with the camera angles to visit.  :func:`load` reads and
+validates a file (every error names the file, the field and what was expected);
+:func:`plan` turns a protocol into the ordered list of measurement points, lists every
+point the rig would refuse (travel limits, camera/lamp separation) with its reason, and
+estimates the instrument time.
 
 The rig (Oren & Nayar 1995, section 5, Fig 15; our rig motorises the lamp) has three axes:
 the camera swings in one plane (signed camera angle ``view``: the camera sits at polar
@@ -17,11 +18,18 @@ the source side).  The rig has no sample-rotation stage, so it realises any pair
 directions up to a common rotation about the normal: for isotropic samples (all the
 papers' models) that is every geometry.
 
+Every number in a protocol must be finite, and the size of a plan is bounded
+(:data:`MAX_PLANNED_POINTS`, :data:`MAX_REPEATS`, :data:`MAX_FRAMES`,
+:data:`MAX_HDR_BRACKETS`) and checked arithmetically before anything is expanded, so a
+mistyped file fails at once with one message instead of exhausting time or memory.
+
 The file format is documented in docs/protocols.md.
 """
 from __future__ import annotations
 
+import difflib
 import math
+import stat
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,6 +50,7 @@ __all__ = [
     "Exposure",
     "Darks",
     "Reference",
+    "Checks",
     "Block",
     "Protocol",
     "PlannedPoint",
@@ -51,11 +60,40 @@ __all__ = [
     "loads",
     "plan",
     "rig_coordinates",
+    "MAX_PLANNED_POINTS",
+    "MAX_REPEATS",
+    "MAX_FRAMES",
+    "MAX_HDR_BRACKETS",
 ]
 
 FORMAT_VERSION = 1
 #: Rounding allowance when comparing the camera/lamp separation with its minimum [deg].
 SEPARATION_TOLERANCE = 1e-6
+
+#: Most measurement points a protocol may plan (blocks x theta_i x view x repeats, refused
+#: points included), checked arithmetically before the plan is expanded.
+MAX_PLANNED_POINTS = 200_000
+#: Most repeats of one block's sweep.
+MAX_REPEATS = 10_000
+#: Most frames averaged per point (``exposure.frames``) or per check (``checks.frames``).
+MAX_FRAMES = 100
+#: Fewest frames of a lamp-stability check (its scatter measures the flicker).
+MIN_CHECK_FRAMES = 2
+#: Most exposure times of an HDR bracket series.
+MAX_HDR_BRACKETS = 16
+#: Longest exposure the camera takes [s]: the upper end of an HDR bracket.
+MAX_EXPOSURE_SECONDS = 60.0
+#: Most angles one ``{start, stop, step}`` range expands to.
+MAX_RANGE_ANGLES = 100_000
+#: Largest protocol file read [bytes] (a protocol is a few kB; this stops a device or a
+#: data file given by mistake from filling the memory).
+MAX_FILE_BYTES = 10_000_000
+#: Stage speed and acceleration the time estimate uses when the protocol leaves the
+#: controller's settings [deg/s, deg/s^2].
+DEFAULT_VELOCITY = 10.0
+DEFAULT_ACCELERATION = 20.0
+#: Relative standard uncertainties of a reference standard are at most this [-].
+MAX_REFERENCE_UNCERTAINTY = 0.5
 
 
 class ProtocolError(ValueError):
@@ -77,10 +115,12 @@ class RigLimits:
         Lamp azimuth travel [deg].
     min_separation : float
         Smallest angle allowed between camera and lamp directions [deg] (their housings).
-    velocity : float
-        Stage slew speed [deg/s] used for time estimates.
-    acceleration : float
-        Stage acceleration [deg/s^2] used for time estimates.
+    velocity : float or None
+        Stage slew speed [deg/s] programmed into every stage axis; None leaves the
+        controller's setting (the time estimate then assumes 10 deg/s).
+    acceleration : float or None
+        Stage acceleration [deg/s^2] programmed into every stage axis; None leaves the
+        controller's setting (the time estimate then assumes 20 deg/s^2).
     settle_time : float
         Wait after each move before exposing [s].
     readout_time : float
@@ -95,22 +135,47 @@ class RigLimits:
     lamp_theta_range: tuple[float, float] = (0.0, 90.0)
     lamp_phi_range: tuple[float, float] = (-180.0, 180.0)
     min_separation: float = 5.0
-    velocity: float = 10.0
-    acceleration: float = 20.0
+    velocity: float | None = None
+    acceleration: float | None = None
     settle_time: float = 0.2
     readout_time: float = 0.1
     lamp_solid_angle: float = 0.003
     camera_solid_angle: float = 0.0009
+
+    @property
+    def estimate_velocity(self) -> float:
+        """Stage speed the time estimate uses [deg/s]: ``velocity``, else 10 deg/s."""
+        return DEFAULT_VELOCITY if self.velocity is None else self.velocity
+
+    @property
+    def estimate_acceleration(self) -> float:
+        """Stage acceleration the time estimate uses [deg/s^2]: ``acceleration``, else 20."""
+        return DEFAULT_ACCELERATION if self.acceleration is None else self.acceleration
 
 
 @dataclass(frozen=True)
 class Exposure:
     """Exposure policy.
 
-    ``mode`` is ``"auto"`` (adjust the exposure until the ROI mean sits near
-    ``target_fraction`` of full scale with no saturated pixel, starting from ``time``),
-    ``"fixed"`` (always ``time``) or ``"hdr"`` (one frame per time in ``brackets``, combined
-    from the unsaturated ones).  Times in seconds.
+    Attributes
+    ----------
+    mode : str
+        ``"auto"`` (adjust the exposure until the ROI mean sits near ``target_fraction`` of
+        full scale with no saturated pixel, starting from ``time``), ``"fixed"`` (always
+        ``time``) or ``"hdr"`` (one frame per time in ``brackets``, combined from the
+        unsaturated ones).
+    time : float
+        The fixed exposure time, or the first guess of the automatic exposure [s]
+        (1e-6 to 60).
+    brackets : tuple of float
+        HDR exposure times [s], each in (0, 60], at most 16 (mode ``"hdr"`` only).
+    target_fraction : float
+        The automatic exposure's aim: the ROI mean as a fraction of full scale [-]
+        (0.05 to 0.95); passed to the rig.
+    max_time : float
+        The longest automatic exposure [s] (1e-6 to 600); passed to the rig.
+    frames : int
+        Frames averaged per point (1 to 100).
     """
 
     mode: str = "auto"
@@ -135,11 +200,53 @@ class Reference:
 
     The standard (e.g. a diffuse reflectance standard treated as Lambertian with
     ``reflectance``) is measured at each (theta_i, phi_i, view) in ``geometries``.
+
+    Attributes
+    ----------
+    label : str
+        What the standard is.
+    reflectance : float
+        Its certified (Lambertian) albedo [-], in [0, 1].
+    geometries : tuple of (float, float, float)
+        (theta_i, phi_i, view) where it is measured [deg].
+    reflectance_uncertainty : float
+        Relative standard uncertainty of the certified reflectance [-], in [0, 0.5].
+    angular_uncertainty : float
+        Relative standard uncertainty from the standard's departure from Lambertian at
+        the measured geometries [-], in [0, 0.5].
     """
 
     label: str
     reflectance: float
     geometries: tuple[tuple[float, float, float], ...]
+    reflectance_uncertainty: float = 0.0
+    angular_uncertainty: float = 0.0
+
+
+@dataclass(frozen=True)
+class Checks:
+    """Lamp-stability check measurements, for rigs without a lamp monitor.
+
+    The check geometry on the sample is re-measured with ``frames`` exposures before the
+    first sample point, after every ``every`` measured sample points, at the end of the
+    sample points (before the reference standard, if any) and after the reference block.
+    The reduction interpolates the lamp drift between checks and measures the flicker from
+    their scatter.
+
+    Attributes
+    ----------
+    every : int
+        Measured sample points between checks; 0 = no checks at all.
+    geometry : (float, float, float) or None
+        (theta_i, phi_i, view) of the check [deg]; None = the first planned point the
+        plan does not refuse.
+    frames : int
+        Exposures per check (2 to 100).
+    """
+
+    every: int = 0
+    geometry: tuple[float, float, float] | None = None
+    frames: int = 5
 
 
 @dataclass(frozen=True)
@@ -178,105 +285,28 @@ class Protocol:
     darks: Darks
     blocks: tuple[Block, ...]
     reference: Reference | None = None
+    checks: Checks = Checks()
     source: str = "<string>"
     text: str = ""
 
 
-# --------------------------------------------------------------------------- parsing
-class _Fields:
-    """Reads typed fields from a TOML table, raising errors that name file and field."""
+# --------------------------------------------------------------------------- field reading
+def _finite(value: Any) -> float | None:
+    """``value`` as a float if it is a finite number (not a bool), else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond the float range
+        return None
+    return number if math.isfinite(number) else None
 
-    def __init__(self, source: str):
-        self.source = source
 
-    def fail(self, field_name: str, expected: str, got: Any = None, *, show_got: bool = True) -> ProtocolError:
-        tail = f", got {got!r}" if show_got else ""
-        return ProtocolError(f"{self.source}: field '{field_name}': expected {expected}{tail}")
-
-    def table(self, data: Mapping, key: str, where: str, required: bool = False) -> Mapping:
-        value = data.get(key, None)
-        if value is None:
-            if required:
-                raise self.fail(_join(where, key), "a table", show_got=False)
-            return {}
-        if not isinstance(value, Mapping):
-            raise self.fail(_join(where, key), "a table", value)
-        return value
-
-    def unknown(self, data: Mapping, allowed: Iterable[str], where: str) -> None:
-        allowed = set(allowed)
-        for key in data:
-            if key not in allowed:
-                import difflib
-
-                hint = difflib.get_close_matches(key, sorted(allowed), n=1)
-                extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-                raise ProtocolError(
-                    f"{self.source}: field '{_join(where, key)}' is not a known field{extra}; "
-                    f"known fields here: {sorted(allowed)}"
-                )
-
-    def string(self, data: Mapping, key: str, where: str, default: str | None = None) -> str:
-        value = data.get(key, default)
-        if value is None:
-            raise self.fail(_join(where, key), "a string (required)", show_got=False)
-        if not isinstance(value, str) or not value.strip():
-            raise self.fail(_join(where, key), "a non-empty string", value)
-        return value
-
-    def number(
-        self, data: Mapping, key: str, where: str, default: float | None = None,
-        low: float = -math.inf, high: float = math.inf, unit: str = "",
-    ) -> float:
-        value = data.get(key, default)
-        name = _join(where, key)
-        if value is None:
-            raise self.fail(name, f"a number{_unit(unit)} (required)", show_got=False)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
-            raise self.fail(name, f"a number{_unit(unit)}", value)
-        if not low <= value <= high:
-            raise self.fail(name, f"a number in [{low:g}, {high:g}]{_unit(unit)}", value)
-        return float(value)
-
-    def integer(self, data: Mapping, key: str, where: str, default: int, low: int = 0) -> int:
-        value = data.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise self.fail(_join(where, key), f"an integer >= {low}", value)
-        return int(value)
-
-    def boolean(self, data: Mapping, key: str, where: str, default: bool) -> bool:
-        value = data.get(key, default)
-        if not isinstance(value, bool):
-            raise self.fail(_join(where, key), "true or false", value)
-        return value
-
-    def pair(self, data: Mapping, key: str, where: str, default: tuple[float, float], unit: str) -> tuple[float, float]:
-        value = data.get(key, list(default))
-        name = _join(where, key)
-        if (not isinstance(value, list) or len(value) != 2
-                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-                or value[0] > value[1]):
-            raise self.fail(name, f"[low, high] with low <= high{_unit(unit)}", value)
-        return float(value[0]), float(value[1])
-
-    def angles(self, value: Any, name: str) -> tuple[float, ...]:
-        """A list of angles, or a range table {start, stop, step} (stop included)."""
-        if isinstance(value, list):
-            if not value or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-                raise self.fail(name, "a non-empty list of angles [deg] or {start, stop, step}", value)
-            return tuple(float(v) for v in value)
-        if isinstance(value, Mapping):
-            self.unknown(value, ("start", "stop", "step"), name)
-            start = self.number(value, "start", name, unit="deg")
-            stop = self.number(value, "stop", name, unit="deg")
-            step = self.number(value, "step", name, low=1e-6, unit="deg")
-            count = int(math.floor((stop - start) / step + 1e-9)) + 1 if stop >= start else 0
-            if count <= 0:
-                raise self.fail(name, "stop >= start", {"start": start, "stop": stop})
-            if count > 100_000:
-                raise self.fail(name, "at most 100000 angles", f"{count} angles")
-            return tuple(round(start + k * step, 10) for k in range(count))
-        raise self.fail(name, "a list of angles [deg] or a table {start, stop, step}", value)
+def _interval(low: float, high: float, low_open: bool = False) -> str:
+    """``[low, high]``, ``(low, high]``, ``[low, inf)`` ... as text."""
+    left = f"({low:g}" if low_open or low == -math.inf else f"[{low:g}"
+    right = f"{high:g})" if high == math.inf else f"{high:g}]"
+    return f"{left}, {right}"
 
 
 def _join(where: str, key: str) -> str:
@@ -287,15 +317,238 @@ def _unit(unit: str) -> str:
     return f" [{unit}]" if unit else ""
 
 
+class _Fields:
+    """Reads typed fields from a TOML table, raising errors that name file and field.
+
+    Parameters
+    ----------
+    source : str
+        The file (or ``<string>``) named in every message.
+    """
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, field_name: str, expected: str, got: Any = None, *, show_got: bool = True) -> ProtocolError:
+        """The error for ``field_name``: what was expected and (optionally) what was found."""
+        tail = f", got {_shown(got)}" if show_got else ""
+        return ProtocolError(f"{self.source}: field '{field_name}': expected {expected}{tail}")
+
+    def table(self, data: Mapping, key: str, where: str, required: bool = False) -> Mapping:
+        """The sub-table ``key`` (empty when absent and not required)."""
+        value = data.get(key, None)
+        if value is None:
+            if required:
+                raise self.fail(_join(where, key), "a table", show_got=False)
+            return {}
+        if not isinstance(value, Mapping):
+            raise self.fail(_join(where, key), "a table", value)
+        return value
+
+    def unknown(self, data: Mapping, allowed: Iterable[str], where: str) -> None:
+        """Refuse keys of ``data`` outside ``allowed`` (suggesting the nearest known one)."""
+        allowed = set(allowed)
+        for key in data:
+            if key not in allowed:
+                hint = difflib.get_close_matches(key, sorted(allowed), n=1)
+                extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+                raise ProtocolError(
+                    f"{self.source}: field '{_join(where, key)}' is not a known field{extra}; "
+                    f"known fields here: {sorted(allowed)}"
+                )
+
+    def string(self, data: Mapping, key: str, where: str, default: str | None = None) -> str:
+        """A non-empty string (required unless ``default`` is given)."""
+        value = data.get(key, default)
+        if value is None:
+            raise self.fail(_join(where, key), "a string (required)", show_got=False)
+        if not isinstance(value, str) or not value.strip():
+            raise self.fail(_join(where, key), "a non-empty string", value)
+        return value
+
+    def number(
+        self, data: Mapping, key: str, where: str, default: float | None = None,
+        low: float = -math.inf, high: float = math.inf, unit: str = "", low_open: bool = False,
+    ) -> float:
+        """A finite number in [low, high] (or (low, high] with ``low_open``)."""
+        value = data.get(key, default)
+        name = _join(where, key)
+        if value is None:
+            raise self.fail(name, f"a finite number{_unit(unit)} (required)", show_got=False)
+        return self.bounded(value, name, low, high, unit, low_open)
+
+    def optional_number(
+        self, data: Mapping, key: str, where: str, low: float, high: float, unit: str, low_open: bool = False,
+    ) -> float | None:
+        """Like :meth:`number`, but None when the key is absent."""
+        if key not in data:
+            return None
+        return self.bounded(data[key], _join(where, key), low, high, unit, low_open)
+
+    def bounded(self, value: Any, name: str, low: float, high: float, unit: str = "", low_open: bool = False) -> float:
+        """``value`` as a float, refused unless finite and within the interval."""
+        number = _finite(value)
+        inside = number is not None and (low < number if low_open else low <= number) and number <= high
+        if not inside:
+            span = "" if (low, high) == (-math.inf, math.inf) else f" in {_interval(low, high, low_open)}"
+            raise self.fail(name, f"a finite number{span}{_unit(unit)}", value)
+        return number
+
+    def integer(
+        self, data: Mapping, key: str, where: str, default: int, low: int = 0,
+        high: int | None = None, limit: str = "",
+    ) -> int:
+        """An integer in [low, high]; ``limit`` names the protocol limit ``high`` is."""
+        value = data.get(key, default)
+        name = _join(where, key)
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            expected = f"an integer >= {low}" if high is None else f"an integer in [{low}, {high}]"
+            raise self.fail(name, expected, value)
+        if high is not None and value > high:
+            why = f" ({limit})" if limit else ""
+            raise self.fail(name, f"an integer in [{low}, {high}]{why}", value)
+        return int(value)
+
+    def boolean(self, data: Mapping, key: str, where: str, default: bool) -> bool:
+        """true or false."""
+        value = data.get(key, default)
+        if not isinstance(value, bool):
+            raise self.fail(_join(where, key), "true or false", value)
+        return value
+
+    def pair(
+        self, data: Mapping, key: str, where: str, default: tuple[float, float], unit: str,
+        low: float, high: float,
+    ) -> tuple[float, float]:
+        """[a, b] of finite numbers with low <= a <= b <= high."""
+        value = data.get(key, list(default))
+        name = _join(where, key)
+        expected = f"[low, high] of finite numbers with low <= high, within {_interval(low, high)}{_unit(unit)}"
+        if not isinstance(value, list) or len(value) != 2:
+            raise self.fail(name, expected, value)
+        numbers = [_finite(v) for v in value]
+        if None in numbers or not low <= numbers[0] <= numbers[1] <= high:
+            raise self.fail(name, expected, value)
+        return numbers[0], numbers[1]
+
+    def numbers(
+        self, value: Any, name: str, low: float, high: float, unit: str, *,
+        what: str = "angles", max_count: int = MAX_RANGE_ANGLES, limit: str = "", low_open: bool = False,
+    ) -> tuple[float, ...]:
+        """A list of finite numbers, or a range table {start, stop, step} (stop included).
+
+        The count of a range is computed before it is expanded; every value must lie in
+        [low, high] (or (low, high] with ``low_open``) [``unit``].
+        """
+        span = f"{_interval(low, high, low_open)}{_unit(unit)}"
+        why = f" ({limit})" if limit else ""
+        if isinstance(value, list):
+            if not value:
+                raise self.fail(name, f"a non-empty list of {what} {span} or {{start, stop, step}}", value)
+            if len(value) > max_count:
+                raise self.fail(name, f"at most {max_count} {what}{why}", _Said(f"{len(value)} values"))
+            return tuple(self.bounded(v, f"{name}[{k}]", low, high, unit, low_open) for k, v in enumerate(value))
+        if isinstance(value, Mapping):
+            self.unknown(value, ("start", "stop", "step"), name)
+            start = self.number(value, "start", name, low=low, high=high, unit=unit, low_open=low_open)
+            stop = self.number(value, "stop", name, low=low, high=high, unit=unit, low_open=low_open)
+            step = self.number(value, "step", name, low=1e-6, unit=unit)
+            if stop < start:
+                raise self.fail(name, "stop >= start", {"start": start, "stop": stop})
+            count = math.floor((stop - start) / step + 1e-9) + 1
+            if count > max_count:
+                raise self.fail(name, f"at most {max_count} {what}{why}", _Said(f"{count} values"))
+            values = tuple(round(start + k * step, 10) for k in range(count))
+            return tuple(self.bounded(v, name, low, high, unit, low_open) for v in values)
+        raise self.fail(name, f"a list of {what} {span} or a table {{start, stop, step}}", value)
+
+    def rig_geometry(self, value: Any, name: str, view_limit: float) -> tuple[float, float, float]:
+        """A [theta_i, phi_i, view] triple [deg]: finite, theta_i in [0, 90], phi_i in
+        [-360, 360], view in [-view_limit, view_limit]."""
+        if not isinstance(value, list) or len(value) != 3:
+            raise self.fail(name, "a [theta_i, phi_i, view] triple of numbers [deg]", value)
+        theta_i = self.bounded(value[0], f"{name}[0] (theta_i)", 0.0, 90.0, "deg")
+        phi_i = self.bounded(value[1], f"{name}[1] (phi_i)", -360.0, 360.0, "deg")
+        view = self.bounded(value[2], f"{name}[2] (view)", -view_limit, view_limit, "deg")
+        return theta_i, phi_i, view
+
+    def finite_tree(self, value: Any, name: str) -> None:
+        """Refuse NaN or infinite numbers anywhere in a free-form value (metadata)."""
+        if isinstance(value, Mapping):
+            for key, item in value.items():
+                self.finite_tree(item, _join(name, str(key)))
+        elif isinstance(value, list):
+            for k, item in enumerate(value):
+                self.finite_tree(item, f"{name}[{k}]")
+        elif isinstance(value, float) and not math.isfinite(value):
+            raise self.fail(name, "a finite number", value)
+
+
+class _Said(str):
+    """A description of what was found, shown without quotes in a message."""
+
+    def __repr__(self) -> str:
+        return str(self)
+
+
+def _shown(value: Any, limit: int = 120) -> str:
+    """``repr(value)`` cut to ``limit`` characters (a field may hold a huge list)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# --------------------------------------------------------------------------- sections
+_TOP_LEVEL = ("protocol", "sample", "rig", "exposure", "darks", "reference", "checks", "block")
+
+
 def loads(text: str, source: str = "<string>") -> Protocol:
-    """Parse and validate protocol TOML text (see :func:`load`)."""
+    """Parse and validate protocol TOML text (see :func:`load`).
+
+    Parameters
+    ----------
+    text : str
+        The TOML text.
+    source : str
+        Name used in error messages (the file).
+
+    Returns
+    -------
+    Protocol
+
+    Raises
+    ------
+    ProtocolError
+        Invalid TOML, or a field missing, unknown, not finite, out of range or beyond a
+        protocol limit; the message names the file, the field and what was expected.
+    """
+    data = _parse_toml(text, source)
+    f = _Fields(source)
+    f.unknown(data, _TOP_LEVEL, "")
+    name, description = _read_header(f, data)
+    sample, metadata = _read_sample(f, data)
+    rig = _read_rig(f, f.table(data, "rig", ""))
+    exposure = _read_exposure(f, f.table(data, "exposure", ""))
+    darks = _read_darks(f, f.table(data, "darks", ""))
+    reference = _read_reference(f, f.table(data, "reference", ""))
+    checks = _read_checks(f, f.table(data, "checks", ""), rig)
+    blocks = _read_blocks(f, data.get("block"))
+    return Protocol(
+        name=name, sample=sample, description=description, metadata=dict(metadata), rig=rig,
+        exposure=exposure, darks=darks, blocks=tuple(blocks), reference=reference, checks=checks,
+        source=source, text=text,
+    )
+
+
+def _parse_toml(text: str, source: str) -> dict:
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise ProtocolError(f"{source}: not valid TOML: {error}") from None
-    f = _Fields(source)
-    f.unknown(data, ("protocol", "sample", "rig", "exposure", "darks", "reference", "block"), "")
+    except RecursionError:
+        raise ProtocolError(f"{source}: not valid TOML: arrays or tables nested too deeply") from None
 
+
+def _read_header(f: _Fields, data: Mapping) -> tuple[str, str]:
     head = f.table(data, "protocol", "", required=True)
     f.unknown(head, ("name", "description", "format_version"), "protocol")
     version = f.integer(head, "format_version", "protocol", FORMAT_VERSION, low=1)
@@ -305,106 +558,168 @@ def loads(text: str, source: str = "<string>") -> Protocol:
     description = head.get("description", "")
     if not isinstance(description, str):
         raise f.fail("protocol.description", "a string", description)
+    return name, description
 
-    sample_table = f.table(data, "sample", "", required=True)
-    f.unknown(sample_table, ("label", "metadata"), "sample")
-    sample = f.string(sample_table, "label", "sample")
-    metadata = f.table(sample_table, "metadata", "sample")
 
-    rig_table = f.table(data, "rig", "")
-    f.unknown(rig_table, RigLimits.__dataclass_fields__.keys(), "rig")
+def _read_sample(f: _Fields, data: Mapping) -> tuple[str, Mapping]:
+    table = f.table(data, "sample", "", required=True)
+    f.unknown(table, ("label", "metadata"), "sample")
+    label = f.string(table, "label", "sample")
+    metadata = f.table(table, "metadata", "sample")
+    f.finite_tree(metadata, "sample.metadata")
+    return label, metadata
+
+
+def _read_rig(f: _Fields, table: Mapping) -> RigLimits:
+    f.unknown(table, RigLimits.__dataclass_fields__.keys(), "rig")
     base = RigLimits()
-    rig = RigLimits(
-        camera_range=f.pair(rig_table, "camera_range", "rig", base.camera_range, "deg"),
-        lamp_theta_range=f.pair(rig_table, "lamp_theta_range", "rig", base.lamp_theta_range, "deg"),
-        lamp_phi_range=f.pair(rig_table, "lamp_phi_range", "rig", base.lamp_phi_range, "deg"),
-        min_separation=f.number(rig_table, "min_separation", "rig", base.min_separation, 0.0, 90.0, "deg"),
-        velocity=f.number(rig_table, "velocity", "rig", base.velocity, 1e-6, unit="deg/s"),
-        acceleration=f.number(rig_table, "acceleration", "rig", base.acceleration, 1e-6, unit="deg/s^2"),
-        settle_time=f.number(rig_table, "settle_time", "rig", base.settle_time, 0.0, unit="s"),
-        readout_time=f.number(rig_table, "readout_time", "rig", base.readout_time, 0.0, unit="s"),
-        lamp_solid_angle=f.number(rig_table, "lamp_solid_angle", "rig", base.lamp_solid_angle, 0.0, 1.0, "sr"),
-        camera_solid_angle=f.number(rig_table, "camera_solid_angle", "rig", base.camera_solid_angle, 0.0, 1.0, "sr"),
+    return RigLimits(
+        camera_range=f.pair(table, "camera_range", "rig", base.camera_range, "deg", -180.0, 180.0),
+        lamp_theta_range=f.pair(table, "lamp_theta_range", "rig", base.lamp_theta_range, "deg", 0.0, 90.0),
+        lamp_phi_range=f.pair(table, "lamp_phi_range", "rig", base.lamp_phi_range, "deg", -360.0, 360.0),
+        min_separation=f.number(table, "min_separation", "rig", base.min_separation, 0.0, 90.0, "deg"),
+        velocity=f.optional_number(table, "velocity", "rig", 0.0, math.inf, "deg/s", low_open=True),
+        acceleration=f.optional_number(table, "acceleration", "rig", 0.0, math.inf, "deg/s^2", low_open=True),
+        settle_time=f.number(table, "settle_time", "rig", base.settle_time, 0.0, unit="s"),
+        readout_time=f.number(table, "readout_time", "rig", base.readout_time, 0.0, unit="s"),
+        lamp_solid_angle=f.number(table, "lamp_solid_angle", "rig", base.lamp_solid_angle, 0.0, 1.0, "sr"),
+        camera_solid_angle=f.number(table, "camera_solid_angle", "rig", base.camera_solid_angle, 0.0, 1.0, "sr"),
     )
 
-    exp_table = f.table(data, "exposure", "")
-    f.unknown(exp_table, Exposure.__dataclass_fields__.keys(), "exposure")
-    mode = exp_table.get("mode", "auto")
+
+def _read_exposure(f: _Fields, table: Mapping) -> Exposure:
+    f.unknown(table, Exposure.__dataclass_fields__.keys(), "exposure")
+    mode = table.get("mode", "auto")
     if mode not in ("auto", "fixed", "hdr"):
         raise f.fail("exposure.mode", "one of 'auto', 'fixed', 'hdr'", mode)
     brackets: tuple[float, ...] = ()
     if mode == "hdr":
-        if "brackets" not in exp_table:
+        if "brackets" not in table:
             raise f.fail("exposure.brackets", "a list of exposure times [s] (required for mode 'hdr')", show_got=False)
-        brackets = f.angles(exp_table["brackets"], "exposure.brackets")
-        if any(b <= 0 for b in brackets):
-            raise f.fail("exposure.brackets", "positive exposure times [s]", list(brackets))
-    elif "brackets" in exp_table:
-        raise f.fail("exposure.brackets", "no brackets unless mode = 'hdr'", exp_table["brackets"])
-    exposure = Exposure(
-        mode=mode,
-        time=f.number(exp_table, "time", "exposure", 0.02, 1e-6, 60.0, "s"),
-        brackets=brackets,
-        target_fraction=f.number(exp_table, "target_fraction", "exposure", 0.5, 0.05, 0.95),
-        max_time=f.number(exp_table, "max_time", "exposure", 5.0, 1e-6, 600.0, "s"),
-        frames=f.integer(exp_table, "frames", "exposure", 1, low=1),
-    )
-
-    dark_table = f.table(data, "darks", "")
-    f.unknown(dark_table, ("at_start", "every"), "darks")
-    darks = Darks(
-        at_start=f.boolean(dark_table, "at_start", "darks", True),
-        every=f.integer(dark_table, "every", "darks", 20, low=0),
-    )
-
-    reference = None
-    ref_table = f.table(data, "reference", "")
-    if ref_table:
-        f.unknown(ref_table, ("label", "reflectance", "geometries"), "reference")
-        geoms = ref_table.get("geometries", [[0.0, 0.0, 10.0]])
-        if (not isinstance(geoms, list) or not geoms
-                or not all(isinstance(g, list) and len(g) == 3 for g in geoms)):
-            raise f.fail("reference.geometries", "a list of [theta_i, phi_i, view] triples [deg]", geoms)
-        reference = Reference(
-            label=f.string(ref_table, "label", "reference"),
-            reflectance=f.number(ref_table, "reflectance", "reference", None, 0.0, 1.0),
-            geometries=tuple(tuple(float(x) for x in g) for g in geoms),
+        brackets = f.numbers(
+            table["brackets"], "exposure.brackets", 0.0, MAX_EXPOSURE_SECONDS, "s", low_open=True,
+            what="exposure times", max_count=MAX_HDR_BRACKETS,
+            limit=f"the limit on HDR brackets; each within the camera's range (0, {MAX_EXPOSURE_SECONDS:g}] s",
         )
+    elif "brackets" in table:
+        raise f.fail("exposure.brackets", "no brackets unless mode = 'hdr'", table["brackets"])
+    return Exposure(
+        mode=mode,
+        time=f.number(table, "time", "exposure", 0.02, 1e-6, MAX_EXPOSURE_SECONDS, "s"),
+        brackets=brackets,
+        target_fraction=f.number(table, "target_fraction", "exposure", 0.5, 0.05, 0.95),
+        max_time=f.number(table, "max_time", "exposure", 5.0, 1e-6, 600.0, "s"),
+        frames=f.integer(table, "frames", "exposure", 1, low=1, high=MAX_FRAMES, limit="the limit on frames per point"),
+    )
 
-    raw_blocks = data.get("block")
+
+def _read_darks(f: _Fields, table: Mapping) -> Darks:
+    f.unknown(table, ("at_start", "every"), "darks")
+    return Darks(
+        at_start=f.boolean(table, "at_start", "darks", True),
+        every=f.integer(table, "every", "darks", 20, low=0),
+    )
+
+
+def _read_reference(f: _Fields, table: Mapping) -> Reference | None:
+    if not table:
+        return None
+    f.unknown(table, Reference.__dataclass_fields__.keys(), "reference")
+    raw = table.get("geometries", [[0.0, 0.0, 10.0]])
+    if not isinstance(raw, list) or not raw:
+        raise f.fail("reference.geometries", "a non-empty list of [theta_i, phi_i, view] triples [deg]", raw)
+    if len(raw) > MAX_PLANNED_POINTS:
+        raise f.fail("reference.geometries", f"at most {MAX_PLANNED_POINTS} geometries (the limit on planned points)",
+                     _Said(f"{len(raw)} geometries"))
+    geometries = tuple(f.rig_geometry(g, f"reference.geometries[{k}]", 90.0) for k, g in enumerate(raw))
+    return Reference(
+        label=f.string(table, "label", "reference"),
+        reflectance=f.number(table, "reflectance", "reference", None, 0.0, 1.0),
+        geometries=geometries,
+        reflectance_uncertainty=f.number(table, "reflectance_uncertainty", "reference", 0.0,
+                                         0.0, MAX_REFERENCE_UNCERTAINTY),
+        angular_uncertainty=f.number(table, "angular_uncertainty", "reference", 0.0, 0.0, MAX_REFERENCE_UNCERTAINTY),
+    )
+
+
+def _read_checks(f: _Fields, table: Mapping, rig: RigLimits) -> Checks:
+    f.unknown(table, Checks.__dataclass_fields__.keys(), "checks")
+    geometry = None
+    if "geometry" in table:
+        geometry = f.rig_geometry(table["geometry"], "checks.geometry", 180.0)
+        reason = refusal_reason(*geometry, rig)
+        if reason is not None:
+            raise f.fail("checks.geometry", f"a geometry the rig can measure (the plan refuses it: {reason})",
+                         table["geometry"])
+    return Checks(
+        every=f.integer(table, "every", "checks", 0, low=0),
+        geometry=geometry,
+        frames=f.integer(table, "frames", "checks", Checks.frames, low=MIN_CHECK_FRAMES, high=MAX_FRAMES,
+                         limit="the limit on frames per check"),
+    )
+
+
+_BLOCK_FIELDS = ("name", "theta_i", "phi_i", "view", "repeats", "geometries")
+
+
+def _read_blocks(f: _Fields, raw_blocks: Any) -> list[Block]:
+    """Every ``[[block]]``, refusing a protocol that plans more than MAX_PLANNED_POINTS."""
     if not isinstance(raw_blocks, list) or not raw_blocks:
-        raise ProtocolError(f"{source}: field 'block': expected at least one [[block]] table with theta_i and view")
-    blocks = []
+        raise ProtocolError(f"{f.source}: field 'block': expected at least one [[block]] table with theta_i and view")
+    blocks: list[Block] = []
+    planned = 0
     for k, raw in enumerate(raw_blocks):
         where = f"block[{k}]"
         if not isinstance(raw, Mapping):
             raise f.fail(where, "a table", raw)
-        f.unknown(raw, ("name", "theta_i", "phi_i", "view", "repeats", "geometries"), where)
-        if "geometries" in raw:
-            blocks.extend(_geometry_blocks(f, raw, where))
-            continue
-        theta_values = raw.get("theta_i")
-        thetas = f.angles(theta_values, f"{where}.theta_i") if isinstance(theta_values, (list, dict)) else (
-            f.number(raw, "theta_i", where, None, 0.0, 90.0, "deg"),)
-        for t in thetas:
-            if not 0.0 <= t <= 90.0:
-                raise f.fail(f"{where}.theta_i", "angles in [0, 90] [deg]", t)
-        phi = f.number(raw, "phi_i", where, 0.0, -360.0, 360.0, "deg")
-        if "view" not in raw:
-            raise f.fail(f"{where}.view", "a list of signed camera angles [deg] or {start, stop, step} (required)", show_got=False)
-        views = f.angles(raw["view"], f"{where}.view")
-        repeats = f.integer(raw, "repeats", where, 1, low=1)
-        label = raw.get("name", None)
-        if label is not None and not isinstance(label, str):
-            raise f.fail(f"{where}.name", "a string", label)
-        for t in thetas:
-            default = f"theta_i={t:g}" + (f", phi_i={phi:g}" if phi else "")
-            blocks.append(Block(name=label or default, theta_i=t, phi_i=phi, views=views, repeats=repeats))
-    return Protocol(
-        name=name, sample=sample, description=description, metadata=dict(metadata), rig=rig,
-        exposure=exposure, darks=darks, blocks=tuple(blocks), reference=reference,
-        source=source, text=text,
-    )
+        f.unknown(raw, _BLOCK_FIELDS, where)
+        new = _geometry_blocks(f, raw, where) if "geometries" in raw else _sweep_blocks(f, raw, where)
+        planned += sum(len(b.views) * b.repeats for b in new)
+        if planned > MAX_PLANNED_POINTS:
+            raise f.fail(where, f"at most {MAX_PLANNED_POINTS} planned points in total (the limit on blocks x "
+                                "theta_i x view x repeats)", _Said(f"{planned} points up to this block"))
+        blocks.extend(new)
+    return blocks
+
+
+def _block_name(f: _Fields, raw: Mapping, where: str, default: str | None) -> str | None:
+    label = raw.get("name", default)
+    if label is not None and not isinstance(label, str):
+        raise f.fail(f"{where}.name", "a string", label)
+    return label
+
+
+def _repeats(f: _Fields, raw: Mapping, where: str) -> int:
+    return f.integer(raw, "repeats", where, 1, low=1, high=MAX_REPEATS, limit="the limit on repeats")
+
+
+def _sweep_blocks(f: _Fields, raw: Mapping, where: str) -> list[Block]:
+    """One block per lamp polar angle of a ``theta_i``/``phi_i``/``view`` table.
+
+    The size (thetas x views x repeats) is checked before any block is made.
+    """
+    theta_value = raw.get("theta_i")
+    if isinstance(theta_value, (list, Mapping)):
+        thetas = f.numbers(theta_value, f"{where}.theta_i", 0.0, 90.0, "deg")
+    else:
+        thetas = (f.number(raw, "theta_i", where, None, 0.0, 90.0, "deg"),)
+    phi = f.number(raw, "phi_i", where, 0.0, -360.0, 360.0, "deg")
+    if "view" not in raw:
+        raise f.fail(f"{where}.view", "a list of signed camera angles [deg] or {start, stop, step} (required)",
+                     show_got=False)
+    views = f.numbers(raw["view"], f"{where}.view", -180.0, 180.0, "deg")
+    repeats = _repeats(f, raw, where)
+    planned = len(thetas) * len(views) * repeats
+    if planned > MAX_PLANNED_POINTS:
+        raise f.fail(where, f"at most {MAX_PLANNED_POINTS} planned points in total (the limit on blocks x "
+                            "theta_i x view x repeats)",
+                     _Said(f"{len(thetas)} theta_i x {len(views)} views x {repeats} repeats = {planned} points"))
+    label = _block_name(f, raw, where, None)
+    blocks = []
+    for t in thetas:
+        default = f"theta_i={t:g}" + (f", phi_i={phi:g}" if phi else "")
+        blocks.append(Block(name=label or default, theta_i=t, phi_i=phi, views=views, repeats=repeats))
+    return blocks
 
 
 def _geometry_blocks(f: _Fields, raw: Mapping, where: str) -> list[Block]:
@@ -417,21 +732,12 @@ def _geometry_blocks(f: _Fields, raw: Mapping, where: str) -> list[Block]:
     for key in ("theta_i", "phi_i", "view"):
         if key in raw:
             raise f.fail(f"{where}.{key}", "no theta_i/phi_i/view in a block that lists geometries", raw[key])
-    geoms = raw["geometries"]
-    name = f"{where}.geometries"
-    if (not isinstance(geoms, list) or not geoms or not all(
-            isinstance(g, list) and len(g) == 4
-            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in g) for g in geoms)):
-        raise f.fail(name, "a non-empty list of [theta_i, phi_i, theta_r, phi_r] quadruples [deg]", geoms if not isinstance(geoms, list) else geoms[:3])
-    array = np.array(geoms, dtype=float)
-    bad = (array[:, 0] < 0) | (array[:, 0] > 90) | (array[:, 2] < 0) | (array[:, 2] > 90)
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise f.fail(f"{name}[{k}]", "polar angles theta_i, theta_r in [0, 90] [deg]", geoms[k])
-    repeats = f.integer(raw, "repeats", where, 1, low=1)
-    label = raw.get("name", "geometries")
-    if not isinstance(label, str):
-        raise f.fail(f"{where}.name", "a string", label)
+    array = _sample_geometries(f, raw["geometries"], f"{where}.geometries")
+    repeats = _repeats(f, raw, where)
+    if len(array) * repeats > MAX_PLANNED_POINTS:
+        raise f.fail(where, f"at most {MAX_PLANNED_POINTS} planned points in total (the limit on geometries x "
+                            "repeats)", _Said(f"{len(array)} geometries x {repeats} repeats"))
+    label = _block_name(f, raw, where, "geometries")
     ti, lamp_phi, view = rig_coordinates(array[:, 0], array[:, 1], array[:, 2], array[:, 3])
     lamp = np.round(np.stack([ti, lamp_phi], axis=1), 6)
     groups: dict[tuple[float, float], list[float]] = {}
@@ -443,13 +749,35 @@ def _geometry_blocks(f: _Fields, raw: Mapping, where: str) -> list[Block]:
     ]
 
 
+def _sample_geometries(f: _Fields, geoms: Any, name: str) -> np.ndarray:
+    """[theta_i, phi_i, theta_r, phi_r] rows [deg]: finite, polar angles in [0, 90],
+    azimuths in [-360, 360]."""
+    expected = "a non-empty list of [theta_i, phi_i, theta_r, phi_r] quadruples [deg]"
+    if not isinstance(geoms, list) or not geoms:
+        raise f.fail(name, expected, geoms)
+    if len(geoms) > MAX_PLANNED_POINTS:
+        raise f.fail(name, f"at most {MAX_PLANNED_POINTS} geometries (the limit on planned points)",
+                     _Said(f"{len(geoms)} geometries"))
+    rows = []
+    for k, g in enumerate(geoms):
+        if not isinstance(g, list) or len(g) != 4:
+            raise f.fail(f"{name}[{k}]", "a [theta_i, phi_i, theta_r, phi_r] quadruple of numbers [deg]", g)
+        rows.append((
+            f.bounded(g[0], f"{name}[{k}][0] (theta_i)", 0.0, 90.0, "deg"),
+            f.bounded(g[1], f"{name}[{k}][1] (phi_i)", -360.0, 360.0, "deg"),
+            f.bounded(g[2], f"{name}[{k}][2] (theta_r)", 0.0, 90.0, "deg"),
+            f.bounded(g[3], f"{name}[{k}][3] (phi_r)", -360.0, 360.0, "deg"),
+        ))
+    return np.array(rows, dtype=float)
+
+
 def load(path: str | Path) -> Protocol:
     """Read and validate a protocol file.
 
     Parameters
     ----------
     path : str or Path
-        TOML protocol file (format: docs/protocols.md).
+        TOML protocol file (format: docs/protocols.md), at most 10 MB.
 
     Returns
     -------
@@ -460,17 +788,37 @@ def load(path: str | Path) -> Protocol:
     FileNotFoundError
         If the file does not exist.
     ProtocolError
-        If the file is not valid TOML or a field is missing, unknown or out of range; the
-        message names the file, the field and what was expected.
+        If the path cannot be read (a directory, a device, a symlink loop, no permission),
+        the file is not UTF-8 TOML, or a field is missing, unknown, not finite, out of range
+        or beyond a protocol limit; the message names the file, the field and what was
+        expected.
     """
     path = Path(path)
+    return loads(_read_text(path), source=str(path))
+
+
+def _read_text(path: Path) -> str:
+    """The UTF-8 text of a regular file of at most MAX_FILE_BYTES (stat first: a FIFO or a
+    device is never opened)."""
     try:
-        text = path.read_text(encoding="utf-8")
+        status = path.stat()
+        if stat.S_ISDIR(status.st_mode):
+            raise ProtocolError(f"{path}: cannot read the protocol file: it is a directory, expected a TOML file")
+        if not stat.S_ISREG(status.st_mode):
+            raise ProtocolError(f"{path}: cannot read the protocol file: not a regular file, expected a TOML file")
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_FILE_BYTES + 1)
     except FileNotFoundError:
         raise FileNotFoundError(f"protocol file not found: {path}") from None
+    except OSError as error:
+        raise ProtocolError(f"{path}: cannot read the protocol file: {error.strerror or error}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise ProtocolError(f"{path}: cannot read the protocol file: larger than {MAX_FILE_BYTES // 1_000_000} MB, "
+                            "expected a TOML protocol of a few kB")
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError:
         raise ProtocolError(f"{path}: not a UTF-8 text file") from None
-    return loads(text, source=str(path))
 
 
 # --------------------------------------------------------------------------- planning
@@ -513,7 +861,24 @@ class Refusal:
 
 @dataclass(frozen=True)
 class Plan:
-    """The ordered points of a protocol, what is refused, and the estimated time."""
+    """The ordered points of a protocol, what is refused, and the estimated time.
+
+    Attributes
+    ----------
+    protocol : Protocol
+    points : tuple of PlannedPoint
+        The points to measure, in order.
+    refused : tuple of Refusal
+        The points the rig would refuse, with the reasons.
+    dark_frames : int
+        Dark frames the run takes.
+    estimated_seconds : float
+        Estimated instrument time [s] (lamp warm-up not included).
+    moves : dict
+        Total travel per axis [deg].
+    checks : int
+        Lamp-stability check measurements the run makes (see :class:`Checks`).
+    """
 
     protocol: Protocol
     points: tuple[PlannedPoint, ...]
@@ -521,6 +886,20 @@ class Plan:
     dark_frames: int
     estimated_seconds: float
     moves: dict = field(default_factory=dict)
+    checks: int = 0
+
+    @property
+    def check_geometry(self) -> tuple[float, float, float] | None:
+        """(theta_i, phi_i, view) of the lamp-stability checks [deg], or None without checks.
+
+        The protocol's ``checks.geometry``, else the first point the plan measures.
+        """
+        if self.checks == 0:
+            return None
+        if self.protocol.checks.geometry is not None:
+            return self.protocol.checks.geometry
+        first = self.points[0]
+        return first.theta_i, first.phi_i, first.view
 
     def summary(self) -> str:
         """Human-readable dry-run report (what ``gonio plan`` prints)."""
@@ -530,6 +909,7 @@ class Plan:
             f"  points to measure: {len(self.points)}",
             f"  points refused: {len(self.refused)}",
             f"  dark frames: {self.dark_frames}",
+            f"  lamp-stability checks: {self._checks_text()}",
             f"  exposure: {self.protocol.exposure.mode}",
             f"  estimated instrument time: {_duration(self.estimated_seconds)} (lamp warm-up not included)",
         ]
@@ -542,6 +922,14 @@ class Plan:
                 p = r.point
                 lines.append(f"  [{p.block}] theta_i={p.theta_i:g} phi_i={p.phi_i:g} view={p.view:g}: {r.reason}")
         return "\n".join(lines)
+
+    def _checks_text(self) -> str:
+        if self.checks == 0:
+            return "0"
+        theta_i, phi_i, view = self.check_geometry
+        checks = self.protocol.checks
+        return (f"{self.checks} (every {checks.every} points, {checks.frames} frames each, at "
+                f"theta_i={theta_i:g} phi_i={phi_i:g} view={view:g})")
 
 
 def _duration(seconds: float) -> str:
@@ -556,27 +944,81 @@ def camera_lamp_separation(theta_i: float, phi_i: float, view: float) -> float:
 
 
 def refusal_reason(theta_i: float, phi_i: float, view: float, rig: RigLimits) -> str | None:
-    """Why the rig would refuse this geometry, or None if it can measure it."""
+    """Why the rig would refuse this geometry, or None if it can measure it.
+
+    Parameters
+    ----------
+    theta_i, phi_i : float
+        Lamp polar angle and azimuth [deg].
+    view : float
+        Signed camera angle [deg].
+    rig : RigLimits
+        Travel limits and the minimum camera/lamp separation.
+    """
+    return refusal_reasons(theta_i, phi_i, (view,), rig)[0]
+
+
+def refusal_reasons(theta_i: float, phi_i: float, views: Sequence[float], rig: RigLimits) -> list[str | None]:
+    """:func:`refusal_reason` for every camera angle of one lamp direction (one array pass).
+
+    Parameters
+    ----------
+    theta_i, phi_i : float
+        Lamp polar angle and azimuth [deg].
+    views : sequence of float
+        Signed camera angles [deg].
+    rig : RigLimits
+
+    Returns
+    -------
+    list of str or None
+        Per view, the reason the rig refuses it, or None.
+    """
+    lamp = _lamp_refusal(theta_i, phi_i, rig)
+    if lamp is not None:
+        return [_camera_refusal(view, rig) or lamp for view in views]
+    view_array = np.asarray(views, dtype=float)
+    separations = angle_between(theta_i, phi_i, np.abs(view_array), np.where(view_array >= 0, 0.0, 180.0))
+    # Exactly the minimum is allowed; 1e-6 deg absorbs the rounding of the angle
+    # computation (a 5 deg step lands on 4.9999999999 deg otherwise).
+    too_close = separations < rig.min_separation - SEPARATION_TOLERANCE
+    reasons: list[str | None] = []
+    for view, separation, close in zip(views, separations.tolist(), too_close.tolist()):
+        reason = _camera_refusal(view, rig)
+        if reason is None and close:
+            reason = (f"camera and lamp only {separation:.2f} deg apart "
+                      f"(minimum separation {rig.min_separation:g} deg)")
+        reasons.append(reason)
+    return reasons
+
+
+def _camera_refusal(view: float, rig: RigLimits) -> str | None:
     lo, hi = rig.camera_range
-    if not lo <= view <= hi:
-        return f"camera angle {view:g} deg outside travel [{lo:g}, {hi:g}] deg"
+    return None if lo <= view <= hi else f"camera angle {view:g} deg outside travel [{lo:g}, {hi:g}] deg"
+
+
+def _lamp_refusal(theta_i: float, phi_i: float, rig: RigLimits) -> str | None:
     lo, hi = rig.lamp_theta_range
     if not lo <= theta_i <= hi:
         return f"lamp theta_i {theta_i:g} deg outside travel [{lo:g}, {hi:g}] deg"
     lo, hi = rig.lamp_phi_range
     if not lo <= phi_i <= hi:
         return f"lamp phi_i {phi_i:g} deg outside travel [{lo:g}, {hi:g}] deg"
-    separation = camera_lamp_separation(theta_i, phi_i, view)
-    # Exactly the minimum is allowed; 1e-6 deg absorbs the rounding of the angle
-    # computation (a 5 deg step lands on 4.9999999999 deg otherwise).
-    if separation < rig.min_separation - SEPARATION_TOLERANCE:
-        return (f"camera and lamp only {separation:.2f} deg apart "
-                f"(minimum separation {rig.min_separation:g} deg)")
     return None
 
 
 def move_time(distance: float, velocity: float, acceleration: float) -> float:
-    """Time of a trapezoidal (or triangular) velocity-profile move [s]."""
+    """Time of a trapezoidal (or triangular) velocity-profile move [s].
+
+    Parameters
+    ----------
+    distance : float
+        Travel [deg] (sign ignored).
+    velocity : float
+        Slew speed [deg/s].
+    acceleration : float
+        Acceleration and deceleration [deg/s^2].
+    """
     distance = abs(distance)
     if distance == 0.0:
         return 0.0
@@ -586,15 +1028,46 @@ def move_time(distance: float, velocity: float, acceleration: float) -> float:
     return distance / velocity + velocity / acceleration
 
 
-def _exposure_estimate(exposure: Exposure, rig: RigLimits) -> float:
-    """Estimated camera time per point [s]: frames x (exposure + readout), auto adds tries."""
+def _frame_seconds(exposure: Exposure, rig: RigLimits) -> float:
+    """Camera time of one exposure [s]: exposure + readout (HDR: the whole bracket series)."""
     if exposure.mode == "hdr":
-        per_frame = sum(exposure.brackets) + rig.readout_time * len(exposure.brackets)
-    elif exposure.mode == "auto":
-        per_frame = 3 * (exposure.time + rig.readout_time)  # typical: two trial frames + one
-    else:
-        per_frame = exposure.time + rig.readout_time
-    return exposure.frames * per_frame
+        return sum(exposure.brackets) + rig.readout_time * len(exposure.brackets)
+    return exposure.time + rig.readout_time
+
+
+def _exposure_estimate(exposure: Exposure, rig: RigLimits) -> float:
+    """Estimated camera time per point [s]: frames x exposure, auto adds two trial frames."""
+    tries = 3 if exposure.mode == "auto" else 1  # typical auto: two trial frames + one
+    return exposure.frames * tries * _frame_seconds(exposure, rig)
+
+
+def planned_point_count(protocol: Protocol) -> int:
+    """Points the plan of ``protocol`` expands to, refused included (no expansion)."""
+    return sum(len(block.views) * block.repeats for block in protocol.blocks)
+
+
+def check_count(checks: Checks, measured_points: int, reference_measured: bool) -> int:
+    """Lamp-stability checks of a run.
+
+    Parameters
+    ----------
+    checks : Checks
+        The protocol's ``[checks]``.
+    measured_points : int
+        Sample points the plan measures (refused ones excluded).
+    reference_measured : bool
+        Whether a reference block follows the sample points.
+
+    Returns
+    -------
+    int
+        0 without checks (``every == 0``) or without a measured point; else one before the
+        first point, one after every ``every`` points before the last, one at the end and one
+        after the reference block: ``2 + (n - 1) // every (+ 1)``.
+    """
+    if checks.every == 0 or measured_points == 0:
+        return 0
+    return 2 + (measured_points - 1) // checks.every + (1 if reference_measured else 0)
 
 
 def plan(protocol: Protocol) -> Plan:
@@ -603,9 +1076,41 @@ def plan(protocol: Protocol) -> Plan:
     Points are visited block by block (the lamp moves once per block), camera angles in
     the order given, each block's sweep repeated ``repeats`` times.  The time estimate adds
     stage moves (trapezoidal profile; axes move one after another, as a conservative
-    bound), settling, exposures and dark frames.
+    bound), settling, exposures, dark frames, the reference standard and the lamp checks.
+
+    Raises
+    ------
+    ProtocolError
+        If the protocol plans more than :data:`MAX_PLANNED_POINTS` points (checked before
+        anything is expanded).
     """
+    total = planned_point_count(protocol)
+    if total > MAX_PLANNED_POINTS:
+        raise ProtocolError(f"{protocol.source}: field 'block': expected at most {MAX_PLANNED_POINTS} planned points "
+                            f"in total (the limit on blocks x theta_i x view x repeats), got {total}")
     rig = protocol.rig
+    points, refused, moves, seconds = _expand(protocol)
+    darks = (1 if protocol.darks.at_start else 0) + (
+        (len(points) - 1) // protocol.darks.every if protocol.darks.every and points else 0
+    )
+    dark_time = protocol.exposure.max_time if protocol.exposure.mode == "auto" else protocol.exposure.time
+    seconds += darks * (min(dark_time, 1.0) + rig.readout_time)
+    per_point = _exposure_estimate(protocol.exposure, rig) + rig.settle_time
+    long_move = move_time(90.0, rig.estimate_velocity, rig.estimate_acceleration)
+    reference = protocol.reference
+    if reference:
+        seconds += len(reference.geometries) * (per_point + 2 * long_move)
+    reference_measured = reference is not None and any(refusal_reason(*g, rig) is None for g in reference.geometries)
+    checks = check_count(protocol.checks, len(points), reference_measured)
+    # a check: one move there (at most 90 deg, a bound), settling and its frames
+    seconds += checks * (long_move + rig.settle_time + protocol.checks.frames * _frame_seconds(protocol.exposure, rig))
+    return Plan(protocol, tuple(points), tuple(refused), darks, seconds, moves, checks)
+
+
+def _expand(protocol: Protocol) -> tuple[list[PlannedPoint], list[Refusal], dict, float]:
+    """Points, refusals, travel per axis [deg] and time of the sample points [s]."""
+    rig = protocol.rig
+    velocity, acceleration = rig.estimate_velocity, rig.estimate_acceleration
     points, refused = [], []
     index = 0
     position = (0.0, 0.0, 0.0)  # camera view, lamp theta, lamp phi after homing
@@ -613,29 +1118,22 @@ def plan(protocol: Protocol) -> Plan:
     moves = {"camera": 0.0, "lamp_theta": 0.0, "lamp_phi": 0.0}
     per_point = _exposure_estimate(protocol.exposure, rig) + rig.settle_time
     for block in protocol.blocks:
+        reasons = refusal_reasons(block.theta_i, block.phi_i, block.views, rig)
         for repeat in range(block.repeats):
-            for view in block.views:
+            for view, reason in zip(block.views, reasons):
                 point = PlannedPoint(index, block.name, repeat, block.theta_i, block.phi_i, view)
                 index += 1
-                reason = refusal_reason(block.theta_i, block.phi_i, view, rig)
                 if reason:
                     refused.append(Refusal(point, reason))
                     continue
                 target = (view, block.theta_i, block.phi_i)
                 for axis, a, b in zip(moves, position, target):
                     moves[axis] += abs(b - a)
-                    seconds += move_time(b - a, rig.velocity, rig.acceleration)
+                    seconds += move_time(b - a, velocity, acceleration)
                 position = target
                 seconds += per_point
                 points.append(point)
-    darks = (1 if protocol.darks.at_start else 0) + (
-        (len(points) - 1) // protocol.darks.every if protocol.darks.every and points else 0
-    )
-    dark_time = protocol.exposure.max_time if protocol.exposure.mode == "auto" else protocol.exposure.time
-    seconds += darks * (min(dark_time, 1.0) + rig.readout_time)
-    if protocol.reference:
-        seconds += len(protocol.reference.geometries) * (per_point + 2 * move_time(90.0, rig.velocity, rig.acceleration))
-    return Plan(protocol, tuple(points), tuple(refused), darks, seconds, moves)
+    return points, refused, moves, seconds
 
 
 def rig_coordinates(theta_i, phi_i, theta_r, phi_r) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

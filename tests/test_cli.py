@@ -1,6 +1,9 @@
 """The gonio command line: version, help, model listing and slice plots, clean errors."""
 from __future__ import annotations
 
+import errno
+import os
+import stat
 import subprocess
 import sys
 
@@ -65,3 +68,96 @@ def test_figures_reproduces_oren_nayar_figs_10_to_14(tmp_path, capsys):
     assert [n[:5] for n in names] == ["fig10", "fig11", "fig12", "fig13", "fig14"]
     assert all((tmp_path / n).stat().st_size > 20_000 for n in names)
     assert "5 figures written" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------------- output folders
+CSV = "theta_i,phi_i,theta_r,phi_r,value,sigma\n30,0,10,0,0.30,0.01\n30,0,20,0,0.29,0.01\n30,0,40,180,0.28,0.01\n"
+
+
+def _fit(data, out, *extra) -> int:
+    return main(["fit", str(data), "--model", "lambert", "--no-mcmc", "--quiet", "--out", str(out), *extra])
+
+
+def test_fit_refuses_a_used_folder_and_overwrite_replaces_only_its_own_files(tmp_path, capsys):
+    data = tmp_path / "data.csv"
+    data.write_text(CSV)
+    out = tmp_path / "result"
+    assert _fit(data, out, "--report") == 0
+    written = {p.name for p in out.iterdir()}
+    assert {"result.json", "summary.txt", "report.html", "fit-data.png"} <= written
+    capsys.readouterr()
+    assert _fit(data, out) == 2  # a second run without --overwrite
+    assert "already holds files" in capsys.readouterr().err
+    (out / "notes.txt").write_text("the user's notes")
+    before = (out / "result.json").stat().st_mtime_ns
+    assert _fit(data, out, "--overwrite") == 0  # no --report this time
+    remaining = {p.name for p in out.iterdir()}
+    assert remaining == {"result.json", "summary.txt", "notes.txt"}  # the earlier report is stale: removed
+    assert (out / "notes.txt").read_text() == "the user's notes"
+    assert (out / "result.json").stat().st_mtime_ns >= before
+
+
+def test_fit_result_files_are_written_atomically_with_normal_permissions(tmp_path, monkeypatch):
+    from gonio import files
+    from gonio.fitting import Dataset, fit
+
+    data = tmp_path / "data.csv"
+    data.write_text(CSV)
+    result = fit(Dataset.from_csv(data), "lambert", mcmc=False)
+    previous = os.umask(0o027)
+    try:
+        path = result.save(tmp_path / "out")
+    finally:
+        os.umask(previous)
+    for name in result.saved_files():
+        assert stat.S_IMODE((tmp_path / "out" / name).stat().st_mode) == 0o640  # 0o666 & ~0o027
+    original = path.read_bytes()
+
+    def disk_full(handle, *args):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    real_fdopen = os.fdopen
+
+    def failing_fdopen(fd, *args, **kwargs):
+        handle = real_fdopen(fd, *args, **kwargs)
+        handle.write = disk_full
+        return handle
+
+    monkeypatch.setattr(files.os, "fdopen", failing_fdopen)
+    with pytest.raises(OSError, match="No space left"):
+        result.save(tmp_path / "out")
+    monkeypatch.undo()
+    assert path.read_bytes() == original  # the earlier result is intact
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(result.saved_files())  # no temporary left
+
+
+def test_tables_clear_deletes_only_tables_gonio_built(tmp_path, monkeypatch, capsys):
+    import numpy as np
+
+    from gonio.models.tabulated import store
+
+    monkeypatch.setenv("GONIO_TABLE_DIR", str(tmp_path))
+    built = store.save(tmp_path / "oren-nayar.npz", {"shape": np.array([2]), "rtol": np.array(1e-3)})
+    np.savez(tmp_path / "chain.npz", chain=np.zeros(3))  # a user's file with the same extension
+    np.savez(tmp_path / "oren-nayar.tmp.npz", x=np.zeros(1))
+    (tmp_path / "notes.txt").write_text("keep")
+    assert main(["tables", "clear"]) == 0
+    out = capsys.readouterr().out
+    assert not built.exists() and f"removed {built}" in out
+    for name in ("chain.npz", "oren-nayar.tmp.npz", "notes.txt"):
+        assert (tmp_path / name).exists() and f"kept {tmp_path / name}" in out
+
+
+def test_tables_clear_keeps_a_foreign_file_with_a_table_name_and_removes_legacy_tables(tmp_path, monkeypatch, capsys):
+    import numpy as np
+
+    from gonio.models.tabulated import store
+
+    monkeypatch.setenv("GONIO_TABLE_DIR", str(tmp_path))
+    np.savez(tmp_path / "oren-nayar.npz", samples=np.zeros(3))  # named like a table, written by someone else
+    assert store.clear_cache() == [] and (tmp_path / "oren-nayar.npz").exists()
+    # a table written before the signature: the exact name and the arrays every table holds
+    np.savez(tmp_path / "oren-nayar.npz", shape=np.array([2]), rtol=np.array(1e-3), build_seconds=np.array(1.0))
+    assert store.clear_cache() == [tmp_path / "oren-nayar.npz"]
+    assert main(["tables", "clear"]) == 0
+    assert "no table built by gonio" in capsys.readouterr().out

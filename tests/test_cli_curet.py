@@ -252,3 +252,25 @@ def test_bad_input_is_reported_without_traceback(argv, message, capsys, tmp_path
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not any(tmp_path.iterdir())  # nothing written on bad input
+
+
+@needs_data
+def test_fit_command_refuses_a_used_folder_and_overwrite_keeps_other_files(tmp_path, capsys):
+    out = tmp_path / "plaster"
+    argv = ["curet", "fit", "10", "--model", "lambert", "--no-mcmc", "--no-report", "--quiet", "--out", str(out)]
+    assert main(argv) == 0
+    assert main(argv) == 2
+    assert "already holds files" in capsys.readouterr().err
+    (out / "notes.txt").write_text("keep me")
+    (out / "lambert" / "chain.npz").write_bytes(b"stale chain of an earlier MCMC run")
+    assert main(argv + ["--overwrite"]) == 0
+    assert (out / "notes.txt").read_text() == "keep me"
+    assert not (out / "lambert" / "chain.npz").exists()  # not part of the new (least-squares) result
+    assert FitResult.load(out / "lambert").mcmc is None
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "data.csv").write_text("my own data")
+    assert main(argv[:-1] + [str(foreign), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert "no results of 'gonio curet fit'" in err and "Traceback" not in err
+    assert (foreign / "data.csv").read_text() == "my own data"

@@ -69,3 +69,67 @@ def test_interval_widths_are_calibrated_over_emulator_seeds(tmp_path):
         z += [(least_squares.values[n] - t) / (least_squares.stderr[n] * scale) for n, t in TRUTH.items()]
     rms = float(np.sqrt(np.mean(np.square(z))))
     assert 0.4 < rms < 2.0, (rms, np.round(z, 2))
+
+
+# ---------------------------------------------------------------------- the output folder
+def test_a_new_demo_run_removes_only_what_the_demo_recorded(tmp_path):
+    """The marker lists the demo's files; a re-run deletes those (and folders left empty),
+    never a file a user put into the output folder."""
+    from gonio.cli.demo import MARKER, _prepare_output, demo_paths
+
+    out = _prepare_output(tmp_path / "demo")
+    record = json.loads((out / MARKER).read_text())
+    files, folders = demo_paths()
+    assert (record["files"], record["folders"]) == (files, folders)
+    for relative in files:  # what a finished demo leaves
+        (out / relative).parent.mkdir(parents=True, exist_ok=True)
+        (out / relative).write_text("demo output")
+    recording = out / folders[0]
+    (recording / "my-notes.txt").write_text("keep me")
+    (out / "summary-for-my-thesis.txt").write_text("keep me too")
+    assert _prepare_output(out) == out
+    remaining = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
+    assert remaining == sorted([MARKER, "recordings", folders[0], f"{folders[0]}/my-notes.txt",
+                                "summary-for-my-thesis.txt"])
+
+
+def test_an_old_text_marker_stands_for_the_demo_layout(tmp_path):
+    from gonio.cli.demo import MARKER, _prepare_output, demo_paths
+
+    out = tmp_path / "demo"
+    fit_result = out / "fit-oren-nayar" / "result.json"
+    fit_result.parent.mkdir(parents=True)
+    fit_result.write_text("{}")
+    (out / "fit-oren-nayar" / "mine.txt").write_text("keep")
+    (out / MARKER).write_text("output of 'gonio demo'; a new demo run replaces this folder\n")
+    _prepare_output(out)
+    assert not fit_result.exists() and (out / "fit-oren-nayar" / "mine.txt").read_text() == "keep"
+    assert json.loads((out / MARKER).read_text())["files"] == demo_paths()[0]
+
+
+def test_a_tampered_marker_cannot_reach_outside_the_folder_or_through_links(tmp_path):
+    from gonio.cli.demo import MARKER, _prepare_output
+
+    outside = tmp_path / "precious.txt"
+    outside.write_text("keep")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "data.csv").write_text("keep")
+    out = tmp_path / "demo"
+    out.mkdir()
+    (out / "linked").symlink_to(elsewhere)
+    (out / MARKER).write_text(json.dumps({"files": ["../precious.txt", str(outside), "linked/data.csv"],
+                                          "folders": ["..", "linked"]}))
+    _prepare_output(out)
+    assert outside.read_text() == "keep" and (elsewhere / "data.csv").read_text() == "keep"
+    assert (out / "linked").is_symlink()
+
+
+def test_demo_refuses_a_symlinked_output_folder(tmp_path, capsys):
+    target = tmp_path / "real"
+    target.mkdir()
+    (tmp_path / "link").symlink_to(target)
+    assert main(["demo", "--out", str(tmp_path / "link"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a symbolic link" in err and "Traceback" not in err
+    assert not any(target.iterdir())

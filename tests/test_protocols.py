@@ -75,7 +75,7 @@ def test_repeats_multiply_points_and_keys_stay_unique():
     "change, field, expected",
     [
         (("theta_i = 45", "theta_i = 95"), "block[0].theta_i", "[0, 90]"),
-        (("theta_i = 45", "theta_i = 'high'"), "block[0].theta_i", "a number"),
+        (("theta_i = 45", "theta_i = 'high'"), "block[0].theta_i", "a finite number"),
         (("view = [-60, 0, 30]", "view = {start = 10, stop = 0, step = 5}"), "block[0].view", "stop >= start"),
         (("view = [-60, 0, 30]", "view = {start = 0, stop = 10, step = -5}"), "block[0].view.step", "[1e-06"),
         (("view = [-60, 0, 30]", "veiw = [1]"), "block[0].veiw", "did you mean 'view'"),
@@ -137,3 +137,159 @@ def test_gonio_plan_cli_prints_summary_and_errors_cleanly(tmp_path, capsys):
     assert main(["plan", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "bad.toml: field 'block[0].theta_i'" in err and "Traceback" not in err
+
+
+# ---------------------------------------------------------------------- new fields and limits
+WITH_REFERENCE = MINIMAL + """
+[reference]
+label = "standard"
+reflectance = 0.99
+geometries = [[30, 0, -10]]
+"""
+
+
+def _with_table(text: str, table: str) -> str:
+    """``text`` with ``table`` (TOML) inserted before its first block."""
+    return text.replace("[[block]]", table + "\n[[block]]", 1)
+
+
+def test_defaults_of_the_new_fields_keep_old_protocols_unchanged():
+    protocol = P.loads(WITH_REFERENCE)
+    assert protocol.checks == P.Checks(every=0, geometry=None, frames=5)
+    assert protocol.reference.reflectance_uncertainty == 0.0 and protocol.reference.angular_uncertainty == 0.0
+    assert protocol.rig.velocity is None and protocol.rig.acceleration is None
+    assert (protocol.rig.estimate_velocity, protocol.rig.estimate_acceleration) == (10.0, 20.0)
+    plan = P.plan(protocol)
+    assert plan.checks == 0 and plan.check_geometry is None
+    assert "lamp-stability checks: 0" in plan.summary()
+
+
+def test_checks_table_is_parsed_and_counted_as_documented():
+    """2 + (n - 1) // every checks, plus one after the reference block."""
+    text = MINIMAL.replace("view = [-60, 0, 30]", "view = {start = -80, stop = 80, step = 10}")  # 17 views
+    protocol = P.loads(_with_table(text, "[checks]\nevery = 5\ngeometry = [45, 0, -20]\nframes = 7"))
+    assert protocol.checks == P.Checks(every=5, geometry=(45.0, 0.0, -20.0), frames=7)
+    plan = P.plan(protocol)
+    n = len(plan.points)
+    assert n == 17 and not plan.refused  # 10 deg steps miss the lamp at 45 deg
+    assert plan.checks == 2 + (n - 1) // 5 == 5
+    assert plan.check_geometry == (45.0, 0.0, -20.0)
+    assert "lamp-stability checks: 5 (every 5 points, 7 frames each" in plan.summary()
+    with_reference = P.plan(P.loads(_with_table(text + WITH_REFERENCE.split(MINIMAL)[1], "[checks]\nevery = 5")))
+    assert with_reference.checks == 6
+
+
+def test_checks_default_geometry_is_the_first_point_the_plan_measures():
+    text = MINIMAL.replace("view = [-60, 0, 30]", "view = [-95, 45, 30]")  # -95 outside travel, 45 on the lamp
+    plan = P.plan(P.loads(_with_table(text, "[checks]\nevery = 1")))
+    assert [p.view for p in plan.points] == [30.0]
+    assert plan.check_geometry == (45.0, 0.0, 30.0)
+    assert plan.checks == 2  # before and after the only point
+
+
+def test_checks_every_one_and_no_measured_point():
+    text = MINIMAL.replace("view = [-60, 0, 30]", "view = [45]")  # refused: no point measured
+    assert P.plan(P.loads(_with_table(text, "[checks]\nevery = 1"))).checks == 0
+    assert P.check_count(P.Checks(every=1), 10, reference_measured=True) == 2 + 9 + 1
+    assert P.check_count(P.Checks(every=10), 10, reference_measured=False) == 2
+    assert P.check_count(P.Checks(every=10), 11, reference_measured=False) == 3
+
+
+def test_checks_add_frames_and_a_move_each_to_the_time_estimate():
+    base = P.loads(MINIMAL)
+    checked = P.loads(_with_table(MINIMAL, "[checks]\nevery = 2\nframes = 4\n[exposure]\nmode = 'fixed'\ntime = 0.5"))
+    fixed = P.loads(_with_table(MINIMAL, "[exposure]\nmode = 'fixed'\ntime = 0.5"))
+    plan, without = P.plan(checked), P.plan(fixed)
+    assert plan.checks == 2 + (3 - 1) // 2 == 3
+    rig = base.rig
+    per_check = P.move_time(90.0, 10.0, 20.0) + rig.settle_time + 4 * (0.5 + rig.readout_time)
+    assert plan.estimated_seconds - without.estimated_seconds == pytest.approx(3 * per_check, rel=1e-12)
+
+
+def test_check_geometry_the_rig_refuses_is_an_error_with_the_reason():
+    text = _with_table(MINIMAL, "[rig]\ncamera_range = [-60, 60]\n[checks]\nevery = 3\ngeometry = [30, 0, 70]")
+    with pytest.raises(P.ProtocolError, match=r"^my\.toml: field 'checks\.geometry': expected a geometry the rig "
+                                              r"can measure \(the plan refuses it: camera angle 70 deg outside travel"):
+        P.loads(text, source="my.toml")
+
+
+def test_reference_uncertainties_are_read_and_bounded():
+    text = WITH_REFERENCE + "reflectance_uncertainty = 0.005\nangular_uncertainty = 0.02\n"
+    reference = P.loads(text).reference
+    assert (reference.reflectance_uncertainty, reference.angular_uncertainty) == (0.005, 0.02)
+    for key in ("reflectance_uncertainty", "angular_uncertainty"):
+        for bad in ("-0.1", "0.51", "nan", "'small'"):
+            with pytest.raises(P.ProtocolError, match=f"field 'reference.{key}': expected a finite number in"):
+                P.loads(WITH_REFERENCE + f"{key} = {bad}\n")
+
+
+def test_velocity_and_acceleration_are_programmed_values_or_none():
+    rig = P.loads(_with_table(MINIMAL, "[rig]\nvelocity = 4\nacceleration = 8")).rig
+    assert (rig.velocity, rig.acceleration) == (4.0, 8.0)
+    assert (rig.estimate_velocity, rig.estimate_acceleration) == (4.0, 8.0)
+    slow = P.plan(P.loads(_with_table(MINIMAL, "[rig]\nvelocity = 4\nacceleration = 8")))
+    assert slow.estimated_seconds > P.plan(P.loads(MINIMAL)).estimated_seconds
+    for key in ("velocity", "acceleration"):
+        for bad in ("0", "-1", "inf", "nan", "true"):
+            with pytest.raises(P.ProtocolError, match=f"field 'rig.{key}': expected a finite number"):
+                P.loads(_with_table(MINIMAL, f"[rig]\n{key} = {bad}"))
+
+
+@pytest.mark.parametrize("change, field, limit", [
+    (("view = [-60, 0, 30]", "view = [-60, 0, 30]\nrepeats = 10001"), "block[0].repeats", "the limit on repeats"),
+    (("[[block]]", "[exposure]\nframes = 101\n[[block]]"), "exposure.frames", "the limit on frames per point"),
+    (("[[block]]", "[checks]\nframes = 101\n[[block]]"), "checks.frames", "the limit on frames per check"),
+    (("[[block]]", "[exposure]\nmode = 'hdr'\nbrackets = [" + ", ".join(["0.01"] * 17) + "]\n[[block]]"),
+     "exposure.brackets", "at most 16 exposure times (the limit on HDR brackets"),
+    (("view = [-60, 0, 30]", "view = {start = -90, stop = 90, step = 0.0001}"), "block[0].view", "at most 100000"),
+    (("theta_i = 45\nview = [-60, 0, 30]", ("theta_i = {start = 0, stop = 90, step = 0.01}\n"
+                                            "view = {start = -90, stop = 90, step = 1}")),
+     "block[0]", "9001 theta_i x 181 views x 1 repeats"),
+])
+def test_limits_are_checked_before_expanding_and_named(change, field, limit):
+    with pytest.raises(P.ProtocolError) as info:
+        P.loads(MINIMAL.replace(*change), source="my.toml")
+    assert str(info.value).startswith(f"my.toml: field '{field}'") and limit in str(info.value), str(info.value)
+
+
+def test_limits_are_inclusive():
+    protocol = P.loads(MINIMAL.replace("view = [-60, 0, 30]", "view = [-60, 0, 30]\nrepeats = 10000"))
+    assert protocol.blocks[0].repeats == 10_000
+    brackets = ", ".join(["0.01"] * 15 + ["60"])
+    assert len(P.loads(_with_table(MINIMAL, f"[exposure]\nmode = 'hdr'\nbrackets = [{brackets}]")).exposure.brackets) == 16
+    assert P.loads(_with_table(MINIMAL, "[exposure]\nframes = 100")).exposure.frames == 100
+
+
+def test_plan_refuses_an_oversized_protocol_built_in_code():
+    """The limit holds for protocols constructed directly, not only for parsed files."""
+    protocol = P.loads(MINIMAL)
+    huge = P.Block("huge", 45.0, 0.0, tuple(float(v) for v in range(-90, 91)), repeats=2000)
+    oversized = P.Protocol(protocol.name, protocol.sample, "", {}, protocol.rig, protocol.exposure, protocol.darks,
+                           (huge,), source="code")
+    with pytest.raises(P.ProtocolError, match=r"^code: field 'block': expected at most 200000 planned points"):
+        P.plan(oversized)
+
+
+def test_views_outside_the_camera_range_stay_refused_points():
+    """Views within [-180, 180] but beyond camera_range are refused points, not errors."""
+    plan = P.plan(P.loads(MINIMAL.replace("view = [-60, 0, 30]", "view = [-170, 0, 120]")))
+    assert [p.view for p in plan.points] == [0.0]
+    assert all("outside travel" in r.reason for r in plan.refused)
+
+
+def test_load_reports_unreadable_paths(tmp_path):
+    with pytest.raises(P.ProtocolError, match="it is a directory"):
+        P.load(tmp_path)
+    (tmp_path / "a.toml").symlink_to(tmp_path / "b.toml")
+    (tmp_path / "b.toml").symlink_to(tmp_path / "a.toml")
+    with pytest.raises(P.ProtocolError, match=r"a\.toml: cannot read the protocol file"):
+        P.load(tmp_path / "a.toml")
+    with pytest.raises(FileNotFoundError, match="protocol file not found"):
+        P.load(tmp_path / "missing.toml")
+
+
+def test_refusal_reasons_of_a_block_equal_the_single_point_rule():
+    rig = P.RigLimits(camera_range=(-80.0, 80.0), lamp_phi_range=(-90.0, 90.0))
+    views = [-95.0, -80.0, 0.0, 42.0, 45.0, 47.0, 50.0, 85.0]
+    for theta_i, phi_i in ((45.0, 0.0), (45.0, 120.0), (30.0, 60.0)):
+        assert P.refusal_reasons(theta_i, phi_i, views, rig) == [P.refusal_reason(theta_i, phi_i, v, rig) for v in views]

@@ -1,12 +1,13 @@
 """Firmware of the emulated CCD camera (SCPI dialect of docs/protocol.md, section 2)."""
 from __future__ import annotations
 
-from typing import Callable
+from typing import Protocol
 
 import numpy as np
 
 from .ccd import CCDSensor, Exposure
 from .clock import SimClock
+from .monitor import LampMonitor
 from .scpi import ScpiError, ScpiInstrument, definite_length_block, expect_args, format_number, parse_number
 from .world import Optics
 
@@ -16,8 +17,15 @@ EXPOSURE_RANGE_S = (1e-5, 60.0)
 GAIN_RANGE = (1.0, 16.0)
 DEFAULT_EXPOSURE_S = 0.01
 
-#: ``scene(t_start, exposure_s) -> mean photons per pixel`` (array (height, width) or scalar).
-Scene = Callable[[float, float], "np.ndarray | float"]
+
+class Scene(Protocol):
+    """What the camera looks at (:class:`drivers.emulator.rig.Scene`)."""
+
+    def lamp_exposure(self, t_start: float, exposure_s: float) -> float:
+        """Lamp output of one exposure, flicker included [-]."""
+
+    def photons(self, t_start: float, exposure_s: float, lamp: float) -> "np.ndarray | float":
+        """Mean photons per pixel of an exposure lit with lamp output ``lamp``."""
 
 
 def roi_statistics(frame: np.ndarray, saturated: np.ndarray, roi: tuple[int, int, int, int]) -> tuple[float, float, int, int]:
@@ -55,11 +63,16 @@ class CameraFirmware(ScpiInstrument):
         Temporal noise source.
     serial : str
         Serial number in ``*IDN?``.
+    monitor : LampMonitor, optional
+        The lamp monitor triggered with every exposure (``MONitor?``); None: no monitor
+        fitted (``MONitor?`` is then an undefined header, ``*OPT?`` replies ``0``).
     """
 
     def __init__(self, clock: SimClock, sensor: CCDSensor, optics: Optics, scene: Scene,
-                 rng: np.random.Generator, serial: str = "SN0001") -> None:
+                 rng: np.random.Generator, serial: str = "SN0001", monitor: LampMonitor | None = None) -> None:
         super().__init__()
+        self.monitor = monitor
+        self.last_monitor_v: float | None = None
         self.clock = clock
         self.sensor = sensor
         self.optics = optics
@@ -80,8 +93,12 @@ class CameraFirmware(ScpiInstrument):
         self.add("ACQuire", False, self._acquire)
         self.add("ROI:STATistics", True, self._roi_stat)
         self.add("FRAMe", True, self._frame)
+        self.add("ROI:DATA", True, self._roi_data)
         self.add("SENSe:INFO", True, self._info)
         self.add("TEMPerature", True, lambda a: self._no_args(a) or format_number(self.sensor.params.temperature_c))
+        self.add("*OPT", True, lambda a: self._no_args(a) or ("MON" if self.monitor is not None else "0"))
+        if self.monitor is not None:
+            self.add("MONitor", True, self._monitor)
 
     def identity(self) -> str:
         return f"GONIO,CCD-512,{self.serial},1.0"
@@ -116,15 +133,18 @@ class CameraFirmware(ScpiInstrument):
             raise ScpiError(-104, f"SHUT expects OPEN or CLOSE, got {args[0]!r}")
 
     def _set_roi(self, args: list[str]) -> None:
+        """``ROI <x0>,<y0>,<width>,<height>`` [pixels]: four strict integers inside the sensor.
+
+        A parameter that is not an integer (``++1``, ``1.5``, ``1e2``) is -104; a rectangle
+        that is not inside the sensor (``x0`` or ``y0`` negative, ``width`` or ``height``
+        below 1, right or bottom edge beyond the sensor) is -222.
+        """
         expect_args(args, 4)
-        values = []
-        for name, text in zip(("x0", "y0", "width", "height"), args):
-            if not text.lstrip("+").isdigit():
-                raise ScpiError(-104, f"ROI {name} expects a non-negative integer, got {text!r}")
-            values.append(int(text))
-        x0, y0, w, h = values
-        if w < 1 or h < 1 or x0 + w > self.optics.width or y0 + h > self.optics.height:
-            raise ScpiError(-222, f"ROI {x0},{y0},{w},{h} outside the {self.optics.width}x{self.optics.height} sensor")
+        names = ("x0", "y0", "width", "height")
+        x0, y0, w, h = (self.parse_integer(text, f"ROI {name}") for name, text in zip(names, args))
+        width, height = self.optics.width, self.optics.height
+        if x0 < 0 or y0 < 0 or w < 1 or h < 1 or x0 + w > width or y0 + h > height:
+            raise ScpiError(-222, f"ROI {x0},{y0},{w},{h} outside the {width}x{height} sensor")
         self.roi = (x0, y0, w, h)
 
     def _acquire(self, args: list[str]) -> None:
@@ -132,9 +152,17 @@ class CameraFirmware(ScpiInstrument):
         if self.fault:
             raise ScpiError(-200, "camera fault")
         t0 = self.clock.now()
-        photons = self.scene(t0, self.exposure_s) if self.shutter_open else 0.0
+        lamp = self.scene.lamp_exposure(t0, self.exposure_s)
+        photons = self.scene.photons(t0, self.exposure_s, lamp) if self.shutter_open else 0.0
         self.last = self.sensor.expose(photons, self.exposure_s, self.gain, self.rng)
+        if self.monitor is not None:  # the monitor sees the lamp whatever the shutter does
+            self.last_monitor_v = self.monitor.read(lamp, self.exposure_s)
         self.clock.wait_until(t0 + self.exposure_s + self.sensor.params.readout_s)
+
+    def _monitor(self, args: list[str]) -> str:
+        expect_args(args, 0)
+        self._need_frame()
+        return f"{self.last_monitor_v:.7f}"
 
     def _need_frame(self) -> Exposure:
         if self.last is None:
@@ -151,6 +179,12 @@ class CameraFirmware(ScpiInstrument):
         expect_args(args, 0)
         shot = self._need_frame()
         return definite_length_block(shot.frame.astype("<u2").tobytes())
+
+    def _roi_data(self, args: list[str]) -> bytes:
+        expect_args(args, 0)
+        shot = self._need_frame()
+        x0, y0, w, h = self.roi
+        return definite_length_block(shot.frame[y0:y0 + h, x0:x0 + w].astype("<u2").tobytes())
 
     def _info(self, args: list[str]) -> str:
         expect_args(args, 0)

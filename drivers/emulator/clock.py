@@ -7,6 +7,7 @@ the wall clock and waiting really sleeps, so the instruments answer with hardwar
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
 
@@ -33,6 +34,14 @@ def transfer_time(n_bytes: int, baudrate: int, bits_per_byte: int = 10) -> float
     return n_bytes * bits_per_byte / float(baudrate)
 
 
+def _finite(value: float, name: str) -> float:
+    """``value`` as a float, or ValueError naming ``name`` if it is NaN or infinite."""
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite time [s], got {value!r}")
+    return value
+
+
 class SimClock:
     """A monotonic simulated clock [s], shared by the instruments of one rig.
 
@@ -43,6 +52,14 @@ class SimClock:
         which return at once.  True: time follows the wall clock and waiting sleeps.
     start : float
         Simulated time at creation [s].
+
+    Raises
+    ------
+    ValueError
+        For a non-finite start time, and from :meth:`wait_until` / :meth:`advance` for a
+        non-finite time or duration: a clock at infinity would stop every instrument of
+        the rig (each error timestamp and transfer time is computed from it), so the
+        clock refuses to get there whatever its caller computed.
 
     Examples
     --------
@@ -56,7 +73,7 @@ class SimClock:
     def __init__(self, realtime: bool = False, start: float = 0.0) -> None:
         self.realtime = bool(realtime)
         self._lock = threading.Lock()
-        self._offset = float(start)
+        self._offset = _finite(start, "start")
         self._wall0 = time.monotonic()
 
     def now(self) -> float:
@@ -67,6 +84,7 @@ class SimClock:
 
     def wait_until(self, t: float) -> None:
         """Let simulated time reach ``t`` [s] (jump in fast mode, sleep in real time)."""
+        t = _finite(t, "t")
         if self.realtime:
             delay = t - self.now()
             if delay > 0:
@@ -77,11 +95,12 @@ class SimClock:
                 self._offset = float(t)
 
     def advance(self, seconds: float) -> None:
-        """Let ``seconds`` of simulated time pass (negative values are an error)."""
+        """Let ``seconds`` of simulated time pass (negative or non-finite values are an error)."""
+        seconds = _finite(seconds, "seconds")
         if seconds < 0:
             raise ValueError(f"seconds must be >= 0, got {seconds!r}")
         if self.realtime:
             time.sleep(seconds)
             return
         with self._lock:
-            self._offset += float(seconds)
+            self._offset = _finite(self._offset + seconds, "the clock after the advance")

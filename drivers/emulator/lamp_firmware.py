@@ -54,7 +54,7 @@ class LampFirmware(ScpiInstrument):
         elif word in ("OFF", "0"):
             self.lamp.switch(False, self.clock.now())
         else:
-            raise ScpiError(-104, f"OUTP expects ON or OFF, got {args[0]!r}")
+            raise ScpiError(-104, f"OUTP expects ON or OFF, got '{args[0]}'")  # escaped when queued
 
     def _set_voltage(self, args: list[str]) -> None:
         expect_args(args, 1)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import threading
 import weakref
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 import serial
@@ -27,7 +27,8 @@ from .ccd import CCDParams, CCDSensor
 from .clock import SimClock
 from .lamp import Lamp, LampParams
 from .lamp_firmware import LampFirmware
-from .stage_firmware import DEFAULT_AXES, Esp300Firmware
+from .monitor import LampMonitor, MonitorParams
+from .stage_firmware import DEFAULT_AXES, AxisConfig, Esp300Firmware
 from .transports import DeviceChannel, PtyTransport, TcpTransport
 from .world import Optics, camera_angles, cone_averaged_reflectance, footprint_coverage, separation_deg
 
@@ -155,14 +156,20 @@ class Scene:
         """Sample radiance toward the camera [W/(m^2 sr)]."""
         return self.lamp_irradiance_w_m2 * lamp_output * self.reflectance_factor(positions)
 
-    def __call__(self, t_start: float, exposure_s: float) -> np.ndarray:
-        """Mean photons per pixel of an exposure [photons], shape (height, width).
+    def lamp_exposure(self, t_start: float, exposure_s: float) -> float:
+        """Lamp output of one exposure: its mean over the exposure times one flicker factor [-].
 
-        The geometry is taken at mid-exposure; the lamp output is averaged over the
-        exposure and multiplied by one flicker factor.
+        The camera's sample image and the lamp monitor both see this value (the monitor
+        looks at the same lamp through a beam splitter), so one draw serves both.
+        """
+        return self.lamp.mean_output(t_start, t_start + exposure_s) * self.lamp.flicker_factor(exposure_s, self.rng)
+
+    def photons(self, t_start: float, exposure_s: float, lamp: float) -> np.ndarray:
+        """Mean photons per pixel of an exposure lit with lamp output ``lamp`` [photons].
+
+        The geometry is taken at mid-exposure (true axis positions); shape (height, width).
         """
         positions = self.stage.true_positions(t_start + 0.5 * exposure_s)
-        lamp = self.lamp.mean_output(t_start, t_start + exposure_s) * self.lamp.flicker_factor(exposure_s, self.rng)
         radiance = self.radiance(positions, lamp)
         if not np.isfinite(radiance) or radiance < 0:
             raise ValueError(f"the sample BRDF gave radiance {radiance!r} at axis positions "
@@ -170,6 +177,11 @@ class Scene:
         _, _, theta_r, _ = self.angles(positions)
         rate = radiance * self.optics.photon_rate_per_radiance()
         return self.coverage(theta_r) * (rate * exposure_s)
+
+    def __call__(self, t_start: float, exposure_s: float) -> np.ndarray:
+        """Mean photons per pixel of an exposure [photons] (:meth:`photons` with a fresh
+        :meth:`lamp_exposure`)."""
+        return self.photons(t_start, exposure_s, self.lamp_exposure(t_start, exposure_s))
 
 
 class RigControl:
@@ -320,18 +332,29 @@ class EmulatedRig:
     motors_on : bool
         Start with the stage motors on (default: off, as a real controller powers up).
     optics, ccd_params, lamp_params : optional
-        Override the rig layout and the models' constants.
+        Override the rig layout and the models' constants (e.g.
+        ``LampParams(flicker_rms=0.0, drift_amplitude=0.0)`` for a perfectly steady lamp).
     fixed_pattern : bool
         Include PRNU, DSNU and hot pixels in the CCD.
     lamp_irradiance_w_m2 : float
         In-band irradiance of the warm lamp at rated voltage on a surface facing it.
+    monitor : bool
+        Fit the lamp monitor (camera ``MONitor?``, ``*OPT?`` -> ``MON``); False gives a rig
+        without one, whose camera answers ``MON?`` with -113.
+    monitor_params : MonitorParams, optional
+        Constants of the lamp monitor (:mod:`drivers.emulator.monitor`).
+    axes : sequence of AxisConfig, optional
+        Stage axis configuration (default :data:`~drivers.emulator.stage_firmware.DEFAULT_AXES`;
+        e.g. another repeatability or encoder resolution).
     """
 
     def __init__(self, brdf: Brdf, seed: int = 0, realtime: bool = False, min_separation_deg: float = 5.0,
                  name: str = "default", lamp_warm: bool = False, motors_on: bool = False,
                  optics: Optics | None = None, ccd_params: CCDParams | None = None,
                  lamp_params: LampParams | None = None, fixed_pattern: bool = True,
-                 lamp_irradiance_w_m2: float = DEFAULT_LAMP_IRRADIANCE_W_M2) -> None:
+                 lamp_irradiance_w_m2: float = DEFAULT_LAMP_IRRADIANCE_W_M2, monitor: bool = True,
+                 monitor_params: MonitorParams | None = None,
+                 axes: Sequence[AxisConfig] = DEFAULT_AXES) -> None:
         if not callable(brdf):
             raise ValueError(f"brdf must be callable brdf(theta_i, phi_i, theta_r, phi_r), got {brdf!r}")
         if not 0.0 <= min_separation_deg < 90.0:
@@ -343,20 +366,22 @@ class EmulatedRig:
         self.min_separation_deg = float(min_separation_deg)
         self.optics = optics or Optics()
         self.ccd_params = ccd_params or CCDParams(width=self.optics.width, height=self.optics.height)
-        seeds = np.random.SeedSequence(seed).spawn(7)
+        seeds = np.random.SeedSequence(seed).spawn(8)
         rngs = [np.random.default_rng(s) for s in seeds]
         self.clock = SimClock(realtime=realtime)
         self.lamp = Lamp(params=lamp_params or LampParams(), seed=int(seeds[0].generate_state(1)[0]))
         if lamp_warm:
             self.lamp.switch(True, t=-3600.0)
-        self.stage = Esp300Firmware(self.clock, rngs[1], interlock=self._interlock, axes=DEFAULT_AXES,
+        self.stage = Esp300Firmware(self.clock, rngs[1], interlock=self._interlock, axes=tuple(axes),
                                     baudrate=BAUDRATES["stage"])
         if motors_on:
             for axis in self.stage.axes.values():
                 axis.motor_on = True
         self.sensor = CCDSensor(self.ccd_params, seed=seeds[2], fixed_pattern=fixed_pattern)
         self.scene = Scene(brdf, self.optics, self.lamp, self.stage, lamp_irradiance_w_m2, rngs[3])
-        self.camera = CameraFirmware(self.clock, self.sensor, self.optics, self.scene, rngs[4])
+        self.monitor = LampMonitor(monitor_params or MonitorParams(), rngs[7]) if monitor else None
+        self.camera = CameraFirmware(self.clock, self.sensor, self.optics, self.scene, rngs[4],
+                                     monitor=self.monitor)
         self.lamp_supply = LampFirmware(self.clock, self.lamp, rngs[5])
         self.channels = {
             "stage": DeviceChannel("stage", self.stage, self.clock, BAUDRATES["stage"]),

@@ -9,6 +9,13 @@ Axes (degrees): 1 camera swing, 2 lamp polar angle, 3 lamp azimuth.  Moves follo
 trapezoidal velocity profiles in simulated time; a move is refused when its end point is
 outside the software limits or would bring camera and lamp closer than the minimum
 separation (an interlock callback supplied by the rig).
+
+Every numeric parameter has a finite range (docs/protocol.md, section 1, "Parameter
+ranges"), and a number outside it is refused with the manual's code: 7 for a non-axis
+parameter (the ``WS`` delay), ``x01`` for an axis parameter, ``x10``/``x11`` for a
+velocity/acceleration above the axis maximum, ``x06``/``x07`` for a target beyond the
+software limits.  So no line can make a move or a wait last forever: the firmware
+never computes a non-finite time.
 """
 from __future__ import annotations
 
@@ -22,7 +29,7 @@ import numpy as np
 from .clock import SimClock
 
 __all__ = ["AxisConfig", "DEFAULT_AXES", "MotionProfile", "trapezoid_profile", "move_duration", "Esp300Firmware",
-           "GENERAL_ERRORS", "AXIS_ERRORS"]
+           "GENERAL_ERRORS", "AXIS_ERRORS", "MAX_WS_DELAY_MS", "RATE_REFERENCE_TIME_S"]
 
 #: General (non-axis) error messages, ESP300 manual Appendix A.
 GENERAL_ERRORS = {
@@ -51,6 +58,21 @@ VERSION = "ESP300 Version 3.08 09/09/02"
 SERVO_TICK_S = 400e-6
 ERROR_BUFFER_SIZE = 10
 
+#: Longest ``WS`` delay [ms]: the largest 32-bit signed integer (about 24.9 days).  The
+#: sections of the ESP300 manual consulted for this emulator (3.4.1, 5.2.12, 5.2.13) give
+#: no range for the ``WS`` parameter; this bound is the emulator's decision
+#: (docs/protocol.md): it keeps every wait finite while leaving any real warm-up or
+#: settling wait (hours) possible.
+MAX_WS_DELAY_MS = 2**31 - 1
+
+#: Time over which the slowest allowed motion advances one encoder count [s].  The
+#: ESP300 manual (section 5.2.13 "Minimum Velocity", p. 5-11) explains that the minimum
+#: usable velocity is set by the encoder resolution and the slowest rate of motion
+#: increments, without giving a number; the emulator decides that velocity must be at
+#: least one encoder count per second and acceleration at least one count per second
+#: squared (:attr:`AxisConfig.min_velocity`, :attr:`AxisConfig.min_acceleration`).
+RATE_REFERENCE_TIME_S = 1.0
+
 
 @dataclass(frozen=True)
 class AxisConfig:
@@ -67,6 +89,24 @@ class AxisConfig:
     max_acceleration: float
     resolution: float = 0.001
     repeatability: float = 0.002
+
+    @property
+    def min_velocity(self) -> float:
+        """Smallest ``VA`` [deg/s]: one encoder count per :data:`RATE_REFERENCE_TIME_S`.
+
+        With it, the longest possible move (the whole hardware travel, 370 deg on axis 3,
+        at 0.001 deg/s) lasts about 3.7e5 s (4.3 days) of simulated time: long, but finite.
+        """
+        return self.resolution / RATE_REFERENCE_TIME_S
+
+    @property
+    def min_acceleration(self) -> float:
+        """Smallest ``AC`` [deg/s^2]: one encoder count per :data:`RATE_REFERENCE_TIME_S` squared.
+
+        It bounds the ramp time ``VA / AC`` of a move and of a stop by
+        ``max_velocity / min_acceleration`` (4e4 s on axis 3).
+        """
+        return self.resolution / RATE_REFERENCE_TIME_S**2
 
 
 DEFAULT_AXES = (
@@ -111,25 +151,63 @@ class MotionProfile:
         return v0 + a * dt
 
 
+def _check_motion(name: str, value: float, positive: bool) -> None:
+    """Raise ValueError unless ``value`` is finite (and > 0 when ``positive``)."""
+    if not math.isfinite(value) or (positive and value <= 0):
+        condition = "finite and > 0" if positive else "finite"
+        raise ValueError(f"{name} must be {condition}, got {value!r}")
+
+
 def move_duration(distance: float, velocity: float, acceleration: float) -> float:
     """Duration of a point-to-point move from rest to rest [s].
 
     Trapezoidal profile ``d/v + v/a`` when the axis reaches ``v`` (``d >= v^2/a``),
     otherwise triangular ``2 sqrt(d/a)``.
 
+    Parameters
+    ----------
+    distance : float
+        Distance of the move [deg], finite.
+    velocity : float
+        Programmed velocity [deg/s], finite and > 0.
+    acceleration : float
+        Acceleration and deceleration [deg/s^2], finite and > 0.
+
+    Raises
+    ------
+    ValueError
+        If an argument is not finite or a rate is not positive (the duration would not
+        be a finite time).
+
     Examples
     --------
     >>> move_duration(30.0, 10.0, 20.0), move_duration(1.25, 10.0, 20.0)
     (3.5, 0.5)
     """
+    _check_motion("distance", distance, positive=False)
+    _check_motion("velocity", velocity, positive=True)
+    _check_motion("acceleration", acceleration, positive=True)
     d = abs(distance)
     if d >= velocity * velocity / acceleration:
-        return d / velocity + velocity / acceleration
-    return 2.0 * math.sqrt(d / acceleration)
+        duration = d / velocity + velocity / acceleration
+    else:
+        duration = 2.0 * math.sqrt(d / acceleration)
+    _check_motion("the duration of the move", duration, positive=False)  # e.g. a denormal rate
+    return duration
 
 
 def trapezoid_profile(t0: float, start: float, end: float, velocity: float, acceleration: float) -> MotionProfile:
-    """Rest-to-rest move from ``start`` to ``end`` beginning at ``t0`` (see :func:`move_duration`)."""
+    """Rest-to-rest move from ``start`` to ``end`` [deg] beginning at ``t0`` [s] (see :func:`move_duration`).
+
+    Raises
+    ------
+    ValueError
+        If a time, position or rate is not finite or a rate is not positive.
+    """
+    for name, value in (("t0", t0), ("start", start), ("end", end)):
+        _check_motion(name, value, positive=False)
+    _check_motion("velocity", velocity, positive=True)
+    _check_motion("acceleration", acceleration, positive=True)
     d = end - start
     s = 1.0 if d >= 0 else -1.0
     dist = abs(d)
@@ -143,6 +221,7 @@ def trapezoid_profile(t0: float, start: float, end: float, velocity: float, acce
         t_acc = math.sqrt(dist / acceleration)
         t_flat = 0.0
         v_peak = acceleration * t_acc
+    _check_motion("the duration of the move", t0 + 2 * t_acc + t_flat, positive=False)  # e.g. a denormal rate
     p1 = start + s * 0.5 * acceleration * t_acc * t_acc
     p2 = p1 + s * v_peak * t_flat
     return MotionProfile((
@@ -153,10 +232,20 @@ def trapezoid_profile(t0: float, start: float, end: float, velocity: float, acce
 
 
 def stop_profile(t0: float, position: float, velocity: float, acceleration: float) -> MotionProfile:
-    """Decelerate from ``velocity`` at ``position`` to rest with ``acceleration``."""
+    """Decelerate from ``velocity`` [deg/s] at ``position`` [deg] to rest with ``acceleration`` [deg/s^2].
+
+    Raises
+    ------
+    ValueError
+        If an argument is not finite or the acceleration is not positive.
+    """
+    for name, value in (("t0", t0), ("position", position), ("velocity", velocity)):
+        _check_motion(name, value, positive=False)
+    _check_motion("acceleration", acceleration, positive=True)
     if velocity == 0.0:
         return MotionProfile(((t0, position, 0.0, 0.0, 0.0),))
     duration = abs(velocity) / acceleration
+    _check_motion("the duration of the stop", duration, positive=False)
     return MotionProfile(((t0, position, velocity, -math.copysign(acceleration, velocity), duration),))
 
 
@@ -191,6 +280,11 @@ class AxisState:
         """Where the axis will be at rest (true end point of the current motion)."""
         return self.profile.position(self.profile.end_time)
 
+    def encoder_reading(self, t: float) -> float:
+        """Position at time ``t`` as the encoder reads it: rounded to the resolution [deg]."""
+        res = self.config.resolution
+        return round(self.position(t) / res) * res
+
 
 class _EspError(Exception):
     def __init__(self, code: int) -> None:
@@ -198,8 +292,10 @@ class _EspError(Exception):
         super().__init__(code)
 
 
-_COMMAND = re.compile(r"^(\d*)([A-Za-z]{2})(.*)$")
-_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+# ASCII classes only: a Unicode digit is not a number and a non-ASCII space is not a blank.
+_COMMAND = re.compile(r"^(\d*)([A-Za-z]{2})(.*)$", re.ASCII)
+_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$", re.ASCII)
+_BLANKS = re.compile(r"[ \t]+")  # manual 3.4.1, p. 3-8: blank spaces are ignored (space and tab)
 _QUERIES_WITHOUT_MARK = {"TP", "TE", "TB", "VE"}
 
 
@@ -248,11 +344,24 @@ class Esp300Firmware:
 
     # -- state ------------------------------------------------------------------------
     def _update(self, t: float) -> None:
-        """Queue errors of motions that ended by time ``t`` (hardware limit faults)."""
+        """Settle the motions that ended by time ``t``: a hardware-limit stop queues its error."""
         for axis in self.axes.values():
             if axis.pending_error is not None and not axis.moving(t):
-                self._push(axis.pending_error, axis.profile.end_time)
-                axis.pending_error = None
+                self._end_limit_stop(axis)
+
+    def _end_limit_stop(self, axis: AxisState) -> None:
+        """A move stopped by a hardware limit switch has ended.
+
+        Like a real controller, which aborts the trajectory where the switch trips, the
+        axis's desired position becomes the position where it stopped (its encoder
+        reading), so ``DP?``/``PA?`` report the stop position and a following ``PR``
+        moves relative to it.  It is set when the motion ends, not at command time:
+        queried during the move, ``DP?`` reports the commanded target.
+        """
+        end = axis.profile.end_time
+        axis.desired = axis.encoder_reading(end)
+        self._push(axis.pending_error, end)
+        axis.pending_error = None
 
     def true_positions(self, t: float | None = None) -> tuple[float, ...]:
         """True (continuous) positions of all axes at time ``t`` [deg]."""
@@ -276,7 +385,7 @@ class Esp300Firmware:
         """Process one command line; return the reply bytes (one CR LF line per query)."""
         replies: list[str] = []
         for command in line.split(";"):
-            command = "".join(command.split())  # blanks are ignored (manual 3.4.1)
+            command = _BLANKS.sub("", command)
             if not command:
                 continue
             self._update(self.clock.now())
@@ -355,9 +464,7 @@ class Esp300Firmware:
     def _cmd_TP(self, digits, rest, query):
         if not query:
             raise _EspError(6)
-        axis = self._axis(digits)
-        res = axis.config.resolution
-        return _fmt(round(axis.position(self.clock.now()) / res) * res)
+        return _fmt(self._axis(digits).encoder_reading(self.clock.now()))
 
     def _cmd_DP(self, digits, rest, query):
         if not query:
@@ -460,11 +567,12 @@ class Esp300Firmware:
         return None
 
     def _cmd_WS(self, digits, rest, query):
+        """Wait for stop, then ``nn`` ms more: ``0 <= nn <= MAX_WS_DELAY_MS``, else error 7."""
         if query:
             raise _EspError(6)
         delay_ms = 0.0
         if rest:
-            if not _NUMBER.match(rest) or float(rest) < 0:
+            if not _NUMBER.match(rest) or not 0.0 <= float(rest) <= MAX_WS_DELAY_MS:
                 raise _EspError(7)
             delay_ms = float(rest)
         axes = self._targets(digits)
@@ -484,20 +592,27 @@ class Esp300Firmware:
         setattr(axis, attribute, value)
         return None
 
+    @staticmethod
+    def _check_rate(axis: AxisState, value: float, low: float, high: float, above_code: int) -> None:
+        """Refuse a rate below ``low`` (x01) or above ``high`` (``above_code``: x10, x11)."""
+        n = axis.config.number
+        if value > high:  # also an overflowing number such as 1e400 (inf)
+            raise _EspError(100 * n + above_code)
+        if not value >= low:  # zero, negative and absurdly small (denormal) rates
+            raise _EspError(100 * n + 1)
+
     def _cmd_VA(self, digits, rest, query):
+        """Velocity: ``min_velocity <= nn <= max_velocity`` [deg/s], else x01 / x10."""
         def check(axis, value):
-            if value <= 0:
-                raise _EspError(100 * axis.config.number + 1)
-            if value > axis.config.max_velocity:
-                raise _EspError(100 * axis.config.number + 10)
+            c = axis.config
+            self._check_rate(axis, value, c.min_velocity, c.max_velocity, 10)
         return self._setting(digits, rest, query, "velocity", check)
 
     def _cmd_AC(self, digits, rest, query):
+        """Acceleration: ``min_acceleration <= nn <= max_acceleration`` [deg/s^2], else x01 / x11."""
         def check(axis, value):
-            if value <= 0:
-                raise _EspError(100 * axis.config.number + 1)
-            if value > axis.config.max_acceleration:
-                raise _EspError(100 * axis.config.number + 11)
+            c = axis.config
+            self._check_rate(axis, value, c.min_acceleration, c.max_acceleration, 11)
         return self._setting(digits, rest, query, "acceleration", check)
 
     def _cmd_SL(self, digits, rest, query):
@@ -520,5 +635,19 @@ class Esp300Firmware:
             return "7"
         value = self._number(rest, axis)
         if value != 7:
+            raise _EspError(100 * axis.config.number + 1)
+        return None
+
+    def _cmd_SU(self, digits, rest, query):
+        """Encoder resolution [deg per encoder count] (manual, command ``SU``).
+
+        ``xxSU?`` replies the axis's resolution.  The emulated encoders are fixed
+        hardware, so ``xxSUnn`` accepts only the axis's own resolution (a no-op) and
+        refuses any other value with x01, as ``SN`` accepts only 7.
+        """
+        axis = self._axis(digits)
+        if query:
+            return _fmt(axis.config.resolution)
+        if self._number(rest, axis) != axis.config.resolution:
             raise _EspError(100 * axis.config.number + 1)
         return None

@@ -3,10 +3,16 @@
 Every transport feeds received bytes into a :class:`LineSplitter` and hands complete lines
 to the instrument's :class:`DeviceChannel`, which runs the firmware under a lock, applies
 the injected faults and charges the line's transfer time to the simulated clock.
+
+Robustness (docs/protocol.md, "Robustness"): no received byte sequence can stop a line.
+:meth:`DeviceChannel.process` survives a firmware that raises, even from its error path,
+and every serving loop (pseudo-terminal, TCP, and the in-process URL handler) answers
+the next line whatever happened to the previous one, through :func:`reply_to`.
 """
 from __future__ import annotations
 
 import os
+import re
 import select
 import socket
 import threading
@@ -19,10 +25,12 @@ import numpy as np
 
 from .clock import SimClock, transfer_time
 
-__all__ = ["Firmware", "Faults", "LineSplitter", "DeviceChannel", "PtyTransport", "TcpTransport", "MAX_LINE"]
+__all__ = ["Firmware", "Faults", "LineSplitter", "DeviceChannel", "PtyTransport", "TcpTransport", "MAX_LINE",
+           "reply_to"]
 
 #: Longest accepted command line [bytes]; longer lines are discarded with an error.
 MAX_LINE = 4096
+_TERMINATOR = re.compile(rb"[\r\n]")
 
 
 class Firmware(Protocol):
@@ -59,6 +67,11 @@ class Faults:
 class LineSplitter:
     """Split a byte stream into lines at CR or LF (CR LF gives an empty line, ignored).
 
+    A line is decoded as ASCII with Python's ``surrogateescape`` error handler: each byte
+    >= 0x80 becomes the lone surrogate U+DC80 + (byte - 0x80).  Such a character is no
+    letter, digit or blank for any parser, so it can only make a command invalid, and it
+    maps back to exactly the byte received when an error text quotes it.
+
     Examples
     --------
     >>> s = LineSplitter()
@@ -75,19 +88,37 @@ class LineSplitter:
 
     def feed(self, data: bytes) -> Iterator["str | object"]:
         """Yield each completed line (str), or :attr:`OVERLONG` for a discarded long line."""
-        for byte in data:
-            if byte in (10, 13):
-                if self._discarding:
-                    self._discarding = False
-                    yield self.OVERLONG
-                elif self._buffer:
-                    yield self._buffer.decode("ascii", errors="replace")
-                self._buffer.clear()
-            elif not self._discarding:
-                self._buffer.append(byte)
-                if len(self._buffer) > self.max_line:
-                    self._buffer.clear()
-                    self._discarding = True
+        start = 0
+        for terminator in _TERMINATOR.finditer(data):
+            self._extend(data[start:terminator.start()])
+            yield from self._end_line()
+            start = terminator.end()
+        self._extend(data[start:])
+
+    def _extend(self, chunk: bytes) -> None:
+        """Add bytes of the current line; past ``max_line`` the line is discarded."""
+        if self._discarding or not chunk:
+            return
+        self._buffer += chunk
+        if len(self._buffer) > self.max_line:
+            self._buffer.clear()
+            self._discarding = True
+
+    def _end_line(self) -> Iterator["str | object"]:
+        """A terminator arrived: the line (if any), or OVERLONG if it was discarded."""
+        if self._discarding:
+            self._discarding = False
+            yield self.OVERLONG
+        elif self._buffer:
+            yield self._buffer.decode("ascii", errors="surrogateescape")
+        self._buffer.clear()
+
+
+def _reply_bytes(reply: object) -> bytes:
+    """A firmware's reply, which must be bytes (TypeError otherwise: a firmware bug)."""
+    if not isinstance(reply, bytes):
+        raise TypeError(f"firmware replied {type(reply).__name__}, expected bytes")
+    return reply
 
 
 class DeviceChannel:
@@ -116,7 +147,13 @@ class DeviceChannel:
         self.last_internal_error: Exception | None = None
 
     def process(self, line: "str | object") -> bytes:
-        """Run one received line through the firmware; return the reply bytes (maybe empty)."""
+        """Run one received line through the firmware; return the reply bytes (maybe empty).
+
+        Never raises because of the firmware: an exception from ``handle_line`` (or
+        ``overlong_line``) is recorded in :attr:`last_internal_error` and handed to the
+        firmware's ``internal_error``; if that raises too, the line gets no reply and the
+        later exception is recorded (the first is its ``__context__``).
+        """
         faults = self.faults
         if faults.disconnected:
             return b""
@@ -124,16 +161,8 @@ class DeviceChannel:
             stall, faults.stall_s = faults.stall_s, 0.0
             time.sleep(stall)
         with self.lock:
-            if line is LineSplitter.OVERLONG:
-                reply = self.firmware.overlong_line()
-                n_in = MAX_LINE
-            else:
-                n_in = len(line) + 1  # type: ignore[arg-type]
-                try:
-                    reply = self.firmware.handle_line(line)  # type: ignore[arg-type]
-                except Exception as error:  # a firmware bug must not kill the line
-                    self.last_internal_error = error
-                    reply = self.firmware.internal_error(error)
+            reply = self._run_firmware(line)
+            n_in = MAX_LINE if line is LineSplitter.OVERLONG else len(line) + 1  # type: ignore[arg-type]
             self.lines_processed += 1
             self.clock.advance(transfer_time(n_in + len(reply), self.baudrate))
             if reply and faults.garble > 0:
@@ -142,6 +171,20 @@ class DeviceChannel:
         if faults.disconnected:
             return b""
         return reply
+
+    def _run_firmware(self, line: "str | object") -> bytes:
+        """The firmware's reply to one line, or its error path's reply, or ``b""``."""
+        try:
+            if line is LineSplitter.OVERLONG:
+                return _reply_bytes(self.firmware.overlong_line())
+            return _reply_bytes(self.firmware.handle_line(line))  # type: ignore[arg-type]
+        except Exception as error:  # a firmware bug must not kill the line
+            self.last_internal_error = error
+            try:
+                return _reply_bytes(self.firmware.internal_error(error))
+            except Exception as error_path_error:  # ... nor a bug in its error path
+                self.last_internal_error = error_path_error
+                return b""
 
     def _garbled(self, reply: bytes) -> bytes:
         body = bytearray(reply.rstrip(b"\r\n"))
@@ -153,6 +196,21 @@ class DeviceChannel:
         if not body:
             body = bytearray(b"?")
         return bytes(body) + tail
+
+
+def reply_to(channel: DeviceChannel, line: "str | object") -> bytes:
+    """``channel.process(line)`` for a serving loop: any exception becomes no reply.
+
+    :meth:`DeviceChannel.process` already contains the firmware's failures; this guard
+    keeps a serving thread alive against anything else (a fault injected with bad
+    values, a clock refusing a time), and records the exception in the channel's
+    ``last_internal_error``.
+    """
+    try:
+        return channel.process(line)
+    except Exception as error:
+        channel.last_internal_error = error
+        return b""
 
 
 class _Worker:
@@ -210,7 +268,7 @@ class PtyTransport(_Worker):
             except OSError:
                 return
             for line in splitter.feed(data):
-                reply = self.channel.process(line)
+                reply = reply_to(self.channel, line)
                 if reply:
                     self._write(reply)
 
@@ -289,7 +347,7 @@ class TcpTransport(_Worker):
                 if not data:
                     return
                 for line in splitter.feed(data):
-                    reply = self.channel.process(line)
+                    reply = reply_to(self.channel, line)
                     if reply:
                         try:
                             conn.sendall(reply)

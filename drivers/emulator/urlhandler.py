@@ -20,7 +20,7 @@ import urllib.parse
 from serial import SerialBase, SerialException
 from serial.serialutil import PortNotOpenError
 
-from .transports import DeviceChannel, LineSplitter
+from .transports import DeviceChannel, LineSplitter, reply_to
 
 __all__ = ["Serial", "SCHEMES"]
 
@@ -95,7 +95,7 @@ class Serial(SerialBase):
             if channel is None or self._baudrate != channel.baudrate:
                 continue
             for line in splitter.feed(data):
-                reply = channel.process(line)
+                reply = reply_to(channel, line)  # never raises: the port stays served
                 if reply:
                     with self._rx_ready:
                         self._rx.extend(reply)

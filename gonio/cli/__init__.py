@@ -2,9 +2,16 @@
 
 Each sub-command lives in its own module of this package and provides
 ``register(subparsers)``, which adds its parser and sets ``func`` (a function of the
-parsed arguments returning an exit code).  ``main`` wires them together and turns
-expected errors (bad input, interrupted runs) into a one-line message instead of a
-traceback.
+parsed arguments returning an exit code).  ``main`` wires them together and turns every
+error into one line on stderr instead of a traceback:
+
+* bad input (:class:`CLIError`, ``ValueError``, a file that cannot be read or written,
+  a rig that cannot be reached): ``gonio: error: <message>``, exit code 2;
+* Ctrl-C: exit code 130;
+* anything else is an internal error: ``gonio: error: <Type>: <message> (run with --debug
+  for the traceback)``, exit code 1.
+
+``gonio --debug COMMAND ...`` lets every exception propagate, traceback included.
 """
 from __future__ import annotations
 
@@ -16,6 +23,11 @@ import gonio
 
 #: Sub-command modules in the order ``gonio --help`` lists them.
 SUBCOMMANDS = ("demo", "models", "figures", "plan", "run", "fit", "report", "emulator", "textons", "curet", "tables")
+
+#: Exit codes: bad input, internal error, interrupted (128 + SIGINT).
+EXIT_BAD_INPUT = 2
+EXIT_INTERNAL_ERROR = 1
+EXIT_INTERRUPTED = 130
 
 
 class CLIError(ValueError):
@@ -29,6 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="gonio: a virtual gonioreflectometer and measurement-analysis suite.",
     )
     parser.add_argument("--version", action="version", version=f"gonio {gonio.__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback of an error instead of a one-line message")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
         importlib.import_module(f"{__name__}.{name}").register(subparsers)
@@ -37,19 +51,75 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the ``gonio`` command line; returns the process exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    arguments = sys.argv[1:] if argv is None else list(argv)
+    try:
+        parser = build_parser()
+    except Exception as error:  # a sub-command that cannot even be imported
+        if "--debug" in arguments:
+            raise
+        print(f"gonio: error: {describe_error(error)[0]}", file=sys.stderr)
+        return EXIT_INTERNAL_ERROR
+    args = parser.parse_args(arguments)
     if getattr(args, "func", None) is None:
         parser.print_help()
-        return 0 if args.command is None else 2
+        return 0 if args.command is None else EXIT_BAD_INPUT
     try:
         return int(args.func(args) or 0)
-    except (CLIError, ValueError, FileNotFoundError) as error:
-        print(f"gonio: error: {error}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("gonio: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    except Exception as error:
+        if args.debug:
+            raise
+        message, code = describe_error(error)
+        print(f"gonio: error: {message}", file=sys.stderr)
+        return code
+
+
+def describe_error(error: Exception) -> tuple[str, int]:
+    """The one-line message and the exit code ``main`` gives for an exception.
+
+    Parameters
+    ----------
+    error : Exception
+        What a sub-command raised.
+
+    Returns
+    -------
+    message : str
+        One line (newlines in the exception's text are folded).
+    code : int
+        2 for bad input (CLIError, ValueError, OSError, a driver error), 1 otherwise.
+    """
+    if isinstance(error, ValueError):
+        text, code = str(error), EXIT_BAD_INPUT
+    elif isinstance(error, OSError):
+        text, code = os_error_text(error), EXIT_BAD_INPUT
+    elif _is_driver_error(error):
+        text, code = f"rig: {type(error).__name__}: {error}", EXIT_BAD_INPUT
+    else:
+        text = f"{type(error).__name__}: {error} (run with --debug for the traceback)"
+        code = EXIT_INTERNAL_ERROR
+    return " ".join(text.split()), code
+
+
+def os_error_text(error: OSError) -> str:
+    """``FILE: reason`` for an operating-system error (permission, no space, a directory...).
+
+    Errors raised with a message of their own (no errno) keep it.
+    """
+    if error.strerror is None:
+        return str(error) or type(error).__name__
+    names = [str(name) for name in (error.filename, error.filename2) if name is not None]
+    where = " -> ".join(names)
+    return f"{where}: {error.strerror}" if where else error.strerror
+
+
+def _is_driver_error(error: Exception) -> bool:
+    """Whether ``error`` comes from the drivers (never imports them: if they were not
+    imported, the error cannot be theirs)."""
+    errors = sys.modules.get("drivers.errors")
+    return errors is not None and isinstance(error, errors.DriverError)
 
 
 if __name__ == "__main__":  # pragma: no cover

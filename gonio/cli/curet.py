@@ -57,7 +57,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import re
 import sys
 import time
@@ -444,7 +443,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     fitting.add_argument("--model", action="append", metavar="NAME[:p=v,...]",
                          help="model to fit, repeatable (default: " + ", ".join(DEFAULT_CANDIDATES) + ")")
-    fitting.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    fitting.add_argument("--out", required=True, metavar="DIR",
+                         help="output folder; refused if it already holds files, unless --overwrite")
+    fitting.add_argument("--overwrite", action="store_true",
+                         help="replace the results of an earlier 'gonio curet fit' in --out (only the files it "
+                              "writes; other files are left alone)")
     fitting.add_argument("--mcmc", action=argparse.BooleanOptionalAction, default=True,
                          help="sample the posterior with emcee (default: yes)")
     fitting.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=True,
@@ -516,14 +519,73 @@ def comparison_record(comparison) -> dict[str, Any]:
                    "rows": [{k: row[k] for k in keys} for row in comparison.rows]})
 
 
+#: Files ``gonio curet fit`` writes at the top of its output folder (each candidate gets a
+#: fit result folder of its own).
+DATA_FILE = "data.csv"
+COMPARISON_TEXT = "comparison.txt"
+COMPARISON_JSON = "comparison.json"
+
+
+def check_fit_folder(out: Path, overwrite: bool, folders: Sequence[str]) -> bool:
+    """Refuse an output folder that would overwrite files gonio did not write.
+
+    Parameters
+    ----------
+    out : Path
+        The ``--out`` folder.
+    overwrite : bool
+        Whether the results of an earlier ``gonio curet fit`` may be replaced.
+    folders : sequence of str
+        The candidate folders this run writes inside ``out``.
+
+    Returns
+    -------
+    bool
+        True when an earlier run's results will be replaced.
+
+    Raises
+    ------
+    CLIError
+        ``out`` is a file; or it holds files and ``overwrite`` is not given; or it is not
+        the output of ``gonio curet fit`` (comparison.txt and a gonio fit result in a
+        candidate folder); or a candidate folder holds files but no gonio fit result.
+    """
+    from gonio.fitting.results import is_fit_result
+
+    from .fit import check_result_folder
+
+    if out.exists() and not out.is_dir():
+        kind = "an existing file" if out.is_file() else "a device or special file"
+        raise CLIError(f"--out {out}: is {kind}, expected an output folder")
+    if not out.exists() or not any(out.iterdir()):
+        return False
+    if not overwrite:
+        raise CLIError(f"--out {out}: the folder already holds files; choose a new folder, or give --overwrite to "
+                       "replace the results of an earlier 'gonio curet fit' there")
+    earlier = (out / COMPARISON_TEXT).is_file() and any(is_fit_result(d) for d in out.iterdir() if d.is_dir())
+    if not earlier:
+        raise CLIError(f"--out {out}: holds files but no results of 'gonio curet fit' ({COMPARISON_TEXT} and a fit "
+                       "result folder); --overwrite only replaces those (gonio never overwrites files it did not "
+                       "write)")
+    for name in folders:
+        check_result_folder(out / name, overwrite=True, argument=f"--out {out}: candidate folder")
+    return True
+
+
 def _run_fit(args: argparse.Namespace) -> int:
     from gonio.fitting import ConvergenceWarning, compare_models, fit
 
+    from .fit import remove_stale_results, written_names
+
     candidates = _parse_candidates(args.model or DEFAULT_CANDIDATES)
     dataset, noise = _dataset_from_args(args)
+    if not args.out.strip():
+        raise CLIError(f"--out {args.out!r}: expected the name of an output folder (an empty name would write into "
+                       "the current folder)")
     out = Path(args.out)
+    replacing = check_fit_folder(out, args.overwrite, [candidate_slug(*c) for c in candidates])
     out.mkdir(parents=True, exist_ok=True)
-    dataset.to_csv(out / "data.csv")
+    dataset.to_csv(out / DATA_FILE)
     say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     say(_describe(dataset, noise))
     summary_rows = []
@@ -542,6 +604,8 @@ def _run_fit(args: argparse.Namespace) -> int:
             from gonio.report.fit_report import write_report
 
             write_report(folder)
+        if replacing:
+            remove_stale_results(folder, written_names(result, args.report))
         seconds = time.perf_counter() - start
         summary_rows.append((label, folder, result, seconds))
         if result.converged is False:
@@ -557,12 +621,14 @@ def _run_fit(args: argparse.Namespace) -> int:
         lines.append(f"{label:<34} redchi {result.least_squares.redchi:8.3f}  {values}  [{folder.name}, {seconds:.1f} s]")
     if comparison is not None:
         lines += ["", "Model comparison (least squares under the noise model, no jitter):", comparison.summary()]
-        (out / "comparison.json").write_text(json.dumps(comparison_record(comparison), indent=1, allow_nan=False))
+        (out / COMPARISON_JSON).write_text(json.dumps(comparison_record(comparison), indent=1, allow_nan=False))
     else:
+        if replacing and (out / COMPARISON_JSON).is_file():
+            (out / COMPARISON_JSON).unlink()  # the earlier run's comparison, not this one's
         lines += ["", f"No model comparison: {', '.join(with_options)} set model options, which the comparison "
                       "does not take; fit them in a separate run."]
     text = "\n".join(lines)
-    (out / "comparison.txt").write_text(text + "\n")
+    (out / COMPARISON_TEXT).write_text(text + "\n")
     print(text)
     print(f"results: {out}")
     return 0

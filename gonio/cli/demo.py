@@ -13,7 +13,7 @@
 from __future__ import annotations
 
 import argparse
-import shutil
+import json
 import sys
 import time
 import warnings
@@ -27,8 +27,11 @@ SAMPLE_MODEL = "oren-nayar"
 TRUTH = {"rho": 0.9, "sigma": 30.0}
 #: The shipped protocols the demo runs.
 PROTOCOLS = ("oren-nayar-fig16-plaster.toml", "oren-nayar-fig19-off-plane.toml")
-#: Marks a folder as the demo's own output, which a new demo run may replace.
+#: Marks a folder as the demo's own output and lists what the demo wrote there, which a
+#: new demo run deletes (nothing else).
 MARKER = ".gonio-demo"
+#: The model comparison the demo writes next to the fit result.
+COMPARISON_FILE = "model-comparison.txt"
 
 
 def protocols_folder() -> Path:
@@ -39,14 +42,117 @@ def protocols_folder() -> Path:
     return folder
 
 
-def _prepare_output(out: Path) -> None:
+def demo_paths() -> tuple[list[str], list[str]]:
+    """The files and folders the demo writes in its output folder, relative to it.
+
+    Returns
+    -------
+    files : list of str
+        The recording files of every protocol (gonio.data.RECORDING_FILES), the fit
+        result and report files, and the model comparison.
+    folders : list of str
+        The folders holding them (a new run removes them only when they are empty).
+    """
+    from gonio import protocols
+    from gonio.data import RECORDING_FILES
+
+    from .fit import result_file_names
+
+    recordings = [f"recordings/{protocols.load(protocols_folder() / name).name}" for name in PROTOCOLS]
+    fit_folder = f"fit-{SAMPLE_MODEL}"
+    files = [f"{folder}/{name}" for folder in recordings for name in RECORDING_FILES]
+    files += [f"{fit_folder}/{name}" for name in result_file_names() + (COMPARISON_FILE,)]
+    return files, recordings + ["recordings", fit_folder]
+
+
+def _recorded_paths(out: Path) -> tuple[list[str], list[str]]:
+    """The files and folders an earlier demo run recorded in its marker.
+
+    A marker of an older gonio (plain text, no list) stands for the demo's fixed layout
+    (:func:`demo_paths`), which is what that demo wrote.
+    """
+    try:
+        recorded = json.loads((out / MARKER).read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, ValueError):
+        return demo_paths()
+    if not isinstance(recorded, dict):
+        return demo_paths()
+    files, folders = recorded.get("files", []), recorded.get("folders", [])
+    valid = all(isinstance(v, list) and all(isinstance(p, str) for p in v) for v in (files, folders))
+    return (files, folders) if valid else demo_paths()
+
+
+def _inside(out: Path, relative: str) -> Path | None:
+    """``out / relative`` if it stays inside ``out`` with no symbolic link on the way, else None."""
+    parts = Path(relative).parts
+    if not parts or Path(relative).is_absolute() or any(part in ("", ".", "..") for part in parts):
+        return None
+    path = out
+    for part in parts[:-1]:
+        path = path / part
+        if path.is_symlink() or not path.is_dir():
+            return None
+    return path / parts[-1]
+
+
+def _remove_earlier_output(out: Path) -> None:
+    """Delete what an earlier demo run recorded in its marker, and nothing else.
+
+    Recorded files are deleted; recorded folders only when they are empty afterwards, so
+    every file a user put into the output folder stays where it is.
+    """
+    files, folders = _recorded_paths(out)
+    for relative in files:
+        path = _inside(out, relative)
+        if path is not None and (path.is_symlink() or path.is_file()):
+            path.unlink()
+    for relative in sorted(folders, key=lambda p: len(Path(p).parts), reverse=True):
+        path = _inside(out, relative)
+        if path is not None and not path.is_symlink() and path.is_dir() and not any(path.iterdir()):
+            path.rmdir()
+
+
+def _prepare_output(out: str | Path) -> Path:
+    """Check ``--out`` and clear what an earlier demo run wrote there.
+
+    Parameters
+    ----------
+    out : str or Path
+        The ``--out`` argument.
+
+    Returns
+    -------
+    pathlib.Path
+        The output folder, created, holding a fresh marker that lists the paths this run
+        writes.
+
+    Raises
+    ------
+    CLIError
+        For an empty name, a symbolic link, an existing file, or a folder holding files
+        but no demo marker (gonio never overwrites data it did not write).
+    """
+    if not str(out).strip():
+        raise CLIError(f"--out {str(out)!r}: expected the name of an output folder")
+    out = Path(out)
+    if out.is_symlink():
+        raise CLIError(f"--out {out}: is a symbolic link; give the folder itself (the demo never writes or "
+                       "deletes through a link)")
+    if out.exists() and not out.is_dir():
+        kind = "an existing file" if out.is_file() else "a device or special file"
+        raise CLIError(f"--out {out}: is {kind}; expected an output folder")
     if out.exists() and any(out.iterdir()):
-        if not (out / MARKER).exists():
-            raise CLIError(f"{out} exists and is not a gonio demo folder; choose another --out "
+        marker = out / MARKER
+        if marker.is_symlink() or not marker.is_file():
+            raise CLIError(f"--out {out}: exists and is not a gonio demo folder; choose another --out "
                            "(gonio never overwrites data it did not write)")
-        shutil.rmtree(out)
+        _remove_earlier_output(out)
+    files, folders = demo_paths()
     out.mkdir(parents=True, exist_ok=True)
-    (out / MARKER).write_text("output of 'gonio demo'; a new demo run replaces this folder\n")
+    record = {"written_by": "gonio demo", "note": "a new demo run deletes these files (and these folders when "
+              "empty), nothing else", "files": files, "folders": folders}
+    (out / MARKER).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    return out
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -136,8 +242,7 @@ def _run(args: argparse.Namespace) -> int:
     from gonio.report.fit_report import write_report
 
     start = time.perf_counter()
-    out = Path(args.out)
-    _prepare_output(out)
+    out = _prepare_output(args.out)
     reduced = measure_demo(out, args.seed, args.quiet)
     result, comparison = fit_demo(reduced, args.seed, args.quiet)
     fit_folder = out / f"fit-{SAMPLE_MODEL}"

@@ -41,10 +41,99 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--walkers", type=int, default=32, help="number of emcee walkers (default 32)")
     parser.add_argument("--max-steps", type=int, default=20000, help="step limit of the chain (default 20000)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--out", help="result folder (default: DATA_STEM.fit-MODEL next to the data)")
+    parser.add_argument("--out", help="result folder (default: DATA_STEM.fit-MODEL next to the data); "
+                                      "refused if it already holds files, unless --overwrite")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an earlier gonio fit result in --out (only its result and report files; "
+                             "other files are left alone)")
     parser.add_argument("--report", action="store_true", help="also write the HTML report into the result folder")
     parser.add_argument("--quiet", action="store_true", help="no progress messages")
     parser.set_defaults(func=_run)
+
+
+def check_result_folder(out: Path, overwrite: bool, argument: str = "--out") -> bool:
+    """Refuse a result folder that would overwrite files gonio did not write.
+
+    Parameters
+    ----------
+    out : Path
+        The folder a fit result will be saved into.
+    overwrite : bool
+        Whether the user allows replacing an earlier gonio fit result there.
+    argument : str
+        The command-line argument named in messages.
+
+    Returns
+    -------
+    bool
+        True when an earlier fit result will be replaced (see :func:`remove_stale_results`).
+
+    Raises
+    ------
+    CLIError
+        ``out`` is an existing file or device; or it holds files and ``overwrite`` is not
+        given; or it holds files but no gonio fit result (result.json of FitResult.save).
+    """
+    from gonio.cli import CLIError
+    from gonio.fitting.results import RESULT_FILE, is_fit_result
+
+    if out.exists() and not out.is_dir():
+        kind = "an existing file" if out.is_file() else "a device or special file"
+        raise CLIError(f"{argument} {out}: is {kind}, expected a folder for the fit result")
+    if not out.exists() or not any(out.iterdir()):
+        return False
+    if not overwrite:
+        raise CLIError(f"{argument} {out}: the folder already holds files; choose a new folder, or give --overwrite "
+                       "to replace the gonio fit result in it")
+    if not is_fit_result(out):
+        raise CLIError(f"{argument} {out}: holds files but no gonio fit result ({RESULT_FILE}); --overwrite only "
+                       "replaces a fit result (gonio never overwrites files it did not write)")
+    return True
+
+
+def result_file_names() -> tuple[str, ...]:
+    """Every file name a fit result folder may hold from FitResult.save and write_report."""
+    from gonio.fitting.results import CHAIN_FILE, RESULT_FILE, SUMMARY_FILE
+    from gonio.report.fit_report import REPORT_FILES
+
+    return (RESULT_FILE, CHAIN_FILE, SUMMARY_FILE) + REPORT_FILES
+
+
+def remove_stale_results(out: Path, written: tuple[str, ...]) -> list[Path]:
+    """Delete the result and report files of an earlier fit that the new one did not rewrite.
+
+    Only the names FitResult.save and write_report write are considered (a chain left
+    from an earlier MCMC run, a report of an earlier fit); every other file stays.
+
+    Parameters
+    ----------
+    out : Path
+        The result folder.
+    written : tuple of str
+        Names the new fit wrote.
+
+    Returns
+    -------
+    list of Path
+        The files deleted.
+    """
+    removed = []
+    for name in result_file_names():
+        path = out / name
+        if name not in written and (path.is_file() or path.is_symlink()):
+            path.unlink()
+            removed.append(path)
+    return removed
+
+
+def written_names(result, report: bool) -> tuple[str, ...]:
+    """The file names a saved ``result`` (plus its report, when written) occupies."""
+    names = result.saved_files()
+    if report:
+        from gonio.report.fit_report import REPORT_FILES
+
+        names += REPORT_FILES
+    return names
 
 
 def _pairs(items: list[str], what: str) -> dict[str, str]:
@@ -138,7 +227,13 @@ def _run(args: argparse.Namespace) -> int:
     for key, text in _pairs(args.prior, "--prior").items():
         bounds = model.param(key).bounds if key in model.param_names else (-float("inf"), float("inf"))
         priors[key] = parse_prior(text, bounds)
+    if args.out is not None and not args.out.strip():
+        from gonio.cli import CLIError
+
+        raise CLIError(f"--out {args.out!r}: expected the name of a result folder (an empty name would write "
+                       "into the current folder)")
     out = Path(args.out) if args.out else data_path.with_name(f"{data_path.stem}.fit-{name}")
+    replacing = check_result_folder(out, args.overwrite)
     if not args.quiet:
         print(f"fitting {name} to {dataset.n} {dataset.quantity} values from {data_path}", file=sys.stderr)
     with warnings.catch_warnings():
@@ -153,6 +248,8 @@ def _run(args: argparse.Namespace) -> int:
         from gonio.report.fit_report import write_report
 
         print(f"report: {write_report(out)}")
+    if replacing:
+        remove_stale_results(out, written_names(result, args.report))
     print(f"result: {path}")
     if result.converged is False:
         print("gonio: WARNING: the MCMC chain did NOT converge (step limit reached); "

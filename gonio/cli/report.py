@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .paths import check_output_folder
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``gonio report``."""
@@ -26,6 +28,8 @@ def _run(args: argparse.Namespace) -> int:
     source = Path(args.result_dir)
     if not (source / "result.json").exists() and not source.is_file():
         raise FileNotFoundError(f"{source}: no result.json here; give a folder written by 'gonio fit'")
+    if args.out is not None:
+        check_output_folder(args.out, "report")
     path = write_report(source, args.out)
     print(f"report written to {path.resolve()}")
     return 0

@@ -12,6 +12,7 @@ from gonio import acquisition, protocols
 
 from . import CLIError
 from .models import parse_model_spec
+from .paths import check_output_folder
 from .progress import ProgressLine
 
 #: The paper's wall plaster (Oren & Nayar 1995, Fig 16): the default emulated sample.
@@ -45,19 +46,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 @contextmanager
-def emulated_rig(sample: str, seed: int, name: str = "gonio-run") -> Iterator[tuple]:
+def emulated_rig(sample: str, seed: int, name: str = "gonio-run", **emulator_options) -> Iterator[tuple]:
     """An in-process emulated rig with a registry model as sample, opened through the drivers.
 
     Yields ``(rig, emulator, change_sample, metadata)``: the driver-level Rig, the emulator
     (for its clock), a function swapping the sample for a Lambertian reference standard
-    and back, and the configuration to store with the recording.
+    and back, and the configuration to store with the recording. ``emulator_options`` go
+    to :class:`drivers.emulator.rig.EmulatedRig` (e.g. ``monitor=False``,
+    ``lamp_params=...``); plain values among them are stored in the metadata.
     """
     from drivers.emulator.rig import EmulatedRig
     from drivers.rig import Rig
 
     model_name, values = parse_model_spec(sample)
     brdf = functools.partial(gonio.brdf, model_name, **values)
-    emulator = EmulatedRig(brdf, seed=seed, name=name, lamp_warm=False)
+    emulator = EmulatedRig(brdf, seed=seed, name=name, **{"lamp_warm": False, **emulator_options})
     emulator.start(pty=False)
     try:
         rig = Rig.open(emulator.url("stage"), emulator.url("camera"), emulator.url("lamp"))
@@ -71,6 +74,9 @@ def emulated_rig(sample: str, seed: int, name: str = "gonio-run") -> Iterator[tu
             metadata = {"rig": {"kind": "emulator", "sample": sample, "model": model_name,
                                 "parameters": values, "seed": seed,
                                 "min_separation_deg": emulator.min_separation_deg,
+                                "lamp_monitor": emulator.monitor is not None,
+                                "options": {k: (v if isinstance(v, (bool, int, float, str)) else repr(v))
+                                            for k, v in emulator_options.items()},
                                 "aperture_sr": [emulator.optics.lamp_solid_angle_sr,
                                                 emulator.optics.camera_solid_angle_sr]}}
             yield rig, emulator, change_sample, metadata
@@ -94,11 +100,34 @@ def _progress_printer(quiet: bool):
     return show
 
 
+def check_ports(ports: dict[str, str | None]) -> None:
+    """Refuse a partial set of real-rig ports, or a port path that does not exist.
+
+    Parameters
+    ----------
+    ports : dict
+        ``{"--stage": ..., "--camera": ..., "--lamp": ...}``: device paths (e.g.
+        /dev/ttyUSB0), pyserial URLs (``socket://host:port``) or port names (COM3).
+
+    Raises
+    ------
+    CLIError
+        Naming the argument.
+    """
+    given = [value for value in ports.values() if value]
+    if given and len(given) != len(ports):
+        raise CLIError("a real rig needs all three of --stage, --camera and --lamp")
+    for argument, port in ports.items():
+        if port and "://" not in port and "/" in port and not Path(port).exists():
+            raise CLIError(f"{argument} {port}: no such serial port (expected an existing device such as "
+                           "/dev/ttyUSB0, or a pyserial URL such as socket://host:port)")
+
+
 def _run(args: argparse.Namespace) -> int:
+    check_output_folder(args.out, "recording")
+    check_ports({"--stage": args.stage, "--camera": args.camera, "--lamp": args.lamp})
     protocol = protocols.load(args.protocol)
     ports = (args.stage, args.camera, args.lamp)
-    if any(ports) and not all(ports):
-        raise CLIError("a real rig needs all three of --stage, --camera and --lamp")
     reflectance = protocol.reference.reflectance if protocol.reference else None
     try:
         if all(ports):

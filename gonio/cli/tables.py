@@ -3,7 +3,9 @@
 ``gonio tables build [NAME ...]`` evaluates the exact model on the table grid (minutes on
 a few cores) and writes the table to the user cache, or to ``--output``;
 ``gonio tables info`` says which table each tabulated model would read;
-``gonio tables clear`` deletes the user cache (never the tables shipped with gonio).
+``gonio tables clear`` deletes the tables ``gonio tables build`` wrote into the user cache
+(recognised by name and by a signature inside the file) and lists every other file there,
+which it keeps (never the tables shipped with gonio, never a user's own files).
 """
 from __future__ import annotations
 
@@ -14,12 +16,47 @@ import time
 from . import CLIError
 
 
+def check_output_file(output: str) -> None:
+    """Refuse a ``tables build --output`` that would overwrite something gonio did not write.
+
+    Parameters
+    ----------
+    output : str
+        The ``--output`` argument.
+
+    Raises
+    ------
+    CLIError
+        For an empty name, a folder, a device or special file, or an existing file that
+        is not a table written by gonio's builder.
+    """
+    from pathlib import Path
+
+    from gonio.models.tabulated import store
+
+    if not output.strip():
+        raise CLIError(f"--output {output!r}: expected the name of a .npz file to write")
+    path = Path(output)
+    if path.is_dir():
+        raise CLIError(f"--output {output}: is a folder; expected the name of a .npz file to write")
+    if path.exists() and not path.is_file():
+        raise CLIError(f"--output {output}: is a device or special file; expected the name of a .npz file to write")
+    if path.exists() and not store.written_by_builder(path):
+        raise CLIError(f"--output {output}: the file exists and is not a table written by 'gonio tables build' "
+                       "(gonio never overwrites files it did not write); choose another name")
+
+
 def _run_build(args: argparse.Namespace) -> int:
     from gonio.models import tabulated
 
     names = args.name or sorted(tabulated.TABLES)
-    if args.output and len(names) != 1:
-        raise CLIError("--output needs exactly one table name")
+    unknown = [name for name in names if name not in tabulated.TABLES]
+    if unknown:
+        raise CLIError(f"unknown table {unknown[0]!r}; known tables: {sorted(tabulated.TABLES)}")
+    if args.output is not None:
+        if len(names) != 1:
+            raise CLIError("--output needs exactly one table name")
+        check_output_file(args.output)
     options = {}
     if args.grid:
         from gonio.models.tabulated.oren_nayar_table import OrenNayarGrid
@@ -68,10 +105,13 @@ def _run_clear(args: argparse.Namespace) -> int:
 
     removed = store.clear_cache()
     tabulated._forget_loaded()
+    _, kept = store.cache_contents()
     for path in removed:
         print(f"removed {path}")
     if not removed:
-        print(f"nothing to remove in {store.cache_dir()}")
+        print(f"no table built by gonio in {store.cache_dir()}")
+    for path in kept:
+        print(f"kept {path} (not a table written by 'gonio tables build')")
     return 0
 
 
@@ -90,6 +130,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     info = actions.add_parser("info", help="which table each tabulated model reads")
     info.add_argument("name", nargs="*", help="table names (default: all)")
     info.set_defaults(func=_run_info)
-    clear = actions.add_parser("clear", help="delete the tables in the user cache")
+    clear = actions.add_parser("clear", help="delete the tables gonio built in the user cache (other files are kept)")
     clear.set_defaults(func=_run_clear)
     parser.set_defaults(func=lambda args: (parser.print_help(), 0)[1])

@@ -15,6 +15,7 @@ posterior) in one folder, and read back with :meth:`FitResult.load`.
 from __future__ import annotations
 
 import datetime as _dt
+import io
 import json
 import math
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ import numpy as np
 
 import gonio
 from gonio import models
+from gonio.files import write_atomic
 
 from .dataset import Dataset
 from .least_squares import LeastSquaresResult, _with_unit
@@ -33,10 +35,13 @@ from .priors import Prior, prior_from_dict
 from .problem import FitProblem, evaluated_model, predict_quantity
 from .selection import information_criteria
 
-__all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE"]
+__all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE", "SUMMARY_FILE", "RESULT_FORMAT", "is_fit_result"]
 
 RESULT_FILE = "result.json"
 CHAIN_FILE = "chain.npz"
+SUMMARY_FILE = "summary.txt"
+#: The ``format`` field of every result.json gonio writes.
+RESULT_FORMAT = "gonio-fit-result"
 
 # A posterior is "piled at a bound" when its 95 % interval reaches to within 5 % of its own
 # width of the bound: the data are then consistent with the bound value itself.  For a
@@ -68,6 +73,16 @@ def _clean(value: Any) -> Any:
 
 def _nan(value: Any) -> float:
     return math.nan if value is None else float(value)
+
+
+def is_fit_result(folder: str | Path) -> bool:
+    """Whether ``folder`` holds a ``result.json`` written by :meth:`FitResult.save`."""
+    path = Path(folder) / RESULT_FILE
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(data, dict) and data.get("format") == RESULT_FORMAT
 
 
 @dataclass
@@ -256,18 +271,37 @@ class FitResult:
             }
         return _clean(out)
 
+    def saved_files(self) -> tuple[str, ...]:
+        """Names of the files :meth:`save` writes for this result (chain only with MCMC)."""
+        return (RESULT_FILE, SUMMARY_FILE) + ((CHAIN_FILE,) if self.mcmc is not None else ())
+
     def save(self, directory: str | Path) -> Path:
         """Write ``result.json``, ``chain.npz`` (with MCMC) and ``summary.txt`` into a folder.
 
-        Returns the path of ``result.json``.
+        Each file is written to a temporary file in the same folder and renamed over the
+        target (:func:`gonio.files.write_atomic`, with the permissions a normally created
+        file gets), so an interrupted or failed write (a full disk) leaves the earlier file,
+        never a truncated one, and no temporary file.
+
+        Parameters
+        ----------
+        directory : str or Path
+            The folder (created if missing).
+
+        Returns
+        -------
+        pathlib.Path
+            The path of ``result.json``.
         """
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         path = directory / RESULT_FILE
-        path.write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False))
+        write_atomic(path, json.dumps(self.to_dict(), indent=1, allow_nan=False))
         if self.mcmc is not None:
-            np.savez_compressed(directory / CHAIN_FILE, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob)
-        (directory / "summary.txt").write_text(self.summary() + "\n")
+            buffer = io.BytesIO()
+            np.savez_compressed(buffer, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob)
+            write_atomic(directory / CHAIN_FILE, buffer.getvalue())
+        write_atomic(directory / SUMMARY_FILE, self.summary() + "\n")
         return path
 
     @classmethod

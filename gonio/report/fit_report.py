@@ -20,12 +20,16 @@ from typing import Any, Callable
 import numpy as np
 from matplotlib.figure import Figure
 
+from gonio.files import write_atomic
 from gonio.fitting.results import FitResult
 from gonio.models import get as get_model
 
 from . import fit_figures
 
-__all__ = ["write_report", "FIGURES"]
+__all__ = ["write_report", "FIGURES", "REPORT_FILE", "REPORT_FILES"]
+
+#: The HTML file :func:`write_report` writes.
+REPORT_FILE = "report.html"
 
 #: (file name, section title, figure function, caption) in report order.
 FIGURES: tuple[tuple[str, str, Callable[[FitResult], Figure], str], ...] = (
@@ -41,6 +45,9 @@ FIGURES: tuple[tuple[str, str, Callable[[FitResult], Figure], str], ...] = (
     ("fit-traces.png", "Chain", fit_figures.trace_figure,
      "Every walker's position at every step; the shaded start is discarded as burn-in."),
 )
+
+#: Every file :func:`write_report` writes into its output folder.
+REPORT_FILES: tuple[str, ...] = (REPORT_FILE,) + tuple(name for name, *_ in FIGURES)
 
 _STYLE = """
 body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; max-width: 1100px;
@@ -62,7 +69,7 @@ def _png(fig: Figure, path: Path) -> bytes:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=110)
     data = buffer.getvalue()
-    path.write_bytes(data)
+    write_atomic(path, data)
     return data
 
 
@@ -220,6 +227,6 @@ density found.</p>
 <h2>Summary</h2><pre>{html.escape(result.summary())}</pre>
 </body></html>
 """
-    path = out / "report.html"
-    path.write_text(body)
+    path = out / REPORT_FILE
+    write_atomic(path, body)
     return path

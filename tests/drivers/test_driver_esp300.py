@@ -152,3 +152,33 @@ def test_disconnected_controller_times_out_quickly(stage, emu):
         stage.identity()
     emu.control.reconnect("stage")
     assert stage.identity().startswith("ESP300")
+
+
+def test_encoder_resolution_exact_pair(stage):
+    # Protocol: xxSU? -> the encoder resolution with 5 decimals; the emulator's axes: 0.001 deg.
+    assert raw(stage, "1SU?") == ["0.00100"]
+    assert [stage.encoder_resolution(axis) for axis in (1, 2, 3)] == [0.001, 0.001, 0.001]
+    assert (">", b"3SU?\r") in [(d, b) for _, d, b in stage.line.transcript]
+    with pytest.raises(ValueError, match="axis"):
+        stage.encoder_resolution(4)
+
+
+def test_encoder_resolution_refuses_a_nonsense_reply(stage, monkeypatch):
+    from drivers.errors import ProtocolError
+
+    for reply in (0.0, -0.001, float("inf"), float("nan")):
+        monkeypatch.setattr(stage, "ask", lambda command, parse=str, **kw: reply)
+        with pytest.raises(ProtocolError, match="encoder resolution"):
+            stage.encoder_resolution(1)
+
+
+def test_dp_after_a_hardware_limit_stop_is_where_the_axis_stopped(stage, emu):
+    stage.motor_on(1)
+    emu.control.hit_limit(1)
+    with pytest.raises(StageError) as info:
+        stage.move_absolute(1, -60.0)
+    assert info.value.code == 105
+    # The axis tripped the switch half way (-30 deg): DP? follows it, TP agrees within the
+    # repeatability (0.002 deg, 1 sigma; both are encoder readings of the rest position).
+    assert stage.desired_position(1) == pytest.approx(-30.0, abs=1e-9)
+    assert abs(stage.position(1) - stage.desired_position(1)) <= 0.002

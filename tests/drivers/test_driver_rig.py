@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from drivers.emulator.rig import EmulatedRig
-from drivers.errors import GeometryError, LampError, ResponseTimeout, StageError
+from drivers.errors import GeometryError, LampError, PositionError, ResponseTimeout, StageError
 from drivers.rig import Measurement, Rig
 
 TIMEOUT = 0.3  # s; in-process replies take < 1 ms
@@ -152,16 +152,24 @@ def test_home_returns_axes_home(rig):
     assert rig.home() == pytest.approx({1: 0.0, 2: 45.0, 3: 0.0}, abs=0.01)
 
 
-def test_hardware_limit_during_move_raises_stage_error(rig, emu):
+def test_hardware_limit_during_move_is_retried_from_where_the_axis_stopped(rig, emu, caplog):
+    """A tripped limit switch (x05 on axis 1) stops the swing half way; the rig re-reads
+    the controller's targets (DP? now says where the axis stopped) and moves again."""
     emu.control.hit_limit(1)
-    with pytest.raises(StageError) as info:
-        rig.move_to(45.0, 0.0, -60.0)  # from home only the swing (axis 1) moves
-    # The swing stops half way at the negative limit switch: x05 on axis 1.
-    assert info.value.code == 105 and info.value.axis == 1
+    position = rig.move_to(45.0, 0.0, -60.0)  # from home only the swing (axis 1) moves
+    assert position[1] == pytest.approx(-60.0, abs=0.01)
+    assert emu.control.true_state().positions_deg[0] == pytest.approx(-60.0, abs=0.01)
+    assert "105" in caplog.text and "NEGATIVE HARDWARE LIMIT" in caplog.text
+
+
+def test_limit_stop_without_retries_is_a_position_error_naming_the_stop(rig, emu):
+    rig.move_retries = 0
+    emu.control.hit_limit(1)
+    with pytest.raises(PositionError, match="105"):
+        rig.move_to(45.0, 0.0, -60.0)
     assert emu.control.true_state().positions_deg[0] == pytest.approx(-30.0, abs=0.01)
-    # The rig forgets its targets and re-reads them: the next move works.
-    rig.move_to(30.0, 0.0, -10.0)
-    assert rig.position()[1] == pytest.approx(-10.0, abs=0.01)
+    rig.move_retries = 2
+    assert rig.move_to(30.0, 0.0, -10.0)[1] == pytest.approx(-10.0, abs=0.01)  # state re-read: works again
 
 
 def test_lamp_burn_out_mid_sweep_raises_lamp_error(rig, emu):

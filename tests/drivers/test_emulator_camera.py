@@ -160,3 +160,59 @@ def test_camera_replies_are_reproducible_from_seed():
 
     assert session(7) == session(7)
     assert session(7) != session(8)
+
+
+# -- strict parameters and printable error texts (docs/protocol.md section 2, "Errors") --------
+
+@pytest.mark.parametrize(
+    "line, code",
+    [
+        ("ROI ++1,2,3,4", "-104"),  # a doubled sign is no integer (was an internal -200)
+        ("ROI 1.5,2,3,4", "-104"),
+        ("ROI 1e2,2,3,4", "-104"),
+        ("ROI 1,2,3,\u0664", "-104"),  # ARABIC-INDIC DIGIT FOUR is no ASCII digit
+        ("ROI 1,,3,4", "-104"),
+        ("ROI -1,0,10,10", "-222"),  # an integer, outside the sensor
+        ("ROI 0,-1,10,10", "-222"),
+        ("ROI 0,0,0,10", "-222"),
+        ("ROI 1,2,3," + "9" * 30, "-222"),
+    ],
+)
+def test_roi_parameters_are_strict_integers_inside_the_sensor(rig, line, code):
+    assert ask(rig, "camera", line) == ""
+    assert [e.split(",")[0] for e in errors(rig)] == [code]
+    assert ask(rig, "camera", "ROI?") == "0,0,512,480\n"
+
+
+def test_roi_accepts_signs_and_leading_zeros(rig):
+    ask(rig, "camera", "ROI +10,0020,+30,40")
+    assert ask(rig, "camera", "ROI?") == "10,20,30,40\n" and errors(rig) == []
+
+
+@pytest.mark.parametrize("line", ["*IDN? 5", "*RST 1", "*CLS 1", "*OPC? 1", "*WAI 0", "SYST:ERR? 1",
+                                  "SYSTEM:ERROR:NEXT? 1"])
+def test_common_commands_refuse_parameters_with_minus_108(rig, line):
+    # IEEE 488.2 section 10: none of these common commands takes a parameter.
+    assert ask(rig, "camera", line) == ""
+    assert [e.split(",")[0] for e in errors(rig)] == ["-108"]
+    assert ask(rig, "lamp", line) == ""
+    assert [e.split(",")[0] for e in errors(rig, "lamp")] == ["-108"]
+
+
+def test_error_texts_are_printable_ascii_and_replies_are_not_lost(rig):
+    from drivers.emulator.transports import LineSplitter
+
+    received = b'\xe9XP 1;FOO"\x07 1;*IDN?\n'
+    (line,) = LineSplitter().feed(received)
+    assert ask(rig, "camera", line) == "GONIO,CCD-512,SN0001,1.0\n"  # the valid query is answered
+    # The byte 0xE9 and the BEL are quoted as \xNN, the double quote is doubled (IEEE 488.2
+    # 8.7.8), so the string is unambiguous and the reply encodes as ASCII.
+    assert errors(rig) == ['-100,"Command error;\'\\xe9XP 1\'"', '-100,"Command error;\'FOO""\\x07 1\'"']
+
+
+def test_error_description_is_at_most_255_characters(rig):
+    ask(rig, "camera", "FOO" + "x" * 3000)
+    (entry,) = errors(rig)
+    code, description = entry.split(",", 1)
+    assert code == "-113" and description.startswith('"Undefined header;FOOxxx') and description.endswith('..."')
+    assert len(description) - 2 <= 255  # SCPI-1999 vol. 2, SYSTem:ERRor

@@ -224,3 +224,171 @@ def test_pymeasure_style_commands():
     assert abs(float(ask(fw, "1TP")) - 12.5) < 0.01
     assert ask(fw, "1SL?") == "-90.00000\r\n"
     assert ask(fw, "TE?") == "0\r\n"
+
+
+# -- parameter ranges (docs/protocol.md section 1, "Parameter ranges") -----------------------
+
+@pytest.mark.parametrize(
+    "line, codes",
+    [
+        ("1WS1e400", [7]),  # overflows to inf: beyond the longest WS delay (non-axis parameter)
+        ("WS1e309", [7]),
+        ("1WS2147483648", [7]),  # one above MAX_WS_DELAY_MS = 2**31 - 1
+        ("1VA1e-308", [101]),  # denormal velocity: below one encoder count per second
+        ("1VA0.000999", [101]),
+        ("1VA0", [101]),
+        ("1VA-0", [101]),
+        ("1VA1e400", [110]),  # inf is above the maximum velocity
+        ("1AC1e-308", [101]),
+        ("1AC1e400", [111]),
+        ("1PA1e400", [106]),  # inf is beyond the positive software limit
+        ("1PA-1e400", [107]),
+        ("1PR1e400", [106]),
+        ("1SL-1e400", [101]),
+        ("1SR1e400", [101]),
+        ("1OR1e400", [101]),
+        ("1SN1e400", [101]),
+        ("1PAnan", [101]),  # not a number in the manual's syntax
+        ("1PAinf", [101]),
+        ("1PA" + "9" * 400, [106]),  # a huge integer is a finite float, or inf: beyond SR either way
+    ],
+)
+def test_out_of_range_numbers_are_refused_with_the_manuals_codes(line, codes):
+    fw = make_stage()
+    ask(fw, "MO")
+    t0 = fw.clock.now()
+    assert ask(fw, line) == ""
+    assert errors(fw) == codes
+    # Nothing changed: settings at their defaults, the axis at home, the clock unmoved.
+    defaults = ("10.00000", "20.00000", "-90.00000", "90.00000", "0.00000", "1")
+    assert ask(fw, "1VA?;1AC?;1SL?;1SR?;1DP?;1MD?") == "".join(f"{v}\r\n" for v in defaults)
+    assert fw.clock.now() == t0
+
+
+def test_refused_velocity_leaves_the_next_move_finite():
+    """The line of the reliability report: 1VA1e-308 used to make the move last forever."""
+    fw = make_stage()
+    ask(fw, "MO")
+    t0 = fw.clock.now()
+    ask(fw, "1VA1e-308;1PA30;1WS")
+    assert errors(fw) == [101]
+    # The move ran with the unchanged velocity (10 deg/s, 20 deg/s^2): 30/10 + 10/20 s; the
+    # end point scatters by the repeatability (0.002 deg = 0.2 ms at 10 deg/s): 2 ms is 10 sigma.
+    assert fw.clock.now() - t0 == pytest.approx(3.5, abs=2e-3)
+
+
+def test_minimum_rates_are_accepted_and_bound_the_longest_move():
+    fw = make_stage(min_sep=None)
+    ask(fw, "MO;3SL-185;3SR185;3VA0.001;3AC0.001")  # the minima: one encoder count per s, per s^2
+    assert errors(fw) == []
+    assert ask(fw, "3VA?;3AC?") == "0.00100\r\n0.00100\r\n"
+    ask(fw, "3PA-185;3WS;3PA185")  # the whole hardware travel of axis 3 at the slowest rates
+    t0 = fw.clock.now()
+    ask(fw, "3WS")
+    elapsed = fw.clock.now() - t0
+    # 370 deg at 0.001 deg/s, plus one ramp time v/a = 1 s (trapezoid: d >= v^2/a); the
+    # repeatability scatter (0.002 deg) of both end points changes it by at most ~10 s.
+    assert elapsed == pytest.approx(move_duration(370.0, 0.001, 0.001), abs=10.0)
+    assert 3.6e5 < elapsed < 3.8e5 and np.isfinite(elapsed)
+    assert errors(fw) == []
+
+
+def test_ws_accepts_its_longest_delay():
+    fw = make_stage()
+    t0 = fw.clock.now()
+    ask(fw, "1WS2147483647")  # MAX_WS_DELAY_MS: about 24.9 days
+    assert errors(fw) == []
+    assert fw.clock.now() - t0 == pytest.approx(2147483.647)
+    assert re.fullmatch(r"0, \d+, NO ERROR DETECTED\r\n", ask(fw, "TB?"))  # timestamps still work
+
+
+@pytest.mark.parametrize(
+    "line, codes",
+    [
+        ("1PA3\u0660", [101]),  # ARABIC-INDIC DIGIT ZERO is no digit of the ESP300 syntax
+        ("\u0661PA30", [6]),  # ... nor an axis number
+        ("1PA\u00a030", [101]),  # a no-break space is not a blank
+        ("1PA30\udce9", [101]),  # a received byte 0xE9 (decoded with surrogateescape)
+        ("1P\udce9A30", [6]),
+    ],
+)
+def test_non_ascii_characters_are_not_digits_or_blanks(line, codes):
+    fw = make_stage()
+    ask(fw, "MO")
+    assert ask(fw, line) == ""
+    assert errors(fw) == codes
+    assert ask(fw, "1DP?") == "0.00000\r\n"
+
+
+def test_tab_is_a_blank():
+    fw = make_stage()
+    ask(fw, "MO;1\tPA\t10;1WS")
+    assert errors(fw) == [] and ask(fw, "1DP?") == "10.00000\r\n"
+
+
+@pytest.mark.parametrize("function, args", [
+    ("move_duration", (30.0, 0.0, 20.0)),
+    ("move_duration", (30.0, 10.0, float("inf"))),
+    ("move_duration", (float("nan"), 10.0, 20.0)),
+    ("move_duration", (30.0, 1e-320, 20.0)),  # positive but denormal: the duration overflows
+    ("stop_profile", (0.0, 0.0, 10.0, 1e-320)),
+    ("trapezoid_profile", (0.0, 0.0, 30.0, 1e-320, 20.0)),
+    ("trapezoid_profile", (float("inf"), 0.0, 30.0, 10.0, 20.0)),
+    ("stop_profile", (0.0, 0.0, 10.0, 0.0)),
+])
+def test_motion_profiles_refuse_non_finite_inputs(function, args):
+    import drivers.emulator.stage_firmware as stage_firmware
+    with pytest.raises(ValueError, match="must be finite"):
+        getattr(stage_firmware, function)(*args)
+
+
+# -- hardware-limit stop ----------------------------------------------------------------------
+
+def test_dp_reports_the_stop_position_after_a_hardware_limit_stop():
+    fw = make_stage()
+    ask(fw, "MO")
+    fw.limit_faults.add(1)  # the next move of axis 1 trips a limit switch half way
+    ask(fw, "1PA-80")
+    fw.clock.advance(1.0)
+    # Mid-move the desired position is the commanded target (the switch has not tripped yet).
+    assert ask(fw, "1DP?;1MD?") == "-80.00000\r\n0\r\n"
+    ask(fw, "1WS")
+    assert errors(fw) == [105]  # NEGATIVE HARDWARE LIMIT DETECTED, axis 1
+    tp, dp, pa = (float(r) for r in ask(fw, "1TP;1DP?;1PA?").split())
+    assert dp == pytest.approx(-40.0, abs=1e-9) and pa == dp  # tripped half way (-40 deg)
+    # TP and DP agree within the repeatability (0.002 deg, 1 sigma; here both are the encoder
+    # reading of the same rest position, so they agree to the resolution).
+    assert abs(tp - dp) <= 0.002
+    ask(fw, "1PR10;1WS")  # PR moves relative to the stop position, not to the old target
+    assert ask(fw, "1DP?") == "-30.00000\r\n"
+    assert abs(float(ask(fw, "1TP")) + 30.0) < 0.01  # 5 sigma of the repeatability
+    assert errors(fw) == []
+
+
+def test_limit_stop_error_is_queued_once_with_the_stop_time():
+    fw = make_stage()
+    ask(fw, "MO")
+    fw.limit_faults.add(2)
+    t0 = fw.clock.now()
+    ask(fw, "2PA85")  # from 45: trips at 65 deg, 20 deg at 15 deg/s, 30 deg/s^2
+    ask(fw, "2WS;2DP?")
+    stop_ticks = int((t0 + move_duration(20.0, 15.0, 30.0)) / 400e-6)
+    code, ticks, message = ask(fw, "TB?").strip().split(", ")
+    assert (int(code), message) == (204, "POSITIVE HARDWARE LIMIT DETECTED")
+    assert abs(int(ticks) - stop_ticks) <= 1  # rounding of the time to 400 us servo ticks
+    assert ask(fw, "2DP?") == "65.00000\r\n" and errors(fw) == []
+
+
+# -- encoder resolution (SU) ------------------------------------------------------------------
+
+def test_su_reports_the_encoder_resolution_and_accepts_only_it():
+    fw = make_stage()
+    assert ask(fw, "1SU?;2SU?;3SU?") == "0.00100\r\n0.00100\r\n0.00100\r\n"
+    assert ask(fw, "1SU0.001;1SU?") == "0.00100\r\n"  # its own resolution: accepted, no change
+    assert errors(fw) == []
+    ask(fw, "1SU0.01")  # the emulated encoders are fixed: any other value is x01
+    ask(fw, "SU?")
+    ask(fw, "4SU?")
+    ask(fw, "1SU")
+    assert errors(fw) == [101, 37, 9, 38]
+    assert ask(fw, "1SU?") == "0.00100\r\n"

@@ -200,3 +200,100 @@ def test_bad_brdf_values_become_execution_errors_not_crashes():
             assert camera.readline().startswith(b'-200,"Execution error;the sample BRDF gave radiance nan')
             camera.write(b"*IDN?\n")  # the line still works
             assert camera.readline() == b"GONIO,CCD-512,SN0001,1.0\n"
+
+
+# -- robustness: no exception from one line stops a line (docs/protocol.md "Robustness") --------
+
+class _FirmwareWithBrokenErrorPath:
+    """A firmware whose handle_line, overlong_line AND internal_error all raise on "boom"."""
+
+    reply_terminator = b"\r\n"
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+
+    def handle_line(self, line: str) -> bytes:
+        if "boom" in line:
+            raise RuntimeError("firmware bug")
+        return self.inner.handle_line(line)
+
+    def overlong_line(self) -> bytes:
+        raise RuntimeError("bug in overlong_line")
+
+    def internal_error(self, error: Exception) -> bytes:
+        raise OverflowError("bug in the error path")
+
+
+def test_sim_clock_refuses_non_finite_times():
+    from drivers.emulator.clock import SimClock
+
+    clock = SimClock()
+    clock.wait_until(2.0)
+    for bad in (float("inf"), float("-inf"), float("nan")):
+        with pytest.raises(ValueError, match="finite"):
+            clock.wait_until(bad)
+        with pytest.raises(ValueError, match="finite"):
+            clock.advance(bad)
+    with pytest.raises(ValueError, match="finite"):
+        SimClock(start=float("inf"))
+    assert clock.now() == 2.0  # every refusal left the clock where it was
+    late = SimClock(start=1e308)
+    with pytest.raises(ValueError, match="finite"):
+        late.advance(1e308)  # each finite, but the sum overflows to inf
+    assert late.now() == 1e308
+
+
+def test_channel_survives_a_firmware_whose_error_path_raises():
+    from drivers.emulator.clock import SimClock
+    from drivers.emulator.stage_firmware import Esp300Firmware
+    from drivers.emulator.transports import DeviceChannel
+
+    clock = SimClock()
+    firmware = _FirmwareWithBrokenErrorPath(Esp300Firmware(clock, np.random.default_rng(0)))
+    channel = DeviceChannel("stage", firmware, clock, 19200)
+    assert channel.process("boom") == b""
+    error = channel.last_internal_error
+    assert isinstance(error, OverflowError)  # the error path's exception is recorded ...
+    assert isinstance(error.__context__, RuntimeError)  # ... with the firmware's as its context
+    assert channel.process(LineSplitter.OVERLONG) == b""
+    assert channel.process("VE?") == b"ESP300 Version 3.08 09/09/02\r\n"  # the line still answers
+    assert channel.lines_processed == 3
+
+
+@pytest.mark.parametrize("kind", ["pty", "tcp", "url"])
+def test_serving_loops_survive_any_exception_from_one_line(rig, kind):
+    channel = rig.channels["stage"]
+    channel.firmware = _FirmwareWithBrokenErrorPath(rig.stage)
+    process = channel.process
+
+    def process_that_raises(line):  # beyond what DeviceChannel.process contains
+        if line == "kaboom":
+            raise MemoryError("not a firmware error")
+        return process(line)
+
+    channel.process = process_that_raises
+    with open_port(rig.addresses()["stage"][kind], "stage") as stage:
+        stage.write(b"boom\r" + b"1" * 5000 + b"\rkaboom\rVE?\r")
+        assert stage.readline() == b"ESP300 Version 3.08 09/09/02\r\n"
+        assert isinstance(channel.last_internal_error, MemoryError)
+        stage.write(b"boom;VE?\rVE?\r")  # and again: the serving thread is alive
+        assert stage.readline() == b"ESP300 Version 3.08 09/09/02\r\n"
+        assert isinstance(channel.last_internal_error, OverflowError)
+
+
+def test_bytes_above_0x7f_reach_the_firmware_as_escapable_surrogates():
+    line = next(iter(LineSplitter().feed(b"EX\xe9P 1\r")))
+    assert line == "EX\udce9P 1"
+    assert line.encode("ascii", errors="surrogateescape") == b"EX\xe9P 1"  # byte-faithful
+
+
+@pytest.mark.parametrize("kind", ["tcp", "url"])
+def test_non_ascii_bytes_never_lose_scpi_replies(rig, kind):
+    with open_port(rig.addresses()["camera"][kind], "camera") as camera:
+        camera.write(b"EX\xe9P 1;*IDN?\n\xff\x00\x1b\n")
+        assert camera.readline() == b"GONIO,CCD-512,SN0001,1.0\n"
+        camera.write(b"SYST:ERR?;SYST:ERR?;SYST:ERR?\n")
+        reply = camera.readline()
+        # Each received byte outside printable ASCII is quoted as \xNN: the reply is ASCII.
+        assert reply == (b'-100,"Command error;\'EX\\xe9P 1\'";'
+                         b'-100,"Command error;\'\\xff\\x00\\x1b\'";0,"No error"\n')

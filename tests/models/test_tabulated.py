@@ -255,11 +255,13 @@ def test_store_round_trip_cache_and_clear(tmp_path, monkeypatch, tiny_arrays):
     assert store.find("no-such-table") is None
     with pytest.raises(store.TableError, match="gonio tables build"):
         store.load("no-such-table")
-    path = store.save(store.cache_dir() / "tiny.npz", tiny_arrays)
-    loaded = store.load("tiny")
+    path = store.save(store.cache_dir() / "oren-nayar.npz", tiny_arrays)
+    loaded = store.load("oren-nayar")
     # float32 storage: 6e-8 relative on log values of order 10
     np.testing.assert_allclose(loaded["log_f1"], tiny_arrays["log_f1"], rtol=0, atol=1e-5)
-    assert store.clear_cache() == [path] and not path.exists()
+    mine = store.cache_dir() / "chain.npz"  # a user's file beside the tables: never deleted
+    np.savez(mine, x=np.arange(3))
+    assert store.clear_cache() == [path] and not path.exists() and mine.exists()
 
 
 def test_cli_builds_describes_and_clears_a_table(tmp_path, monkeypatch, capsys):

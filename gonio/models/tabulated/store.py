@@ -11,16 +11,23 @@ from __future__ import annotations
 
 import math
 import os
+import zipfile
 from functools import lru_cache
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
-__all__ = ["PACKAGE_DIR", "cache_dir", "find", "load", "save", "clear_cache", "check_constants", "TableError"]
+__all__ = ["PACKAGE_DIR", "cache_dir", "find", "load", "save", "clear_cache", "cache_contents", "is_built_table",
+           "written_by_builder", "table_file_names", "check_constants", "TableError", "SIGNATURE_KEY"]
 
 #: Directory of the tables shipped with gonio.
 PACKAGE_DIR = Path(__file__).resolve().parent / "data"
+#: Array every table written by :func:`save` holds (value: :data:`SIGNATURE_VERSION`).
+SIGNATURE_KEY = "gonio_table_format"
+SIGNATURE_VERSION = 1
+#: Arrays every table built before the signature holds (what ``describe`` reads).
+LEGACY_KEYS = frozenset({"shape", "rtol", "build_seconds"})
 
 
 class TableError(ValueError):
@@ -54,13 +61,18 @@ def find(name: str) -> Path | None:
 
 
 def save(path: Path, arrays: Mapping[str, np.ndarray]) -> Path:
-    """Write ``arrays`` to ``path`` (compressed; float64 tables (3-D and up) as float32)."""
+    """Write ``arrays`` to ``path`` (compressed; float64 tables (3-D and up) as float32).
+
+    The file also holds :data:`SIGNATURE_KEY`, by which :func:`clear_cache` recognises the
+    tables gonio wrote.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     stored = {
         key: (value.astype(np.float32) if value.dtype == np.float64 and value.ndim >= 3 else value)
         for key, value in ((k, np.asarray(v)) for k, v in arrays.items())
     }
+    stored[SIGNATURE_KEY] = np.array(SIGNATURE_VERSION)
     temporary = path.with_suffix(".tmp.npz")
     np.savez_compressed(temporary, **stored)
     os.replace(temporary, path)
@@ -89,10 +101,53 @@ def load(name: str, path: Path | None = None) -> dict[str, np.ndarray]:
     return arrays
 
 
-def clear_cache() -> list[Path]:
-    """Delete every table in the user cache directory; returns the deleted paths."""
+def table_file_names() -> tuple[str, ...]:
+    """The file names of the tables gonio builds (``<name>.npz`` for every known table)."""
+    from . import TABLES
+
+    return tuple(f"{name}.npz" for name in sorted(TABLES))
+
+
+def written_by_builder(path: Path) -> bool:
+    """Whether the file at ``path`` is a table written by gonio's builder (any name).
+
+    It must be a readable ``.npz`` holding :data:`SIGNATURE_KEY` (tables written by
+    :func:`save`) or, for tables written before the signature existed, every array the
+    builder writes for any table (:data:`LEGACY_KEYS`).
+    """
+    if path.is_symlink() or not path.is_file():
+        return False
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            keys = set(data.files)
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+        return False
+    return SIGNATURE_KEY in keys or LEGACY_KEYS <= keys
+
+
+def is_built_table(path: Path) -> bool:
+    """Whether ``path`` is a table of the user cache that gonio built: its name is one of
+    :func:`table_file_names` and :func:`written_by_builder` recognises its content."""
+    return path.name in table_file_names() and written_by_builder(path)
+
+
+def cache_contents() -> tuple[list[Path], list[Path]]:
+    """The user table directory split into (tables gonio built, every other entry)."""
     directory = cache_dir()
-    removed = sorted(directory.glob("*.npz")) if directory.is_dir() else []
+    if not directory.is_dir():
+        return [], []
+    entries = sorted(directory.iterdir())
+    tables = [path for path in entries if is_built_table(path)]
+    return tables, [path for path in entries if path not in tables]
+
+
+def clear_cache() -> list[Path]:
+    """Delete the tables gonio built from the user cache directory; returns their paths.
+
+    Only files recognised by :func:`is_built_table` are deleted: any other file there (a
+    user's own ``.npz`` included) is kept; :func:`cache_contents` lists them.
+    """
+    removed, _ = cache_contents()
     for path in removed:
         path.unlink()
     load.cache_clear()

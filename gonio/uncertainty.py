@@ -1,0 +1,261 @@
+"""Uncertainty budget of a radiance reading, component by component (GUM).
+
+Pure functions of recorded numbers, used by :mod:`gonio.reduction`. Every component is a
+standard uncertainty of one reading's signal rate, in the rate's own unit [DN/s] unless
+it says *relative*; components are independent and add in quadrature, except where a
+function says they are common to several readings. The names of the components are the
+keys of :data:`COMPONENTS`; docs/acquisition.md explains how each is estimated.
+
+References
+----------
+JCGM 100:2008, "Evaluation of measurement data - Guide to the expression of uncertainty in
+measurement" (GUM), sections 4.2 (Type A), 4.3 (Type B) and 5.1 (uncorrelated input
+quantities). EMVA Standard 1288 release 4.0 Linear (2021), section 2 (sensor model) and
+section 8 (spatial non-uniformity).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+__all__ = [
+    "COMPONENTS",
+    "CameraModel",
+    "ccd_components",
+    "pooled_excess_variance",
+    "interpolate_drift",
+    "local_slopes",
+    "quantisation_sigma",
+]
+
+#: Budget components of one reduced value: name -> what it is.
+COMPONENTS: dict[str, str] = {
+    "shot_read": "photon shot and read noise of the light frames (EMVA 1288 temporal noise)",
+    "dark": "temporal noise of the dark frame subtracted",
+    "prnu": "photo-response non-uniformity averaged over the ROI, relative to the largest ROI (fixed per window)",
+    "ccd": "CCD noise from the ROI statistics alone (recordings without a camera characterisation)",
+    "lamp_monitor": "lamp monitor noise and dark offset (flicker and drift cancel in the ratio)",
+    "lamp_flicker": "lamp flicker of the exposure (unmonitored; measured from checks or repeats)",
+    "lamp_drift": "uncertainty of the lamp drift interpolated between checks (unmonitored)",
+    "angle": "stage readback uncertainty times the local slope of the measured curve",
+}
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """EMVA 1288 parameters of the camera as characterised during a run.
+
+    Attributes
+    ----------
+    system_gain : float
+        K at ``gain_factor`` [DN/e-].
+    dark_variance : float
+        Temporal dark variance at zero exposure [DN^2].
+    dark_variance_rate : float
+        Its growth with exposure [DN^2/s].
+    prnu : float
+        Relative rms pixel response non-uniformity [-].
+    gain_factor : float
+        Analog gain factor of the characterisation [-].
+    """
+
+    system_gain: float
+    dark_variance: float
+    dark_variance_rate: float
+    prnu: float
+    gain_factor: float = 1.0
+
+    @classmethod
+    def from_metadata(cls, data: Mapping) -> "CameraModel | None":
+        """From ``metadata["camera"]`` of a recording; None when missing or failed."""
+        try:
+            return cls(float(data["system_gain_dn_per_e"]), float(data["dark_variance_dn2"]),
+                       max(float(data["dark_variance_rate_dn2_per_s"]), 0.0),
+                       float(data["prnu"]) if np.isfinite(float(data["prnu"])) else 0.0,
+                       float(data.get("gain_factor", 1.0)))
+        except (KeyError, TypeError, ValueError):
+            return None
+
+    def dark_variance_at(self, exposure: np.ndarray, gain: np.ndarray) -> np.ndarray:
+        """Temporal dark variance of one pixel [DN^2] at exposure [s] and gain factor [-].
+
+        The variance is taken to scale with the square of the analog gain factor relative
+        to the characterisation's (the read noise referred to the input is fixed); runs
+        use one gain, so this only matters when they do not.
+        """
+        scale = (np.asarray(gain, float) / self.gain_factor) ** 2
+        return scale * (self.dark_variance + self.dark_variance_rate * np.asarray(exposure, float))
+
+
+def ccd_components(camera: CameraModel, signal: np.ndarray, exposure: np.ndarray, gain: np.ndarray,
+                   pixels: np.ndarray, frames: np.ndarray, largest_window: float | None = None) -> dict[str, np.ndarray]:
+    """Shot and read, dark and PRNU components of the signal rate ``signal / (t g)`` [DN/s].
+
+    Parameters
+    ----------
+    camera : CameraModel
+    signal : array
+        Dark-subtracted ROI mean, averaged over the frames [DN].
+    exposure, gain, pixels, frames : array
+        Exposure [s], analog gain factor [-], ROI pixel count and frames averaged.
+    largest_window : float, optional
+        Pixel count of the largest ROI of the recording (default: the largest of
+        ``pixels``), see the notes.
+
+    Returns
+    -------
+    dict
+        ``shot_read = sqrt(K S + sigma_d^2(t)) / sqrt(N F)``, ``dark = sigma_d(t) / sqrt(N)``
+        (one dark frame) and ``prnu = p S sqrt(1/N - 1/N_max)``, each divided by ``t g``
+        [DN/s]. A signal at or below zero has no shot noise.
+
+    Notes
+    -----
+    The ROIs of a sweep are centred windows that shrink with ``cos(theta_r)`` along one
+    image axis, so every window lies inside the largest one (normal view), and the mean
+    PRNU of a window ``A`` is that of the largest window ``B`` plus a difference of variance
+    ``p^2 (1/|A| - 1/|B|)``. The part common to all windows is a scale factor of every
+    value: it cancels against the reference standard (measured through a window of nearly
+    the largest size) and in ``L / L(0)``, and a free scale absorbs it. The budget states
+    the difference; the reference's own difference enters the calibration.
+
+    Examples
+    --------
+    >>> cam = CameraModel(0.1, 0.7, 0.2, 0.005)
+    >>> c = ccd_components(cam, np.array([1900.0]), np.array([0.025]), np.array([1.0]),
+    ...                    np.array([19044]), np.array([1]))
+    >>> round(float(c["shot_read"][0] / (1900 / 0.025)), 7)   # relative: sqrt(0.1 * 1900 + 0.7) / 1900 / 138
+    5.27e-05
+    """
+    S = np.asarray(signal, float)
+    t, g = np.asarray(exposure, float), np.asarray(gain, float)
+    n, f = np.asarray(pixels, float), np.asarray(frames, float)
+    k = camera.system_gain * g / camera.gain_factor
+    dark_var = camera.dark_variance_at(t, g)
+    per_rate = 1.0 / (t * g)
+    n_max = float(np.nanmax(n)) if largest_window is None else float(largest_window)
+    return {
+        "shot_read": np.sqrt(k * np.clip(S, 0.0, None) + dark_var) / np.sqrt(n * f) * per_rate,
+        "dark": np.sqrt(dark_var / n) * per_rate,
+        "prnu": camera.prnu * np.abs(S) * np.sqrt(np.clip(1.0 / n - 1.0 / n_max, 0.0, None)) * per_rate,
+    }
+
+
+def pooled_excess_variance(values: Sequence[np.ndarray], noise: Sequence[np.ndarray]) -> tuple[float, int]:
+    """Relative variance of repeated readings beyond their known noise (Type A, pooled).
+
+    Parameters
+    ----------
+    values : sequence of arrays
+        Groups of repeated readings of one quantity each (groups of one are skipped).
+    noise : sequence of arrays
+        Known standard uncertainty of each reading (same shapes).
+
+    Returns
+    -------
+    variance, dof : float, int
+        ``sum((x - mean)^2 / mean^2) / dof - mean((u / mean)^2)``, clipped at 0, and the
+        pooled degrees of freedom ``sum(n - 1)``.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> groups = [100 * (1 + 0.01 * rng.standard_normal(50)) for _ in range(20)]
+    >>> v, dof = pooled_excess_variance(groups, [np.zeros(50)] * 20)
+    >>> round(math.sqrt(v), 3), dof
+    (0.01, 980)
+    """
+    scatter, known, dof = 0.0, [], 0
+    for x, u in zip(values, noise):
+        x, u = np.asarray(x, float), np.asarray(u, float)
+        if x.size < 2:
+            continue
+        level = float(np.mean(x))
+        if not level > 0:
+            continue
+        scatter += float(np.sum((x - level) ** 2)) / level**2
+        known.append(np.mean((u / level) ** 2) * (x.size - 1))
+        dof += x.size - 1
+    if dof == 0:
+        return math.nan, 0
+    return max(scatter / dof - float(np.sum(known)) / dof, 0.0), dof
+
+
+def interpolate_drift(times: np.ndarray, levels: np.ndarray, sigmas: np.ndarray,
+                      at: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lamp drift at times ``at`` by linear interpolation between check measurements.
+
+    Parameters
+    ----------
+    times : array
+        Instrument times of the checks [s], increasing.
+    levels : array
+        Check levels relative to their common reference [-].
+    sigmas : array
+        Relative standard uncertainty of each check level [-].
+    at : array
+        Times to interpolate to [s].
+
+    Returns
+    -------
+    drift, sigma, extrapolated : numpy.ndarray
+        Interpolated level [-], its relative uncertainty from the two checks around each
+        time (``sqrt(((1 - w) u_j)^2 + (w u_j+1)^2)``) and whether the time lies outside
+        the checks' span (then the nearest check is used).
+
+    Examples
+    --------
+    >>> d, s, x = interpolate_drift(np.array([0.0, 10.0]), np.array([1.0, 1.002]),
+    ...                             np.array([1e-4, 1e-4]), np.array([5.0, 20.0]))
+    >>> np.round(d, 6).tolist(), np.round(s * 1e4, 4).tolist(), x.tolist()
+    ([1.001, 1.002], [0.7071, 1.0], [False, True])
+    """
+    times, levels, sigmas, at = (np.asarray(a, float) for a in (times, levels, sigmas, at))
+    if times.size == 1:
+        return np.full(at.shape, levels[0]), np.full(at.shape, sigmas[0]), at != times[0]
+    j = np.clip(np.searchsorted(times, at, side="right") - 1, 0, times.size - 2)
+    span = times[j + 1] - times[j]
+    w = np.clip(np.where(span > 0, (at - times[j]) / np.where(span > 0, span, 1.0), 0.0), 0.0, 1.0)
+    drift = (1 - w) * levels[j] + w * levels[j + 1]
+    sigma = np.hypot((1 - w) * sigmas[j], w * sigmas[j + 1])
+    return drift, sigma, (at < times[0]) | (at > times[-1])
+
+
+def local_slopes(axis_values: np.ndarray, others: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Slope d(value)/d(axis) of a measured curve at each point [value unit per deg].
+
+    Points that share ``others`` (the remaining coordinates, rows of an array) form one
+    curve along ``axis_values``; the slope is numpy's second-order finite difference on
+    the (possibly uneven) spacing. Curves with a single point get slope 0.
+
+    Examples
+    --------
+    >>> v = np.array([0.0, 10.0, 20.0, 0.0])
+    >>> local_slopes(v, np.array([[1], [1], [1], [2]]), np.array([1.0, 2.0, 3.0, 5.0])).tolist()
+    [0.1, 0.1, 0.1, 0.0]
+    """
+    slopes = np.zeros(len(values))
+    others = np.asarray(others).reshape(len(values), -1)
+    keys = [tuple(row) for row in np.round(others, 6)]
+    for key in set(keys):
+        members = np.array([i for i, k in enumerate(keys) if k == key])
+        order = members[np.argsort(axis_values[members])]
+        x = axis_values[order]
+        if len(order) < 2 or np.unique(x).size < len(x):
+            continue
+        slopes[order] = np.gradient(values[order], x, edge_order=1)
+    return slopes
+
+
+def quantisation_sigma(resolution: float) -> float:
+    """Standard uncertainty of a reading rounded to ``resolution``: ``resolution / sqrt(12)``.
+
+    Examples
+    --------
+    >>> round(quantisation_sigma(0.001), 6)
+    0.000289
+    """
+    return float(resolution) / math.sqrt(12.0)
