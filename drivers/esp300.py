@@ -314,13 +314,34 @@ class ESP300:
         return self.ask(f"{self._axis(axis)}TP", float)
 
     def positions(self, axes: Iterable[int] | None = None) -> dict[int, float]:
-        """Actual positions of several axes with one command line (``1TP;2TP;...``)."""
+        """Actual positions of several axes with one command line (``1TP;2TP;...``).
+
+        Raises
+        ------
+        ProtocolError
+            If a reply is not a finite number (a garbled line); the line is marked out of
+            step so that no late reply is taken for the answer to a later question.
+        StageError
+            If the replies do not come and the controller reports why.
+        """
         axes = [self._axis(a) for a in (self.axes if axes is None else axes)]
         command = ";".join(f"{a}TP" for a in axes)
+        replies: list[str] = []
         with self.line._lock:
-            first = self.ask(command, float)
-            rest = [float(self.line.read_line(command=command)) for _ in axes[1:]]
-        return dict(zip(axes, [first, *rest]))
+            self.line.write(command)
+            self.line.exchanges += 1
+            try:
+                replies = [self.line.read_line(command=command) for _ in axes]
+                values = [float(r) for r in replies]
+            except ValueError as exc:
+                self.line.mark_out_of_step()
+                raise ProtocolError(f"{self.line.name}: unexpected replies {replies!r} to {command!r}") from exc
+            except ResponseTimeout:
+                self.raise_error(command)
+                raise
+        if not all(math.isfinite(v) for v in values):
+            raise ProtocolError(f"{self.line.name}: non-finite position in {replies!r} to {command!r}")
+        return dict(zip(axes, values))
 
     def desired_position(self, axis: int) -> float:
         """Target of the current or last move (``xxDP?``) [axis units]."""

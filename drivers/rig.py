@@ -37,7 +37,10 @@ the sample's image with a margin of ``roi_margin_px`` pixels.
 
 Exposure. With ``exposure="auto"`` (default) the exposure is chosen on a ladder of
 12 steps per decade so that the raw ROI mean lies between ``exposure_window`` fractions of
-the ADC maximum, aiming at ``target_fraction``, with no saturated pixel in the ROI.
+the ADC maximum, aiming at ``target_fraction``, with no saturated pixel in the ROI. When
+even the longest allowed exposure gives a weak signal, that frame is returned (a weak
+signal is a measurement; acquisition flags it ``low_signal``); only a point at which every
+frame saturates raises :class:`~drivers.errors.ExposureError`.
 """
 from __future__ import annotations
 
@@ -323,7 +326,8 @@ class Rig:
         return self.lamp.output_is_on()
 
     def wait_lamp_stable(
-        self, settle_time: float = 600.0, *, readings: int = 10, interval: float = 30.0, limit_sigma: float = 6.0
+        self, settle_time: float = 600.0, *, readings: int = 10, interval: float = 30.0, limit_sigma: float = 6.0,
+        min_change: float = 1e-3,
     ) -> dict[str, float]:
         """Wait for the lamp to warm up, then check that it no longer changes.
 
@@ -334,7 +338,11 @@ class Rig:
         10 ms exposures) are taken, then again after ``interval`` seconds; the change of
         their means must stay within ``limit_sigma`` standard errors estimated from the
         readings' own scatter (:func:`~drivers.rig_checks.steadiness`), so the tolerance
-        follows the read-back noise of the instrument at hand.
+        follows the read-back noise of the instrument at hand. A change below
+        ``min_change`` (relative, over ``interval``) is accepted however quiet the readings:
+        slow drift of that size is what the monitor or the lamp checks correct, while a lamp
+        in its warm-up changes several times faster (10 s after switch-on the rig's lamp
+        rises by 4.5e-3 in 30 s).
 
         The current reveals a cold filament (the inrush of the first second) and an
         unsteady supply; only the monitor sees the bulb's slow warm-up.
@@ -361,11 +369,13 @@ class Rig:
         result = {"voltage": self.lamp.measured_voltage(), "current": float(np.mean(second["current"]))}
         for name, values in first.items():
             change, tolerance = steadiness(values, second[name], limit_sigma)
+            tolerance = max(tolerance, min_change)
             result[f"{name}_change"] = change
             if not abs(change) <= tolerance:
                 raise LampError(
                     0, f"lamp not steady after {settle_time:g} s: the {name} changed by {change:.2e} (relative) "
-                       f"in {interval:g} s, more than {limit_sigma:g} standard errors of its readings ({tolerance:.2e})",
+                       f"in {interval:g} s, more than {limit_sigma:g} standard errors of its readings and "
+                       f"{min_change:g} ({tolerance:.2e})",
                     "MEAS:CURR?" if name == "current" else "MON?",
                 )
         return result
@@ -500,7 +510,9 @@ class Rig:
             except (StageError, ProtocolError, TransportError, MotionTimeout, PositionError) as error:
                 failures.append(f"attempt {attempt + 1}: {type(error).__name__}: {error}")
                 _log.warning("stage: move to %s not confirmed (%s); re-reading the controller", end, error)
-                self._resynchronise()
+                if not self._resynchronise():
+                    failures.append("the controller does not answer; not retrying")
+                    break
                 continue
             self._targets = dict(end)
             self._position = position
@@ -539,20 +551,29 @@ class Rig:
                 return position
         raise PositionError(problem)
 
-    def _resynchronise(self) -> None:
+    def _resynchronise(self) -> bool:
         """After a failed move: drop stale input, drain errors, wait, re-read the targets.
 
-        A failure here is logged, not raised: the next attempt (or the caller) meets it.
+        Returns False when the controller does not answer at all (a dead line: retrying is
+        pointless); any other failure is logged and left to the next attempt.
         """
         try:
             self.stage.line.discard_input()
             for entry in self.stage.errors():
                 _log.warning("stage: error %d after a failed move: %s", entry.code, entry.message)
+        except TransportError as error:
+            _log.warning("stage: no answer after a failed move: %s", error)
+            self._targets = None
+            return False
+        except DriverError as error:
+            _log.warning("stage: could not read its errors: %s", error)
+        try:
             self.stage.wait(0.0, timeout=self._move_timeout({a: 0.0 for a in AXES}, {a: 370.0 for a in AXES}))
             self._targets = {a: self.stage.desired_position(a) for a in AXES}
         except DriverError as error:
             _log.warning("stage: could not re-read its state: %s", error)
             self._targets = None
+        return True
 
     def position(self) -> dict[int, float]:
         """Encoder readback ``{1: view, 2: theta_i, 3: phi_i}`` [deg]."""
@@ -726,14 +747,15 @@ class Rig:
                 break
             t = new_t
         good = [(tt, s) for tt, s in tried.items() if s.saturated == 0]
-        if good:
+        if good:  # the brightest unsaturated frame: a weak signal is still data (flagged later)
             tt, s = max(good, key=lambda item: item[1].mean)
-            if s.mean - offset >= 0.02 * max_dn:
-                if tt != self._exposure:
-                    s = self._expose(tt)
-                return tt, s, attempt
+            if s.mean - offset < 0.02 * max_dn:
+                _log.info("automatic exposure: weak signal %.1f DN at %g s (limit %g s)", s.mean - offset, tt, t_max)
+            if tt != self._exposure:
+                s = self._expose(tt)
+            return tt, s, attempt
         raise ExposureError(
-            f"automatic exposure failed within {t_min:g}..{t_max:g} s: tried "
+            f"automatic exposure failed within {t_min:g}..{t_max:g} s: every frame saturated: "
             + ", ".join(f"{tt:g} s -> mean {s.mean:.1f} DN, {s.saturated} saturated" for tt, s in tried.items())
         )
 

@@ -173,6 +173,11 @@ class SerialLine:
             self._out_of_step = False
             return dropped
 
+    def mark_out_of_step(self) -> None:
+        """Declare the line out of step (e.g. a reply did not parse): whatever is still
+        arriving is discarded before the next command is sent."""
+        self._out_of_step = True
+
     def write(self, command: str) -> None:
         """Send one command line (the write terminator is appended).
 

@@ -170,6 +170,25 @@ def _check_geometry(protocol: Protocol, the_plan) -> tuple[float, float, float]:
     return (p.theta_i, p.phi_i, p.view)
 
 
+def _check_apertures(protocol: Protocol, metadata: Mapping[str, Any] | None) -> None:
+    """Refuse a protocol whose stated apertures contradict the ones the rig reports.
+
+    ``rig.lamp_solid_angle`` and ``rig.camera_solid_angle`` tell the reduction what a real
+    rig's apertures are; a rig that knows its own (the emulator, ``metadata["rig"]
+    ["aperture_sr"]``) must agree within 1 %, or the protocol describes another rig.
+    """
+    known = (metadata or {}).get("rig", {}).get("aperture_sr")
+    if known is None:
+        return
+    stated = (protocol.rig.lamp_solid_angle, protocol.rig.camera_solid_angle)
+    for name, said, actual in zip(("lamp_solid_angle", "camera_solid_angle"), stated, known):
+        if not abs(said - actual) <= 0.01 * actual:
+            raise AcquisitionError(
+                f"{protocol.source}: field 'rig.{name}': the protocol says {said:g} sr but this rig's aperture is "
+                f"{actual:g} sr; remove the field or give the rig's value"
+            )
+
+
 def _characterisation_point(rig, the_plan) -> PlannedPoint | None:
     """The planned point with the largest ROI (smallest |view|) the rig accepts."""
     for point in sorted(the_plan.points, key=lambda p: (abs(p.view), p.index)):
@@ -415,7 +434,8 @@ class _Run:
         self.consecutive_errors = 0
         self.result.measured += 1
         self.result.flagged += bool(row["flags"])
-        self.measured_since_dark = 0 if dark_due else (self.measured_since_dark or 0) + 1
+        # points measured since the last fresh dark, this one included
+        self.measured_since_dark = 1 if dark_due else (self.measured_since_dark or 0) + 1
         if dark_due:
             first = raw[0]
             self.writer.append_dark({
@@ -524,6 +544,7 @@ def run_protocol(
             "but no way to swap the sample was given (change_sample)"
         )
     clock = clock or time.monotonic
+    _check_apertures(protocol, metadata)
     the_plan = plan(protocol)
     if protocol.checks.every > 0:
         _check_geometry(protocol, the_plan)  # refuse a protocol without a check point before writing

@@ -36,6 +36,7 @@ from .uncertainty import (
     CameraModel,
     ccd_components,
     interpolate_drift,
+    interpolation_excess,
     local_slopes,
     pooled_excess_variance,
     quantisation_sigma,
@@ -52,6 +53,8 @@ CHECK_BLOCK = "lamp check"
 SATURATED_MAJORITY = 0.5
 #: A value at or below this many standard uncertainties is flagged ``low_signal`` (kept).
 LOW_SIGNAL_SIGMAS = 3.0
+#: Marks a budget.json written by :meth:`Reduced.write`.
+REDUCTION_FORMAT = "gonio reduction 1"
 #: Encoder resolution assumed for recordings that did not store it [deg].
 _DEFAULT_RESOLUTION = 0.001
 
@@ -159,8 +162,45 @@ class Reduced:
         lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 
+    def table_rows(self) -> list[dict[str, Any]]:
+        """One dict per value: geometry, value, total uncertainty, components, repeats, flags."""
+        rows = []
+        for k in range(len(self.radiance)):
+            row = {"theta_i": self.theta_i[k], "phi_i": self.phi_i[k], "theta_r": self.theta_r[k],
+                   "phi_r": self.phi_r[k], "view": self.view[k], "value": self.radiance[k],
+                   "sigma": self.radiance_sigma[k]}
+            row.update({f"u_{name}": float(c[k]) for name, c in self.budget.items()})
+            row.update(repeats=int(self.repeats[k]), flags=str(self.flags[k]) if self.flags is not None else "")
+            rows.append({key: (float(v) if isinstance(v, (np.floating, float)) else v) for key, v in row.items()})
+        return rows
+
+    def write(self, folder: str | Path) -> tuple[Path, Path]:
+        """Write ``reduced.csv`` (one row per value, every budget component as ``u_<name>``)
+        and ``budget.json`` (:meth:`budget_summary`, the reference irradiance, the repeat
+        statistics) into ``folder``, atomically. Returns both paths."""
+        import csv
+        import io
+        import json
+
+        from .files import write_atomic
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        rows = self.table_rows()
+        buffer = io.StringIO()
+        writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
+        writer.writeheader()
+        writer.writerows({k: (repr(v) if isinstance(v, float) else v) for k, v in r.items()} for r in rows)
+        summary = {"format": REDUCTION_FORMAT, "label": self.label, "metadata": dict(self.metadata),
+                   "reference_irradiance": self.reference_irradiance,
+                   "reference_irradiance_sigma": self.reference_irradiance_sigma,
+                   **self.budget_summary(), "repeat_statistics": list(self.repeat_statistics)}
+        csv_path = write_atomic(folder / "reduced.csv", buffer.getvalue())
+        json_path = write_atomic(folder / "budget.json", json.dumps(summary, indent=2, default=float) + "\n")
+        return csv_path, json_path
+
     def _dataset_metadata(self) -> dict[str, Any]:
-        out = dict(self.metadata)
+        out = {k: v for k, v in self.metadata.items() if k != "planned_view"}
         out["uncertainty_budget"] = {k: v["median_relative"] for k, v in self.budget_summary()["components"].items()}
         if self.calibration:
             out["calibration_budget"] = dict(self.calibration)
@@ -386,6 +426,11 @@ def _flicker_from_checks(checks) -> tuple[float, float, int]:
 def _normalise_by_checks(points, rows_all, rate, budget_all, sessions, exposure, warnings, consistency):
     """Divide every row by the lamp drift interpolated between checks; add flicker and drift terms.
 
+    The drift term holds the uncertainty of the two checks around a reading and, when the
+    checks themselves show that linear interpolation misses the lamp's drift
+    (:func:`~gonio.uncertainty.interpolation_excess`), that miss at the reading's place
+    in its interval.
+
     Returns the values, their budget and a label per row naming the pair of checks its
     drift correction comes from (rows between the same checks share its error).
     """
@@ -399,19 +444,20 @@ def _normalise_by_checks(points, rows_all, rate, budget_all, sessions, exposure,
     drift_sigma = np.zeros(rate.shape)
     outside = np.zeros(rate.shape, bool)
     interval = np.full(rate.shape, -1)
-    residuals = []
+    chi2 = []
     for s, c in checks.items():
         level = c["level"] / reference_level
         sigma = np.sqrt((flicker_var + c["ccd_rel"] ** 2) / c["frames"])
         here = rows_all & (sessions == s)
-        d, u, x = interpolate_drift(c["time"], level, sigma, points["instrument_time"][here])
-        drift[here], drift_sigma[here], outside[here] = d, u, x
+        d, u, x, w = interpolate_drift(c["time"], level, sigma, points["instrument_time"][here])
+        excess, session_chi2 = interpolation_excess(c["time"], level, sigma)
+        drift[here], outside[here] = d, x
+        drift_sigma[here] = np.hypot(u, excess * w * (1 - w))
         interval[here] = np.searchsorted(c["time"], points["instrument_time"][here])
-        if len(level) > 2:  # leave-one-out: each interior check predicted from its neighbours
-            predicted = 0.5 * (level[:-2] + level[2:])
-            residuals.append(((level[1:-1] - predicted) ** 2) / (sigma[1:-1] ** 2 + 0.25 * (sigma[:-2] ** 2 + sigma[2:] ** 2)))
-    if residuals:
-        consistency["checks_reduced_chi2"] = float(np.mean(np.concatenate(residuals)))
+        if np.isfinite(session_chi2):
+            chi2.append(session_chi2)
+    if chi2:
+        consistency["checks_reduced_chi2"] = float(np.mean(chi2))
     uncovered = rows_all & ~np.isin(sessions, list(checks))
     if uncovered.any():
         warnings.append(f"{int(uncovered.sum())} point(s) were measured in a session without lamp checks; "

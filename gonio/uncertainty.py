@@ -27,6 +27,7 @@ __all__ = [
     "ccd_components",
     "pooled_excess_variance",
     "interpolate_drift",
+    "interpolation_excess",
     "local_slopes",
     "quantisation_sigma",
 ]
@@ -201,27 +202,59 @@ def interpolate_drift(times: np.ndarray, levels: np.ndarray, sigmas: np.ndarray,
 
     Returns
     -------
-    drift, sigma, extrapolated : numpy.ndarray
+    drift, sigma, extrapolated, fraction : numpy.ndarray
         Interpolated level [-], its relative uncertainty from the two checks around each
-        time (``sqrt(((1 - w) u_j)^2 + (w u_j+1)^2)``) and whether the time lies outside
-        the checks' span (then the nearest check is used).
+        time (``sqrt(((1 - w) u_j)^2 + (w u_j+1)^2)``), whether the time lies outside
+        the checks' span (then the nearest check is used) and the fraction ``w`` of the
+        way from the earlier check to the later one.
 
     Examples
     --------
-    >>> d, s, x = interpolate_drift(np.array([0.0, 10.0]), np.array([1.0, 1.002]),
-    ...                             np.array([1e-4, 1e-4]), np.array([5.0, 20.0]))
-    >>> np.round(d, 6).tolist(), np.round(s * 1e4, 4).tolist(), x.tolist()
-    ([1.001, 1.002], [0.7071, 1.0], [False, True])
+    >>> d, s, x, w = interpolate_drift(np.array([0.0, 10.0]), np.array([1.0, 1.002]),
+    ...                                np.array([1e-4, 1e-4]), np.array([5.0, 20.0]))
+    >>> np.round(d, 6).tolist(), np.round(s * 1e4, 4).tolist(), x.tolist(), w.tolist()
+    ([1.001, 1.002], [0.7071, 1.0], [False, True], [0.5, 1.0])
     """
     times, levels, sigmas, at = (np.asarray(a, float) for a in (times, levels, sigmas, at))
     if times.size == 1:
-        return np.full(at.shape, levels[0]), np.full(at.shape, sigmas[0]), at != times[0]
+        return np.full(at.shape, levels[0]), np.full(at.shape, sigmas[0]), at != times[0], np.zeros(at.shape)
     j = np.clip(np.searchsorted(times, at, side="right") - 1, 0, times.size - 2)
     span = times[j + 1] - times[j]
     w = np.clip(np.where(span > 0, (at - times[j]) / np.where(span > 0, span, 1.0), 0.0), 0.0, 1.0)
     drift = (1 - w) * levels[j] + w * levels[j + 1]
     sigma = np.hypot((1 - w) * sigmas[j], w * sigmas[j + 1])
-    return drift, sigma, (at < times[0]) | (at > times[-1])
+    return drift, sigma, (at < times[0]) | (at > times[-1]), w
+
+
+def interpolation_excess(times: np.ndarray, levels: np.ndarray, sigmas: np.ndarray) -> tuple[float, float]:
+    """How far linear interpolation between checks misses the lamp, from the checks themselves.
+
+    Each interior check is predicted from its two neighbours (leave one out); the mean
+    squared miss beyond what the checks' own noise explains is the interpolation error
+    over twice the check interval, where it is four times the largest error within one
+    interval (the error of a curved drift grows as the interval squared and peaks half
+    way). Callers scale it by ``w (1 - w)`` at fraction ``w`` of an interval.
+
+    Returns
+    -------
+    excess, chi2 : float
+        ``sqrt(max(mean(miss^2 - noise^2), 0))`` [-] (0 with fewer than 3 checks) and the
+        reduced chi-square of the misses (NaN with fewer than 3).
+
+    Examples
+    --------
+    >>> t = np.arange(0.0, 100.0, 10.0)
+    >>> excess, chi2 = interpolation_excess(t, 1 + 1e-3 * np.sin(t / 15), np.full(t.size, 1e-6))
+    >>> round(excess, 4)   # f'' (2 dt)^2 / 8 = 1e-3 / 225 * 400 / 8 = 2.2e-4 times |sin|, rms 1.6e-4
+    0.0002
+    """
+    times, levels, sigmas = (np.asarray(a, float) for a in (times, levels, sigmas))
+    if times.size < 3:
+        return 0.0, math.nan
+    w = (times[1:-1] - times[:-2]) / (times[2:] - times[:-2])
+    miss = levels[1:-1] - ((1 - w) * levels[:-2] + w * levels[2:])
+    noise = sigmas[1:-1] ** 2 + ((1 - w) * sigmas[:-2]) ** 2 + (w * sigmas[2:]) ** 2
+    return math.sqrt(max(float(np.mean(miss**2 - noise)), 0.0)), float(np.mean(miss**2 / noise))
 
 
 def local_slopes(axis_values: np.ndarray, others: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -472,6 +472,19 @@ def _fmt(x: Any, digits: int = 5) -> str:
     return f"{x:.{digits}g}"
 
 
+def _data_notes(metadata: Mapping[str, Any]) -> list[str]:
+    """Summary lines on what the reduction left out or could not measure."""
+    lines = []
+    excluded = metadata.get("excluded") or {}
+    if isinstance(excluded, Mapping):
+        lines += [f"    excluded           = {count} {reason} point(s) excluded (not fitted)"
+                  for reason, count in excluded.items() if count]
+    warnings = metadata.get("reduction_warnings") or []
+    if isinstance(warnings, (list, tuple)):
+        lines += [f"    reduction warning  = {text}" for text in warnings]
+    return lines
+
+
 def _summary_text(result: FitResult) -> str:
     ls = result.least_squares
     data = result.dataset
@@ -485,6 +498,7 @@ def _summary_text(result: FitResult) -> str:
         f"    label              = {data.label or '(none)'}",
         f"    quantity           = {data.quantity} [{data.unit}]",
         f"    incidences         = {len(data.incidences()[0])}",
+        *_data_notes(data.metadata),
         "[[Fit Statistics]]",
         "    # fitting method   = least_squares (trf, bounded)" + (" + emcee" if result.mcmc else ""),
         f"    # function evals   = {ls.nfev}",

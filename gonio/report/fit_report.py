@@ -139,6 +139,34 @@ def _diagnostics_table(result: FitResult) -> str:
     return table
 
 
+def _budget_table(result: FitResult) -> str:
+    """The measurement's uncertainty budget (from the reduction of a recording), if any."""
+    from gonio.uncertainty import COMPONENTS
+
+    meta = result.dataset.metadata
+    budget = meta.get("uncertainty_budget")
+    if not isinstance(budget, dict) or not budget:
+        return "<p>The data carry no uncertainty budget (they do not come from a reduced recording).</p>"
+    rows = "".join(f"<tr><td class=name>{html.escape(name)}</td><td>{_number(value, 3)}</td>"
+                   f"<td class=name>{html.escape(COMPONENTS.get(name, ''))}</td></tr>" for name, value in budget.items())
+    table = ("<table><tr><th class=name>component</th><th>median relative size</th><th class=name>what it is</th></tr>"
+             f"{rows}</table>")
+    calibration = meta.get("calibration_budget")
+    if isinstance(calibration, dict) and calibration:
+        items = ", ".join(f"{html.escape(k)} {_number(v, 2)}" for k, v in calibration.items())
+        table += f"<p class=meta>Calibration (relative, common to every value; the prior on the scale): {items}.</p>"
+    notes = []
+    excluded = meta.get("excluded")
+    if isinstance(excluded, dict):
+        notes += [f"{count} {html.escape(str(reason))} point(s) excluded from the fit" for reason, count in excluded.items()]
+    warnings = meta.get("reduction_warnings")
+    if isinstance(warnings, list):
+        notes += [html.escape(str(w)) for w in warnings]
+    if notes:
+        table += "<ul>" + "".join(f"<li>{n}</li>" for n in notes) + "</ul>"
+    return table + "<p class=meta>How each component is estimated: docs/acquisition.md.</p>"
+
+
 def _correlation_table(result: FitResult) -> str:
     matrix = np.asarray(result.posterior["correlation"] if result.posterior else result.least_squares.correlation, float)
     names = list(result.free)
@@ -214,6 +242,7 @@ Data: {data.n} measurements of {html.escape(data.quantity)} [{html.escape(data.u
 Fixed parameters: {html.escape(fixed)}. Created {html.escape(result.created)} with gonio {html.escape(result.gonio_version)}.</p>
 {flags}
 <h2>What was measured</h2>{figures['What was measured']}
+<h2>Uncertainty budget of the data</h2>{_budget_table(result)}
 <h2>Data and model</h2>{figures['Data and model']}
 <h2>Residuals</h2>{figures['Residuals']}
 <h2>Parameters</h2>{_parameter_table(result)}

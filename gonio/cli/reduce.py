@@ -1,0 +1,70 @@
+"""``gonio reduce``: a recording's radiance per geometry with its uncertainty budget."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from . import CLIError
+from .paths import check_output_folder
+
+#: The files ``gonio reduce`` writes.
+REDUCED_FILES = ("reduced.csv", "budget.json")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``gonio reduce``."""
+    parser = subparsers.add_parser(
+        "reduce",
+        help="reduce a recording: radiance per geometry with its uncertainty budget by component",
+        description=(
+            "Reduce a recording written by 'gonio run': every measured geometry (repeats combined, at the "
+            "geometry the stage read back) with its uncertainty split into components (shot and read noise, "
+            "dark, PRNU, lamp, angle) and the reference standard's calibration. Prints the budget table and "
+            "writes reduced.csv and budget.json (docs/acquisition.md)."
+        ),
+    )
+    parser.add_argument("recording", help="recording folder of 'gonio run'")
+    parser.add_argument("--out", help="output folder (default: RECORDING.reduced next to the recording)")
+    parser.add_argument("--lamp", choices=["auto", "monitor", "checks", "repeats", "none"], default="auto",
+                        help="how lamp flicker and drift are handled (default: the monitor if recorded, "
+                             "else the lamp checks, else the scatter of repeats)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier 'gonio reduce' output in --out")
+    parser.set_defaults(func=_run)
+
+
+def _check_earlier_output(out: Path, overwrite: bool) -> None:
+    present = [name for name in REDUCED_FILES if (out / name).exists()]
+    if not present:
+        return
+    ours = False
+    try:
+        from gonio.reduction import REDUCTION_FORMAT
+
+        ours = json.loads((out / "budget.json").read_text()).get("format") == REDUCTION_FORMAT
+    except (OSError, ValueError, AttributeError):
+        pass
+    if not ours:
+        raise CLIError(f"--out {out}: holds {', '.join(present)} that 'gonio reduce' did not write; choose another "
+                       "--out (gonio never overwrites files it did not write)")
+    if not overwrite:
+        raise CLIError(f"--out {out}: holds an earlier reduction; add --overwrite to replace it")
+
+
+def _run(args: argparse.Namespace) -> int:
+    from gonio.reduction import reduce_recording
+
+    recording = Path(args.recording)
+    if not recording.is_dir():
+        raise CLIError(f"{recording}: not a recording folder (expected the folder 'gonio run --out' wrote)")
+    out = check_output_folder(args.out, "reduction") if args.out else recording.with_name(f"{recording.name}.reduced")
+    _check_earlier_output(out, args.overwrite)
+    reduced = reduce_recording(recording, lamp=args.lamp)
+    print(reduced.budget_table())
+    if reduced.reference_irradiance is not None:
+        print(f"reference irradiance E_0 = {reduced.reference_irradiance:.7g} +/- "
+              f"{reduced.reference_irradiance_sigma:.2g} ({reduced.unit} per sr)")
+    csv_path, json_path = reduced.write(out)
+    print(f"reduced values: {csv_path}")
+    print(f"budget:         {json_path}")
+    return 0
