@@ -398,14 +398,40 @@ def _normalise_by_monitor(points, rows, rate, budget, monitor_dark) -> tuple[np.
     return value, scaled
 
 
-def _checks_by_session(points, rate, ccd_rel, sessions) -> dict[int, dict[str, np.ndarray]]:
-    """Check measurements per session: time, level, frames and per-frame relative scatter."""
+def _check_levels(points, rate: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """Check readings moved to the checks' mean readback geometry (other rows unchanged).
+
+    Every check re-arrives at the check geometry with the stage's repeatability, and the
+    readback says where. The local slopes at the check geometry come from the recording
+    itself, exactly as for repeats of a sample geometry (:func:`geometry_slopes` over
+    the raw signal of every planned geometry: the irradiance factor ``cos(theta_i)``
+    always, the measured curve along the view when the check geometry lies on a sweep),
+    so that the check levels measure the lamp, not the stage.
+    """
+    readback = _readback(points)
+    rows = np.flatnonzero(usable & (points["block"] != REFERENCE_BLOCK))
+    groups = _groups(points, rows)
+    keys = sorted(groups)
+    geometry = np.array([readback[groups[k]].mean(axis=0) for k in keys])
+    slopes = geometry_slopes(geometry, np.array([rate[groups[k]].mean() for k in keys]))
+    level = rate.copy()
+    checks = usable & (points["block"] == CHECK_BLOCK)
+    for g, key in enumerate(keys):
+        members = [i for i in groups[key] if checks[i]]
+        if members:
+            level[members] -= (readback[members] - geometry[g]) @ slopes[g]
+    return level
+
+
+def _checks_by_session(points, level, rate, ccd_rel, sessions) -> dict[int, dict[str, np.ndarray]]:
+    """Check measurements per session: time, level (:func:`_check_levels`), frames and
+    per-frame relative scatter."""
     is_check = (points["block"] == CHECK_BLOCK) & (points["status"] == "ok")
     out: dict[int, dict[str, np.ndarray]] = {}
     for s in np.unique(sessions[is_check]):
         k = np.flatnonzero(is_check & (sessions == s))
         k = k[np.argsort(points["instrument_time"][k])]
-        out[int(s)] = {"time": points["instrument_time"][k], "level": rate[k], "frames": np.maximum(points["frames"][k], 1),
+        out[int(s)] = {"time": points["instrument_time"][k], "level": level[k], "frames": np.maximum(points["frames"][k], 1),
                        "scatter": points["frame_rate_std"][k] / rate[k], "ccd_rel": ccd_rel[k], "rows": k}
     return out
 
@@ -436,7 +462,7 @@ def _normalise_by_checks(points, rows_all, rate, budget_all, sessions, exposure,
     """
     frames = np.maximum(points["frames"], 1)
     ccd_rel = _random_relative(budget_all, rate, frames)
-    checks = _checks_by_session(points, rate, ccd_rel, sessions)
+    checks = _checks_by_session(points, _check_levels(points, rate, rows_all), rate, ccd_rel, sessions)
     flicker_var, dof, _ = _flicker_from_checks(checks)
     check_exposure = float(np.median(np.concatenate([exposure[c["rows"]] for c in checks.values()])))
     reference_level = float(np.mean(np.concatenate([c["level"] for c in checks.values()])))
