@@ -102,6 +102,10 @@ class Reduced:
         readings, the observed standard deviation of one reading (after moving each to
         the mean geometry), the stated one (root mean square of the readings' budgets
         without the components common to the repeats) and their chi-square.
+    window : numpy.ndarray or None
+        ``1/N - 1/N_max`` of each value's camera window (N its pixel count, N_max the
+        largest window of the recording) [1/pixel]: the PRNU errors of two values are
+        correlated as ``sqrt(min/max)`` of their window terms (:meth:`covariance`).
     """
 
     theta_i: np.ndarray
@@ -124,6 +128,32 @@ class Reduced:
     consistency: Mapping[str, float] = field(default_factory=dict)
     unit: str = "DN/s"
     repeat_statistics: tuple = ()
+    window: np.ndarray | None = None
+
+    # -- correlations --------------------------------------------------------------------
+    def covariance(self) -> np.ndarray:
+        """Covariance matrix of the values' errors [``unit``^2].
+
+        Every component is independent between values except PRNU: the camera windows
+        of a recording are centred and nested (they shrink with cos(theta_r) along one
+        image axis), so the PRNU error of a window relative to the largest one is a random
+        walk in the window size: values i and j share ``p^2 x_i x_j min(a_i, a_j)`` with
+        ``a = 1/N - 1/N_max`` (:func:`gonio.uncertainty.ccd_components`); values measured
+        through the same window (the same |view|) share all of it. Without window terms
+        the matrix is diagonal.
+        """
+        total = np.asarray(self.radiance_sigma, float)
+        prnu = np.asarray(self.budget.get("prnu", np.zeros_like(total)), float)
+        covariance = np.diag(total**2 - prnu**2)
+        if self.window is not None and np.any(prnu > 0):
+            a = np.asarray(self.window, float)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                correlation = np.sqrt(np.minimum.outer(a, a) / np.maximum.outer(a, a))
+            correlation = np.nan_to_num(correlation)  # a window with a = 0 has no PRNU term
+            sign = np.sign(self.radiance)
+            covariance += np.outer(sign * prnu, sign * prnu) * correlation
+        np.fill_diagonal(covariance, total**2)
+        return covariance
 
     # -- the budget ----------------------------------------------------------------------
     def budget_summary(self) -> dict[str, Any]:
@@ -227,47 +257,57 @@ class Reduced:
 
         self._require_usable()
         return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, self.radiance,
-                       self.radiance_sigma, quantity="radiance", label=self.label, metadata=self._dataset_metadata())
+                       self.radiance_sigma, quantity="radiance", label=self.label, metadata=self._dataset_metadata(),
+                       covariance=self.covariance())
 
     def normalised_radiance(self):
         """Dataset of L(theta_r)/L(0) per incidence (Oren & Nayar section 5, Figs 16-22).
 
         Each lamp direction is normalised by its own normal-view measurement (planned
-        view 0); lamp directions without one are left out. The uncertainty propagates both
-        measurements' uncertainties without dividing by the value itself, so low and
-        negative values keep a finite uncertainty (the normal point's error is shared
-        across its incidence; that correlation is neglected).
+        view 0); lamp directions without one are left out. The covariance propagates the
+        values' covariance (:meth:`covariance`) through ``r_i = x_i / x_0`` to first order,
+        so the normal-view value shared by an incidence's points and the PRNU shared by
+        their windows are both in it, and it stays finite for low and negative values. The
+        normal-view points themselves are 1 by construction, carry no information and are
+        left out.
         """
         from .fitting import Dataset
 
         self._require_usable()
-        keep = np.zeros(self.radiance.shape, bool)
-        value = np.zeros_like(self.radiance)
-        sigma = np.zeros_like(self.radiance)
         planned = self.metadata.get("planned_view")
         views = np.asarray(planned, float) if planned is not None else self.view
         lamp = np.round(np.stack([self.theta_i, self.phi_i], axis=1), 1)
+        normal_of = np.full(self.radiance.shape, -1)
         for key in {tuple(row) for row in lamp}:
             same = np.all(lamp == key, axis=1)
-            normal = same & (np.abs(views) < 1e-6)
-            if not normal.any():
-                continue
-            k = int(np.flatnonzero(normal)[0])
-            l0, s0 = self.radiance[k], self.radiance_sigma[k]
-            value[same] = self.radiance[same] / l0
-            sigma[same] = np.hypot(self.radiance_sigma[same], value[same] * s0) / abs(l0)
-            sigma[normal] = np.maximum(sigma[normal], 1e-12)
-            keep |= same
-        return Dataset(self.theta_i[keep], self.phi_i[keep], self.theta_r[keep], self.phi_r[keep], value[keep],
-                       np.maximum(sigma[keep], 1e-12), quantity="normalised_radiance", label=self.label,
-                       metadata=self._dataset_metadata())
+            normal = np.flatnonzero(same & (np.abs(views) < 1e-6))
+            if normal.size:
+                normal_of[same] = normal[0]
+        keep = np.flatnonzero(normal_of >= 0)
+        k0 = normal_of[keep]
+        x0 = self.radiance[k0]
+        value = self.radiance[keep] / x0
+        full = self.covariance()
+        # r_i = x_i / x_0(i), linearised: dr_i = (dx_i - r_i dx_0(i)) / x_0(i)
+        covariance = (full[np.ix_(keep, keep)] - full[np.ix_(keep, k0)] * value[None, :]
+                      - value[:, None] * full[np.ix_(k0, keep)] + np.outer(value, value) * full[np.ix_(k0, k0)])
+        covariance /= np.outer(x0, x0)
+        covariance = 0.5 * (covariance + covariance.T)
+        informative = keep != k0  # the normal-view points are 1 by construction: no data
+        covariance = covariance[np.ix_(informative, informative)]
+        keep, value = keep[informative], value[informative]
+        return Dataset(self.theta_i[keep], self.phi_i[keep], self.theta_r[keep], self.phi_r[keep], value,
+                       np.sqrt(np.diag(covariance)),
+                       quantity="normalised_radiance", label=self.label, metadata=self._dataset_metadata(),
+                       covariance=covariance)
 
     def brdf(self):
         """Dataset of absolute BRDF [1/sr], calibrated by the reference standard.
 
-        ``f = L / (E_0 cos theta_i)``; the uncertainty adds the calibration's relative
-        uncertainty (common to all points: for fitting prefer :meth:`fit_inputs`, which
-        puts it into one prior on the scale).
+        ``f = L / (E_0 cos theta_i)``; the covariance adds the calibration's relative
+        uncertainty as an error common to all points (``f_i f_j u_cal^2``), so a fit of
+        this dataset does not average it away (:meth:`fit_inputs` puts it into one prior
+        on the scale instead, which is equivalent).
         """
         from .fitting import Dataset
 
@@ -279,9 +319,9 @@ class Reduced:
         scale = self.reference_irradiance * cos_i
         value = self.radiance / scale
         rel_cal = self.reference_irradiance_sigma / self.reference_irradiance
-        sigma = np.hypot(self.radiance_sigma / scale, value * rel_cal)
-        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, sigma,
-                       quantity="brdf", label=self.label, metadata=self._dataset_metadata())
+        covariance = self.covariance() / np.outer(scale, scale) + np.outer(value, value) * rel_cal**2
+        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
+                       quantity="brdf", label=self.label, metadata=self._dataset_metadata(), covariance=covariance)
 
     def best_dataset(self):
         """Absolute BRDF when calibrated, else normalised radiance."""
@@ -833,6 +873,8 @@ def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
     resolution = {int(k): float(v) for k, v in meta.get("stage", {}).get("encoder_resolution_deg", {}).items()}
     combined = _combine_groups([np.array(groups[k]) for k in keys], rows, _readback(points), resolution)
     geometry, values, budget, counts, repeat_stats = combined
+    pixels = np.array([points["roi_pixels"][groups[k][0]] for k in keys], float)
+    window = np.clip(1.0 / pixels - 1.0 / float(np.max(points["roi_pixels"])), 0.0, None)  # as ccd_components
     total = np.sqrt(sum(b**2 for b in budget.values()))
     flags = np.where(values <= LOW_SIGNAL_SIGMAS * total, "low_signal", "").astype(object)
     consistency = dict(rows.consistency)
@@ -853,6 +895,7 @@ def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
                   **({"aperture_sr": [float(a) for a in aperture]} if aperture else {})},
         budget=budget, calibration=calibration, flags=flags, excluded=excluded,
         warnings=tuple(rows.warnings), consistency=consistency, unit=rows.unit, repeat_statistics=tuple(repeat_stats),
+        window=window,
     )
 
 
@@ -918,4 +961,5 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
         excluded={k: sum(p.excluded.get(k, 0) for p in parts) for k in {k for p in parts for k in p.excluded}},
         warnings=tuple(dict.fromkeys(w for p in parts for w in p.warnings)), consistency=consistency,
         unit=parts[0].unit,
+        window=None if any(p.window is None for p in parts) else np.concatenate([p.window for p in parts]),
     )

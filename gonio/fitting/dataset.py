@@ -103,6 +103,13 @@ class Dataset:
         Short name of the sample or run, used in reports.
     metadata : dict
         Free-form information (instrument, date, protocol...); saved with fit results.
+    covariance : array_like, optional
+        Covariance matrix of the measurement errors, shape (n, n), when they are
+        correlated (a reduced recording: the PRNU of nested camera windows, the
+        normal-view value shared by an incidence's normalised values, the calibration of
+        absolute BRDF). Its diagonal must equal ``sigma**2``. Fits then use the
+        generalised least-squares likelihood (:class:`gonio.fitting.FitProblem`).
+        Saved with fit results (JSON), not in the CSV form.
 
     Raises
     ------
@@ -127,6 +134,7 @@ class Dataset:
     quantity: str = "brdf"
     label: str = ""
     metadata: Mapping[str, Any] = field(default_factory=dict)
+    covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         value = _as_vector("value", self.value, None)
@@ -158,6 +166,10 @@ class Dataset:
         for name, array in arrays.items():
             array.setflags(write=False)
             object.__setattr__(self, name, array)
+        if self.covariance is not None:
+            covariance = _checked_covariance(self.covariance, arrays["sigma"])
+            covariance.setflags(write=False)
+            object.__setattr__(self, "covariance", covariance)
         object.__setattr__(self, "label", str(self.label))
         object.__setattr__(self, "metadata", dict(self.metadata))
 
@@ -214,11 +226,14 @@ class Dataset:
     def subset(self, mask: Any) -> "Dataset":
         """A new dataset with the measurements selected by a boolean mask or index array."""
         select = np.asarray(mask)
+        if select.dtype == bool:
+            select = np.flatnonzero(select)
         return Dataset(
             *(getattr(self, name)[select] for name in (*_ANGLE_FIELDS, "value", "sigma")),
             quantity=self.quantity,
             label=self.label,
             metadata=self.metadata,
+            covariance=None if self.covariance is None else self.covariance[np.ix_(select, select)],
         )
 
     # ------------------------------------------------------------------ persistence
@@ -226,6 +241,8 @@ class Dataset:
         """Plain-Python form (lists), for JSON."""
         out: dict[str, Any] = {name: getattr(self, name).tolist() for name in CSV_COLUMNS}
         out.update(quantity=self.quantity, label=self.label, metadata=dict(self.metadata))
+        if self.covariance is not None:
+            out["covariance"] = self.covariance.tolist()
         return out
 
     @classmethod
@@ -239,10 +256,15 @@ class Dataset:
             quantity=data.get("quantity", "brdf"),
             label=data.get("label", ""),
             metadata=data.get("metadata", {}),
+            covariance=data.get("covariance"),
         )
 
     def to_csv(self, path: str | Path) -> Path:
-        """Write the CSV form (``# key: value`` header lines, then the columns)."""
+        """Write the CSV form (``# key: value`` header lines, then the columns).
+
+        A covariance is not part of the CSV form: the file holds ``sigma`` and says
+        ``# covariance: not stored (independent errors assumed on reading)``.
+        """
         path = Path(path)
         buffer = io.StringIO()
         buffer.write(f"# quantity: {self.quantity}\n")
@@ -250,6 +272,8 @@ class Dataset:
             buffer.write(f"# label: {self.label}\n")
         for key, value in self.metadata.items():
             buffer.write(f"# {key}: {value}\n")
+        if self.covariance is not None:
+            buffer.write("# covariance: not stored (independent errors assumed on reading)\n")
         writer = csv.writer(buffer, lineterminator="\n")
         writer.writerow(CSV_COLUMNS)
         for row in zip(*(getattr(self, name) for name in CSV_COLUMNS)):
@@ -321,3 +345,23 @@ class Dataset:
 
     def __repr__(self) -> str:
         return f"<Dataset {self.label!r}: {self.n} {self.quantity} values>"
+
+
+def _checked_covariance(covariance: Any, sigma: np.ndarray) -> np.ndarray:
+    """The covariance as a float array, checked: (n, n), symmetric, diagonal sigma^2, positive definite."""
+    matrix = np.array(covariance, dtype=float)
+    n = sigma.size
+    if matrix.shape != (n, n):
+        raise ValueError(f"Dataset field 'covariance' has shape {matrix.shape}; expected ({n}, {n})")
+    if not np.all(np.isfinite(matrix)):
+        raise ValueError("Dataset field 'covariance' holds NaN or infinite entries")
+    if not np.allclose(matrix, matrix.T, rtol=1e-10, atol=0.0):
+        raise ValueError("Dataset field 'covariance' is not symmetric")
+    if not np.allclose(np.diag(matrix), sigma**2, rtol=1e-9, atol=0.0):
+        k = int(np.argmax(np.abs(np.diag(matrix) - sigma**2) / sigma**2))
+        raise ValueError(f"Dataset field 'covariance': diagonal entry {k} = {matrix[k, k]:g} is not sigma^2 = {sigma[k]**2:g}")
+    try:
+        np.linalg.cholesky(matrix)
+    except np.linalg.LinAlgError:
+        raise ValueError("Dataset field 'covariance' is not positive definite") from None
+    return matrix

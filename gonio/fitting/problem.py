@@ -12,10 +12,18 @@ Nuisance parameters
     Only for ``quantity='radiance'`` (relative radiance): prediction = scale f_r cos(theta_i).
 ``jitter`` [data units]
     Optional extra noise, added in quadrature to every measurement's uncertainty:
-    sigma_tot^2 = sigma^2 + jitter^2.  It absorbs scatter the quoted uncertainties miss
+    sigma_tot^2 = sigma^2 + jitter^2 (for correlated data, ``jitter^2`` is added to the
+    covariance's diagonal).  It absorbs scatter the quoted uncertainties miss
     (speckle, sample inhomogeneity, model error).  Its physical range is taken as
     [0, 10 (max|value| + max sigma)]: scatter ten times the signal would make the data
     meaningless, and a finite range gives it a proper uniform prior.
+
+Correlated errors
+-----------------
+A dataset with a ``covariance`` C is fitted by generalised least squares: the residual
+vector is whitened with the Cholesky factor L of C (C = L L^T, r_w = L^-1 (prediction -
+value)), so chi^2 = r^T C^-1 r and the Gaussian log-likelihood is
+-chi^2/2 - log det L - n/2 log(2 pi). Without one, L = diag(sigma).
 """
 from __future__ import annotations
 
@@ -195,6 +203,7 @@ class FitProblem:
             self._fast_normal = self.model.at(sources[:, 0], sources[:, 1], 0.0, sources[:, 1], **self.options)
             self._normal_index = index
         self._cos_i = np.cos(np.radians(dataset.theta_i))
+        self._cholesky = None if dataset.covariance is None else np.linalg.cholesky(dataset.covariance)
         self._model_names = set(self.model.param_names)
         # Free model parameters, checked on each evaluation from a vector; fixed values were
         # checked above and defaults lie inside their bounds.
@@ -277,10 +286,32 @@ class FitProblem:
             return self.dataset.sigma
         return np.sqrt(self.dataset.sigma**2 + jitter**2)
 
+    def whiten(self, difference: np.ndarray, jitter: float = 0.0) -> tuple[np.ndarray, float]:
+        """Whitened residuals of ``difference`` (prediction - value) and log det of their factor.
+
+        ``L^-1 difference`` with ``L`` the Cholesky factor of the covariance (plus
+        ``jitter^2`` on its diagonal), or ``difference / sigma_tot`` for independent errors.
+        """
+        if self._cholesky is None:
+            sigma = self.dataset.sigma if jitter == 0.0 else np.sqrt(self.dataset.sigma**2 + jitter**2)
+            return difference / sigma, float(np.sum(np.log(sigma)))
+        factor = self._cholesky
+        if jitter:
+            factor = np.linalg.cholesky(self.dataset.covariance + jitter**2 * np.eye(self.dataset.n))
+        from scipy.linalg import solve_triangular
+
+        return solve_triangular(factor, difference, lower=True, check_finite=False), float(np.sum(np.log(np.diag(factor))))
+
     def residuals(self, vector: Any) -> np.ndarray:
-        """Weighted residuals (prediction - value) / sigma (jitter not included)."""
+        """Whitened residuals (prediction - value) / sigma, or L^-1 (prediction - value) for
+        correlated data (jitter not included)."""
         _, predicted = self._predict_vector(vector)
-        return (predicted - self.dataset.value) / self.dataset.sigma
+        difference = predicted - self.dataset.value
+        if self._cholesky is None:
+            return difference / self.dataset.sigma
+        if not np.all(np.isfinite(difference)):
+            return np.full(difference.shape, np.nan)
+        return self.whiten(difference)[0]
 
     def log_likelihood(self, vector: Any) -> float:
         """Gaussian log-likelihood of the data (with jitter when it is a parameter).
@@ -288,24 +319,26 @@ class FitProblem:
         ``-inf`` when the prediction is undefined (normalised data of a black sample).
         """
         values, predicted = self._predict_vector(vector)
-        sigma = self.total_sigma(values)
-        z = (predicted - self.dataset.value) / sigma
+        difference = predicted - self.dataset.value
+        if not np.all(np.isfinite(difference)):
+            return -math.inf
+        z, log_det = self.whiten(difference, values.get("jitter", 0.0))
         chi2 = float(np.dot(z, z))
         if not math.isfinite(chi2):
             return -math.inf
-        return -0.5 * chi2 - float(np.sum(np.log(sigma))) - 0.5 * z.size * math.log(2.0 * math.pi)
+        return -0.5 * chi2 - log_det - 0.5 * z.size * math.log(2.0 * math.pi)
 
     def chi_square(self, values: Mapping[str, float]) -> float:
-        """Sum of squared weighted residuals with the measurement uncertainties only."""
-        z = (self.predict(values) - self.dataset.value) / self.dataset.sigma
+        """Sum of squared whitened residuals with the measurement uncertainties only."""
+        z = self.whiten(self.predict(values) - self.dataset.value)[0]
         return float(np.dot(z, z))
 
     def optimal_scale(self, values: Mapping[str, float]) -> float:
-        """Weighted linear least-squares ``scale`` for the other values (radiance data)."""
+        """Generalised linear least-squares ``scale`` for the other values (radiance data)."""
         trial = dict(values, scale=1.0)
-        shape = self.predict(trial)
-        w = 1.0 / self.dataset.sigma**2
-        denominator = float(np.sum(w * shape * shape))
+        shape = self.whiten(self.predict(trial))[0]
+        data = self.whiten(np.asarray(self.dataset.value, float))[0]
+        denominator = float(np.dot(shape, shape))
         if denominator <= 0 or not math.isfinite(denominator):
             return 1.0
-        return max(float(np.sum(w * shape * self.dataset.value)) / denominator, 1e-300)
+        return max(float(np.dot(shape, data)) / denominator, 1e-300)

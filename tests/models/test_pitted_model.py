@@ -166,3 +166,11 @@ def test_model_single_scattering_closed_form_equals_the_quadrature(psi):
     # 1e-10 absolute (the BRDF scale is 1/pi): where F1 ~ 1e-4 forward at grazing both
     # quadratures carry ~1e-8 relative
     np.testing.assert_allclose(closed, quadrature, rtol=1e-8, atol=1e-10)
+
+
+def test_a_geometry_whose_quadrature_set_is_empty_evaluates():
+    """Found by Hypothesis: at theta_i = 71, theta_r = 89 in the plane and a tiny aperture
+    the closed form's sliver set near the horizon was empty and the quadrature reshaped an
+    empty array; any geometry must evaluate (KvDDN 1999, eq 14-15: the BRDF is >= 0)."""
+    value = float(PITTED(71.0, 0.0, 89.0, 0.0, rho=0.0, psi=0.01171875, coverage=1.0))
+    assert value >= 0.0

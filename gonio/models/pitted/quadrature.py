@@ -146,6 +146,8 @@ def single_scattering_integral(
     alpha, beta, epsilon = (np.asarray(a, float) for a in np.broadcast_arrays(alpha, beta, epsilon))
     shape = alpha.shape
     alpha, beta, epsilon = alpha.ravel(), beta.ravel(), epsilon.ravel()
+    if alpha.size == 0:  # nothing to integrate (e.g. no geometry needs the quadrature)
+        return np.zeros(shape)
     eps = np.remainder(epsilon + np.pi, 2.0 * np.pi) - np.pi  # (-pi, pi]
     nodes, weights = _panel_rule(int(order))
     edges = _breakpoints(alpha, beta, eps, psi)
