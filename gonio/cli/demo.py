@@ -227,7 +227,8 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True):
     dataset, priors = reduced.fit_inputs()
     _say(quiet, f"fitting {dataset.n} {dataset.quantity} values "
                 f"(model averaged over the rig's apertures {dataset.metadata.get('aperture_sr')} sr)")
-    comparison = compare_models(dataset, ["lambert", "oren-nayar-qualitative", (SAMPLE_MODEL, {"ir_weight": 1.0})])
+    comparison = compare_models(dataset, ["lambert", "oren-nayar-qualitative", (SAMPLE_MODEL, {"ir_weight": 1.0})],
+                                priors=priors)
     _say(quiet, comparison.summary())
     line = None if quiet else ProgressLine("MCMC steps")
 

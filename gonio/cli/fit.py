@@ -219,7 +219,8 @@ def _run(args: argparse.Namespace) -> int:
     fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
     options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
     if len(args.model) > 1:
-        comparison = compare_models(dataset, [(name, {k: v for k, v in fixed.items() if k in models.get(name).param_names}) for name in args.model])
+        comparison = compare_models(dataset, [(name, {k: v for k, v in fixed.items() if k in models.get(name).param_names})
+                                              for name in args.model], priors=priors)
         print(comparison.summary())
         return 0
     name = args.model[0]

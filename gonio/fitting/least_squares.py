@@ -76,6 +76,10 @@ class LeastSquaresResult:
         Groups of parameters that are degenerate with each other.
     warnings : list of str
         Plain-language diagnostics.
+    gaussian_priors : tuple of str
+        Parameters whose Gaussian prior entered the fit (a maximum a posteriori fit: the
+        values are the posterior mode and the covariance its Laplace approximation;
+        ``chi2`` and ``log_likelihood`` remain those of the data alone).
     """
 
     values: dict[str, float]
@@ -94,6 +98,7 @@ class LeastSquaresResult:
     insensitive: list[str] = field(default_factory=list)
     degenerate: list[list[str]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    gaussian_priors: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (NaN written as null by the caller)."""
@@ -114,6 +119,7 @@ class LeastSquaresResult:
             "insensitive": self.insensitive,
             "degenerate": self.degenerate,
             "warnings": self.warnings,
+            "gaussian_priors": list(self.gaussian_priors),
         }
 
     @classmethod
@@ -126,6 +132,7 @@ class LeastSquaresResult:
                 [[np.nan if x is None else x for x in row] for row in kwargs[key]], dtype=float
             ).reshape(len(kwargs["free"]), len(kwargs["free"]))
         kwargs["stderr"] = {k: (math.nan if v is None else v) for k, v in kwargs["stderr"].items()}
+        kwargs["gaussian_priors"] = tuple(kwargs.get("gaussian_priors", ()))
         return cls(**kwargs)
 
 
@@ -257,6 +264,7 @@ def fit_least_squares(
     start: Mapping[str, float] | None = None,
     n_starts: int = 6,
     seed: int | None = 0,
+    priors: Mapping[str, Any] | None = None,
 ) -> LeastSquaresResult:
     """Weighted least-squares fit within the physical bounds.
 
@@ -272,6 +280,11 @@ def fit_least_squares(
         chi-square wins.
     seed : int, optional
         Seed of the random starting points.
+    priors : mapping of Prior, optional
+        Priors of free parameters. Gaussian ones (:class:`~gonio.fitting.priors.Normal`,
+        e.g. the calibration's prior on ``scale``) add the residual ``(x - mean) / sd``, so
+        the fit is the posterior mode under the same likelihood and priors the sampler
+        uses; the others only restrict the range, as the physical bounds already do.
 
     Returns
     -------
@@ -288,11 +301,18 @@ def fit_least_squares(
     >>> round(fit.values["k"], 3), round(fit.values["rho"], 3)
     (0.7, 0.6)
     """
+    from .priors import Normal
+
     rng = np.random.default_rng(seed)
     free = problem.free
     optimised = [n for n in free if n != "jitter"]
     lower, upper = _optimiser_bounds(problem, optimised)
     index = [free.index(n) for n in optimised]
+    gaussian = [(optimised.index(n), p.mean, p.sd) for n, p in (priors or {}).items()
+                if isinstance(p, Normal) and n in optimised]
+    prior_at = np.array([k for k, _, _ in gaussian], int)
+    prior_mean = np.array([m for _, m, _ in gaussian], float)
+    prior_sd = np.array([s for _, _, s in gaussian], float)
     best = None
     nfev = 0
     for point in _start_points(problem, start, n_starts, rng):
@@ -302,6 +322,8 @@ def fit_least_squares(
             vector = template.copy()
             vector[index] = x
             r = problem.residuals(vector)
+            if gaussian:
+                r = np.concatenate([r, (x[prior_at] - prior_mean) / prior_sd])
             # Undefined predictions (normalised data of a black sample) are pushed away
             # from with a large finite residual; least_squares cannot take NaN.
             return np.where(np.isfinite(r), r, 1e10)
@@ -357,6 +379,7 @@ def fit_least_squares(
         insensitive=insensitive,
         degenerate=degenerate,
         warnings=warnings,
+        gaussian_priors=tuple(optimised[k] for k, _, _ in gaussian),
     )
 
 

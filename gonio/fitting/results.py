@@ -500,7 +500,9 @@ def _summary_text(result: FitResult) -> str:
         f"    incidences         = {len(data.incidences()[0])}",
         *_data_notes(data.metadata),
         "[[Fit Statistics]]",
-        "    # fitting method   = least_squares (trf, bounded)" + (" + emcee" if result.mcmc else ""),
+        "    # fitting method   = least_squares (trf, bounded"
+        + (f"; posterior mode with the Gaussian priors on {', '.join(ls.gaussian_priors)}" if ls.gaussian_priors else "")
+        + ")" + (" + emcee" if result.mcmc else ""),
         f"    # function evals   = {ls.nfev}",
         f"    # data points      = {data.n}",
         f"    # variables        = {len(result.free)}",

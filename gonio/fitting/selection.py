@@ -128,6 +128,7 @@ def compare_models(
     candidates: Sequence[str | tuple[str, Mapping[str, float]]],
     threshold: float = 1.0,
     n_starts: int = 6,
+    priors: Mapping[str, Any] | None = None,
 ) -> ModelComparison:
     """Fit several models by least squares and choose the simplest adequate one.
 
@@ -141,6 +142,12 @@ def compare_models(
         parameters is preferred.
     n_starts : int
         Starting points per least-squares fit.
+    priors : mapping of Prior, optional
+        Priors overriding the defaults, by parameter name (e.g. the calibration's prior on
+        ``scale`` from :meth:`gonio.reduction.Reduced.fit_inputs`); each applies to the
+        candidates that have that free parameter. They enter the least-squares fits (a
+        Gaussian prior makes them posterior modes) and the Laplace evidence, as in
+        :func:`gonio.fitting.fit`.
 
     Returns
     -------
@@ -166,8 +173,9 @@ def compare_models(
     for candidate in candidates:
         name, fixed = (candidate, {}) if isinstance(candidate, str) else (candidate[0], dict(candidate[1]))
         problem = FitProblem(name, dataset, fixed)
-        ls = fit_least_squares(problem, n_starts=n_starts)
-        priors = resolve_priors(problem, ls.values)
+        given = {k: v for k, v in (priors or {}).items() if k in problem.free}
+        ls = fit_least_squares(problem, n_starts=n_starts, priors=given)
+        candidate_priors = resolve_priors(problem, ls.values, given)
         label = candidate_label(name, fixed)
         info = information_criteria(ls.log_likelihood, len(problem.free), problem.n_informative)
         rows.append(
@@ -179,7 +187,7 @@ def compare_models(
                 "chi2": ls.chi2,
                 "redchi": ls.redchi,
                 **info,
-                "log_evidence": laplace_log_evidence(problem, ls, priors),
+                "log_evidence": laplace_log_evidence(problem, ls, candidate_priors),
                 "values": ls.values,
                 "warnings": ls.warnings,
             }

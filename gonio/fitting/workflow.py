@@ -67,7 +67,7 @@ def fit(
     0.5
     """
     problem = FitProblem(model, dataset, fixed, options, jitter)
-    least_squares = fit_least_squares(problem, start=start, seed=seed)
+    least_squares = fit_least_squares(problem, start=start, seed=seed, priors=priors)
     if not mcmc:
         return FitResult.build(problem, least_squares, None, resolve_priors(problem, least_squares.values, priors))
     chain, used_priors = sample_posterior(
