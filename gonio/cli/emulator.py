@@ -42,6 +42,7 @@ def build_rig(args: argparse.Namespace):
         min_separation_deg=args.min_separation,
         name=args.name,
         lamp_warm=args.lamp_warm,
+        monitor=not args.no_monitor,
     )
 
 
@@ -116,4 +117,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--lamp-warm", action="store_true",
                         help="start with the lamp on and warm (default: off, as at power-on)")
     parser.add_argument("--name", default="default", help="rig name for gonio-sim:// URLs (default 'default')")
+    parser.add_argument("--no-monitor", action="store_true",
+                        help="a camera without the lamp monitor option (MON?); see docs/emulator.md")
     parser.set_defaults(func=_run)

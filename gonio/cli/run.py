@@ -40,6 +40,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--camera", help="camera port or URL of a real rig")
     parser.add_argument("--lamp", help="lamp supply port or URL of a real rig")
     parser.add_argument("--lamp-voltage", type=float, default=120.0, help="lamp voltage [V] (default 120)")
+    parser.add_argument("--no-monitor", action="store_true",
+                        help="emulated rig without a lamp monitor (use [checks] in the protocol; docs/acquisition.md)")
     parser.add_argument("--no-warm-up", action="store_true", help="do not wait for the lamp to stabilise")
     parser.add_argument("--quiet", action="store_true", help="no progress line")
     parser.set_defaults(func=_run)
@@ -145,7 +147,8 @@ def _run(args: argparse.Namespace) -> int:
                     progress=_progress_printer(args.quiet),
                 )
         else:
-            with emulated_rig(args.sample, args.seed) as (rig, emulator, change_sample, metadata):
+            options = {"monitor": False} if args.no_monitor else {}
+            with emulated_rig(args.sample, args.seed, **options) as (rig, emulator, change_sample, metadata):
                 result = acquisition.run_protocol(
                     protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
                     warm_up=not args.no_warm_up,
