@@ -87,3 +87,96 @@ def test_data_format_doc_lists_the_columns_the_code_writes():
     doc = (Path(__file__).resolve().parent.parent / "docs" / "data-format.md").read_text()
     assert data.column_table(data.COLUMNS) in doc
     assert data.column_table(data.DARK_COLUMNS) in doc
+
+
+# ----------------------------------------------------------------------------- safety
+def test_a_new_recording_refuses_a_folder_with_any_recording_file_and_changes_nothing(tmp_path):
+    """The issue's case: --out into a folder without points.csv replaced the user's
+    metadata.json and appended to their darks.csv."""
+    for name in data.RECORDING_FILES:
+        folder = tmp_path / name.replace(".", "_")
+        folder.mkdir()
+        (folder / name).write_text("the user's own file\n")
+        with pytest.raises(data.RecordingError, match=f"already holds {name}"):
+            data.RecordingWriter(folder, {"protocol": "p"})
+        assert sorted(p.name for p in folder.iterdir()) == [name]
+        assert (folder / name).read_text() == "the user's own file\n"
+    with pytest.raises(data.RecordingError, match="not a folder"):
+        (tmp_path / "file").write_text("x")
+        data.RecordingWriter(tmp_path / "file", {})
+
+
+def test_metadata_gets_the_permissions_of_the_csv_files_beside_it(tmp_path):
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        data.RecordingWriter(tmp_path / "run", {})
+    finally:
+        os.umask(old)
+    modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in (tmp_path / "run").iterdir()}
+    assert modes == {"metadata.json": 0o644, "points.csv": 0o644, "darks.csv": 0o644}
+
+
+def test_a_failed_metadata_write_leaves_no_temporary_file(tmp_path, monkeypatch):
+    import errno
+    import os
+
+    writer = data.RecordingWriter(tmp_path / "run", {})
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OSError):
+        writer.finish("complete")
+    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["darks.csv", "metadata.json", "points.csv"]
+    assert data.read_metadata(tmp_path / "run")["status"] == "running"  # the last good state
+
+
+def test_a_deleted_darks_file_is_recreated_with_its_header_on_resume(tmp_path):
+    w = data.RecordingWriter(tmp_path, {})
+    w.append_point(_row(0, 5.0))
+    (tmp_path / "darks.csv").unlink()
+    resumed = data.RecordingWriter(tmp_path, {}, resume=True)
+    resumed.append_dark({"after_index": 0, "exposure": 0.02, "gain": 1.0, "roi_mean": 100.0, "roi_std": 1.0,
+                         "roi_pixels": 9})
+    assert data.read_darks(tmp_path)["roi_mean"].tolist() == [100.0]
+
+
+def test_unreadable_rows_and_files_name_the_file_and_the_line(tmp_path):
+    w = data.RecordingWriter(tmp_path / "r", {})
+    w.append_point(_row(0, 5.0))
+    with open(tmp_path / "r" / "points.csv", "a") as handle:
+        handle.write("5,block\n")  # a short row
+    with pytest.raises(data.RecordingError, match=r"points.csv, line 3: the row has fewer fields"):
+        data.read_points(tmp_path / "r")
+    (tmp_path / "r" / "points.csv").write_bytes((tmp_path / "r" / "points.csv").read_bytes()[:-8] + b"\xff\xfe\n")
+    with pytest.raises(data.RecordingError, match=r"points.csv: not a UTF-8 text file"):
+        data.read_points(tmp_path / "r")
+
+
+def test_text_cells_that_look_like_formulas_are_escaped_and_read_back(tmp_path):
+    """OWASP CSV injection: a cell starting with = + - @ is prefixed with ' in the file
+    (a spreadsheet shows text, runs nothing) and gonio reads the original back."""
+    w = data.RecordingWriter(tmp_path, {})
+    names = ["=HYPERLINK(\"x\")", "+1", "-2 deg", "@sum", "'quoted", "plain"]
+    for k, name in enumerate(names):
+        w.append_point(_row(k, float(k), block=name))
+    with open(tmp_path / "points.csv", newline="") as handle:
+        raw = [r["block"] for r in csv.DictReader(handle)]
+    assert raw == ["'=HYPERLINK(\"x\")", "'+1", "'-2 deg", "'@sum", "''quoted", "plain"]
+    assert data.read_points(tmp_path)["block"].tolist() == names
+
+
+def test_a_recording_of_the_earlier_format_is_read_but_not_resumed(tmp_path):
+    old = [name for name, _, _ in data.COLUMNS if name not in ("flags", "frames_saturated", "frame_rate_std",
+                                                                  "monitor", "session")]
+    (tmp_path / "metadata.json").write_text("{}")
+    (tmp_path / "darks.csv").write_text(",".join(n for n, _, _ in data.DARK_COLUMNS if n != "monitor") + "\n")
+    row = {"index": "0", "block": "b", "repeat": "0", "theta_i": "30", "phi_i": "0", "view": "10", "status": "ok"}
+    (tmp_path / "points.csv").write_text(",".join(old) + "\n" + ",".join(row.get(n, "") for n in old) + "\n")
+    points = data.read_points(tmp_path)
+    assert points["view"].tolist() == [10.0] and points["flags"].tolist() == [""] and np.isnan(points["monitor"][0])
+    with pytest.raises(data.RecordingError, match="another format cannot be resumed"):
+        data.RecordingWriter(tmp_path, {}, resume=True)

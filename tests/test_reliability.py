@@ -267,3 +267,39 @@ view = [-40, 0, 30]
     assert reduced.excluded == {"saturated": 2} and len(reduced.radiance) == 3
     result = fit(reduced.relative_radiance(), "lambert", fixed={"rho": 0.5}, mcmc=False)
     assert "2 saturated point(s) excluded" in result.summary()
+
+
+def test_a_full_disk_stops_the_run_with_one_message_and_leaves_no_temporary_file(tmp_path, monkeypatch):
+    """The issue's case: ENOSPC was raised again inside the finishing step (a traceback),
+    metadata stayed 'running' and a 0-byte temporary file was left behind."""
+    import errno
+
+    import gonio.data
+    import gonio.files
+
+    protocol = protocols.loads(SMALL, source="resume.toml")
+    state = {"appends": 0, "full": False}
+    real_append, real_replace = gonio.data._fsync_append, gonio.files.os.replace
+
+    def append(path, text):
+        state["appends"] += 1
+        if state["appends"] > 4:  # the two headers, the first dark and the first point fit
+            state["full"] = True
+        if state["full"]:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        real_append(path, text)
+
+    def replace(source, target):
+        if state["full"]:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_replace(source, target)
+    monkeypatch.setattr(gonio.data, "_fsync_append", append)
+    monkeypatch.setattr(gonio.files.os, "replace", replace)
+    with emulated_rig("lambert:rho=0.5", 0, name="full-disk") as (rig, emulator, _, meta):
+        with pytest.raises(acquisition.AcquisitionError, match="cannot write the recording: No space left") as info:
+            acquisition.run_protocol(protocol, rig, tmp_path / "rec", metadata=meta, clock=emulator.control.now,
+                                     warm_up=False)
+    assert "metadata.json could not be updated" in str(info.value)
+    monkeypatch.undo()
+    assert sorted(p.name for p in (tmp_path / "rec").iterdir()) == ["darks.csv", "metadata.json", "points.csv"]
+    assert len(data.read_points(tmp_path / "rec")["index"]) == 1  # what was written is intact
