@@ -191,7 +191,8 @@ def test_export_writes_a_csv_that_gonio_fit_reads(tmp_path, capsys, curet):
     np.testing.assert_allclose(data.theta_i, sample.theta_i, rtol=1e-15)
     assert (data.sigma > 0).all() and "Dana" in data.metadata["source"]
     capsys.readouterr()
-    assert main(["fit", str(path), "--model", "lambert", "--no-mcmc", "--out", str(tmp_path / "fit")]) == 0
+    # Lambert cannot explain a rough plaster: the fit is written and the exit status says so
+    assert main(["fit", str(path), "--model", "lambert", "--no-mcmc", "--out", str(tmp_path / "fit")]) == 4
     lambert = FitResult.load(tmp_path / "fit")
     # Lambert rho of plaster_b: weighted mean of pi f, 0.51 measured (pi x median 0.69 is
     # pulled down by the dark grazing values, which have the smallest sigma).
@@ -218,9 +219,9 @@ def test_fit_command_least_squares_writes_results_and_a_comparison(tmp_path, cap
 @needs_data
 def test_fit_command_with_a_short_mcmc_run_writes_the_report(tmp_path, capsys):
     out = tmp_path / "sandpaper"
-    code = main(["curet", "fit", "sandpaper", "--model", "lambert", "--walkers", "8", "--max-steps", "300",
-                 "--tau-multiple", "5", "--quiet", "--out", str(out)])
-    assert code == 0
+    code = main(["curet", "fit", "sandpaper", "--model", "lambert", "--walkers", "8", "--max-steps", "2000",
+                 "--tau-multiple", "10", "--rhat-limit", "1.05", "--quiet", "--out", str(out)])
+    assert code == 4  # converged by the loose criteria asked for; Lambert cannot explain sandpaper
     result = FitResult.load(out / "lambert")
     assert result.jitter and result.mcmc is not None and set(result.free) == {"rho", "jitter"}
     assert (out / "lambert" / "report.html").stat().st_size > 50_000  # figures embedded
@@ -258,12 +259,12 @@ def test_bad_input_is_reported_without_traceback(argv, message, capsys, tmp_path
 def test_fit_command_refuses_a_used_folder_and_overwrite_keeps_other_files(tmp_path, capsys):
     out = tmp_path / "plaster"
     argv = ["curet", "fit", "10", "--model", "lambert", "--no-mcmc", "--no-report", "--quiet", "--out", str(out)]
-    assert main(argv) == 0
+    assert main(argv) == 4  # written, and Lambert is inadequate for a rough plaster (its documented exit status)
     assert main(argv) == 2
     assert "already holds files" in capsys.readouterr().err
     (out / "notes.txt").write_text("keep me")
     (out / "lambert" / "chain.npz").write_bytes(b"stale chain of an earlier MCMC run")
-    assert main(argv + ["--overwrite"]) == 0
+    assert main(argv + ["--overwrite"]) == 4
     assert (out / "notes.txt").read_text() == "keep me"
     assert not (out / "lambert" / "chain.npz").exists()  # not part of the new (least-squares) result
     assert FitResult.load(out / "lambert").mcmc is None

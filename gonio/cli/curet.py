@@ -38,10 +38,15 @@ of the physical models under test:
 under-estimates the noise (by 0-12 % for Oren-Nayar surfaces with 4 % noise): a physical model that reaches a reduced chi-square near 1 fits
 as well as the best smooth description the data support, and a larger value measures
 systematic misfit.  ``--noise relative:0.05`` replaces the estimate by a fixed relative
-uncertainty.  By default the MCMC also fits ``jitter`` (extra noise in quadrature,
-:mod:`gonio.fitting.problem`) so that posterior intervals widen when the model misfits;
-the model comparison uses the noise model alone (the Laplace evidence is undefined with a
-jitter).
+uncertainty.  By default every fit also has ``jitter`` (extra noise in quadrature,
+:mod:`gonio.fitting.problem`) so that posterior intervals widen when the model misfits,
+and the model comparison uses the same likelihood (one likelihood for fitting and
+selection, :mod:`gonio.fitting.selection`); a fitted jitter larger than the estimated
+noise marks the model inadequate.
+
+Exit status of ``gonio curet fit``: 0 when every chain converged and the chosen model (or,
+without a comparison, at least one candidate) is adequate; 3 when a chain did not
+converge; 4 when no model is adequate; 2 for bad input.
 
 Geometry selection: every value is kept by default (negative values are legitimate
 noisy measurements of a dark sample; dropping them would bias the fit upwards).
@@ -437,7 +442,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Fit each model to one CUReT sample: least squares, then emcee (with a jitter term unless "
             "--no-jitter), a folder with result.json and report.html per model, and comparison.txt/.json "
-            "(chi-square, AIC, BIC, Laplace evidence under the noise model). Models are NAME[:param=value,...] "
+            "(chi-square and its p-value, AIC, BIC, Laplace evidence under the fits' likelihood). Exit status 0 "
+            "all good, 3 a chain did not converge, 4 no adequate model, 2 bad input. Models are NAME[:param=value,...] "
             "with the values held fixed, e.g. oren-nayar:ir_weight=1."
         ),
     )
@@ -451,11 +457,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     fitting.add_argument("--mcmc", action=argparse.BooleanOptionalAction, default=True,
                          help="sample the posterior with emcee (default: yes)")
     fitting.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=True,
-                         help="fit an extra noise term in the MCMC (default: yes)")
+                         help="fit an extra noise term, in every fit and in the comparison (default: yes)")
     fitting.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
     fitting.add_argument("--max-steps", type=int, default=20000, help="step limit of each chain (default 20000)")
     fitting.add_argument("--tau-multiple", type=float, default=50.0,
                          help="chain length required, in autocorrelation times (default 50)")
+    fitting.add_argument("--rhat-limit", type=float, default=1.01,
+                         help="largest rank-normalised split R-hat accepted for convergence (default 1.01)")
     fitting.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     fitting.add_argument("--report", action=argparse.BooleanOptionalAction, default=True,
                          help="write report.html per model (default: yes)")
@@ -513,10 +521,10 @@ def comparison_record(comparison) -> dict[str, Any]:
     """JSON-safe form of a :class:`gonio.fitting.ModelComparison`."""
     from gonio.fitting.results import _clean  # the fit results' JSON conversion (NaN -> null)
 
-    keys = ("label", "model", "fixed", "k", "chi2", "redchi", "aic", "aicc", "bic", "delta_bic", "log_evidence",
-            "delta_log_evidence", "values", "warnings")
-    return _clean({"chosen": comparison.chosen, "reason": comparison.reason, "threshold": comparison.threshold,
-                   "rows": [{k: row[k] for k in keys} for row in comparison.rows]})
+    record = comparison.to_dict()
+    for row, full in zip(record["rows"], comparison.rows):
+        row["warnings"] = full["warnings"]
+    return _clean(record)
 
 
 #: Files ``gonio curet fit`` writes at the top of its output folder (each candidate gets a
@@ -596,8 +604,9 @@ def _run_fit(args: argparse.Namespace) -> int:
         start = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)  # reported below
-            result = fit(dataset, name, fixed=fixed, options=options, mcmc=args.mcmc, jitter=args.jitter and args.mcmc,
+            result = fit(dataset, name, fixed=fixed, options=options, mcmc=args.mcmc, jitter=args.jitter,
                          n_walkers=args.walkers, max_steps=args.max_steps, tau_multiple=args.tau_multiple,
+                         rhat_limit=args.rhat_limit,
                          seed=args.seed)
         result.save(folder)
         if args.report:
@@ -611,16 +620,18 @@ def _run_fit(args: argparse.Namespace) -> int:
         if result.converged is False:
             print(f"gonio: WARNING: {label}: the MCMC chain did NOT converge; posterior numbers are unreliable "
                   "(increase --max-steps)", file=sys.stderr)
-    # The comparison uses the noise model alone: least squares of each candidate, no jitter.
+    # The comparison uses the fits' likelihood: the noise model and, when fitted, the jitter.
     with_options = [candidate_label(name, fixed) for name, fixed, options in candidates if options]
-    comparison = None if with_options else compare_models(dataset, [(name, fixed) for name, fixed, _ in candidates])
+    comparison = None if with_options else compare_models(dataset, [(name, fixed) for name, fixed, _ in candidates],
+                                                          jitter=args.jitter)
     lines = [_describe(dataset, noise), CREDIT + ".", ""]
     for label, folder, result, seconds in summary_rows:
         best = result.best_values()
         values = ", ".join(f"{k} = {best[k]:.4g}" for k in result.free)
         lines.append(f"{label:<34} redchi {result.least_squares.redchi:8.3f}  {values}  [{folder.name}, {seconds:.1f} s]")
     if comparison is not None:
-        lines += ["", "Model comparison (least squares under the noise model, no jitter):", comparison.summary()]
+        likelihood = "the noise model and a fitted jitter" if args.jitter else "the noise model, no jitter"
+        lines += ["", f"Model comparison (posterior modes under {likelihood}, as the fits):", comparison.summary()]
         (out / COMPARISON_JSON).write_text(json.dumps(comparison_record(comparison), indent=1, allow_nan=False))
     else:
         if replacing and (out / COMPARISON_JSON).is_file():
@@ -631,4 +642,22 @@ def _run_fit(args: argparse.Namespace) -> int:
     (out / COMPARISON_TEXT).write_text(text + "\n")
     print(text)
     print(f"results: {out}")
-    return 0
+    return fit_exit_code([result for _, _, result, _ in summary_rows], comparison)
+
+
+def fit_exit_code(results: Sequence[Any], comparison) -> int:
+    """Exit status of ``gonio curet fit`` (module docstring).
+
+    Parameters
+    ----------
+    results : sequence of FitResult
+        Every candidate's fit.
+    comparison : ModelComparison or None
+        The comparison, when one was made.
+    """
+    from gonio.fitting.results import EXIT_INADEQUATE, EXIT_NOT_CONVERGED
+
+    if any(result.converged is False for result in results):
+        return EXIT_NOT_CONVERGED
+    adequate = comparison.chosen_adequate if comparison is not None else any(r.adequate is not False for r in results)
+    return 0 if adequate else EXIT_INADEQUATE

@@ -19,8 +19,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "theta_i,phi_i,theta_r,phi_r,value,sigma (angles in degrees), or to a recording folder written "
             "by 'gonio run'. Weighted, bounded least squares, "
             "then Bayesian sampling with emcee until the chain is 50 autocorrelation times long. The result "
-            "(result.json, chain.npz, summary.txt) is written to a folder next to the data; "
-            "'gonio report FOLDER' turns it into an HTML report."
+            "(result.json, chain.npz, posterior.nc, summary.txt) is written to a folder next to the data; "
+            "'gonio report FOLDER' turns it into an HTML report. Every fit is tested for goodness of fit. "
+            "Exit status: 0 converged and adequate, 2 bad input, 3 chain not converged, "
+            "4 model inadequate (docs/fitting.md, 'Exit codes')."
         ),
     )
     parser.add_argument("data", help="CSV file (theta_i,phi_i,theta_r,phi_r,value,sigma) or a recording folder of "
@@ -36,10 +38,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--option", action="append", default=[], metavar="NAME=VALUE", help="model option")
     parser.add_argument("--mcmc", action=argparse.BooleanOptionalAction, default=True,
                         help="sample the posterior with emcee after least squares (default: yes)")
-    parser.add_argument("--jitter", action="store_true",
-                        help="fit an extra noise term added in quadrature to the uncertainties")
+    parser.add_argument("--jitter", nargs="?", const="absolute", choices=["absolute", "relative"],
+                        help="fit an extra noise term added in quadrature to the uncertainties: 'absolute' "
+                             "(the default when given alone; parameter jitter, in data units) or 'relative' "
+                             "(rel_jitter, a fraction of the prediction)")
     parser.add_argument("--walkers", type=int, default=32, help="number of emcee walkers (default 32)")
     parser.add_argument("--max-steps", type=int, default=20000, help="step limit of the chain (default 20000)")
+    parser.add_argument("--rhat-limit", type=float, default=1.01,
+                        help="largest rank-normalised split R-hat accepted for convergence (default 1.01)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--out", help="result folder (default: DATA_STEM.fit-MODEL next to the data); "
                                       "refused if it already holds files, unless --overwrite")
@@ -213,6 +219,7 @@ def _load(path: Path, quantity: str | None):
 def _run(args: argparse.Namespace) -> int:
     from gonio import models
     from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
+    from gonio.fitting.results import EXIT_INADEQUATE
 
     data_path = Path(args.data)
     dataset, priors = _load(data_path, args.quantity)
@@ -220,9 +227,9 @@ def _run(args: argparse.Namespace) -> int:
     options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
     if len(args.model) > 1:
         comparison = compare_models(dataset, [(name, {k: v for k, v in fixed.items() if k in models.get(name).param_names})
-                                              for name in args.model], priors=priors)
+                                              for name in args.model], priors=priors, jitter=args.jitter or False)
         print(comparison.summary())
-        return 0
+        return 0 if comparison.chosen_adequate else EXIT_INADEQUATE
     name = args.model[0]
     model = models.get(name)
     for key, text in _pairs(args.prior, "--prior").items():
@@ -240,8 +247,9 @@ def _run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
         result = fit(
-            dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=args.jitter, options=options,
-            n_walkers=args.walkers, max_steps=args.max_steps, seed=args.seed, progress=_Progress(args.quiet),
+            dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=args.jitter or False, options=options,
+            n_walkers=args.walkers, max_steps=args.max_steps, rhat_limit=args.rhat_limit, seed=args.seed,
+            progress=_Progress(args.quiet),
         )
     path = result.save(out)
     print(result.summary())
@@ -256,6 +264,8 @@ def _run(args: argparse.Namespace) -> int:
         print("gonio: WARNING: the MCMC chain did NOT converge (step limit reached); "
               "posterior numbers are unreliable. Increase --max-steps or simplify the model.", file=sys.stderr)
     for flag in result.flags:
-        if not flag.startswith("CHAIN NOT CONVERGED"):  # already said above
+        if not flag.startswith(("CHAIN NOT CONVERGED", "MODEL INADEQUATE")):  # said above and below
             print(f"gonio: warning: {flag}", file=sys.stderr)
-    return 0
+    if result.adequate is False:
+        print(f"gonio: {result.adequacy.headline()}", file=sys.stderr)
+    return result.exit_code()

@@ -214,7 +214,7 @@ def _correlation(covariance: np.ndarray) -> np.ndarray:
 
 
 def _start_points(problem: FitProblem, start: Mapping[str, float] | None, n_starts: int, rng) -> list[np.ndarray]:
-    names = [n for n in problem.free if n not in ("jitter", "scale")]
+    names = [n for n in problem.free if n not in (problem.noise_parameter, "scale")]
     lower, upper = _optimiser_bounds(problem, names)
     first = []
     for name, lo, hi in zip(names, lower, upper):
@@ -240,15 +240,16 @@ def _with_nuisances(problem: FitProblem, names, point, start) -> np.ndarray:
     if "scale" in problem.free:
         given = (start or {}).get("scale")
         values["scale"] = float(given) if given is not None else problem.optimal_scale(values)
-    if "jitter" in problem.free:
-        values["jitter"] = 0.0
+    if problem.noise_parameter in problem.free:
+        values[problem.noise_parameter] = 0.0
     return np.array([values[n] for n in problem.free])
 
 
 def _best_jitter(problem: FitProblem, vector: np.ndarray) -> float:
-    """Maximum-likelihood jitter with the other parameters held at ``vector``."""
-    j = problem.free.index("jitter")
-    upper = problem.spec("jitter").bounds[1]
+    """Maximum-likelihood extra noise (``jitter`` or ``rel_jitter``) with the other
+    parameters held at ``vector``."""
+    j = problem.free.index(problem.noise_parameter)
+    upper = problem.spec(problem.noise_parameter).bounds[1]
 
     def negative_log_likelihood(jitter: float) -> float:
         trial = vector.copy()
@@ -305,7 +306,7 @@ def fit_least_squares(
 
     rng = np.random.default_rng(seed)
     free = problem.free
-    optimised = [n for n in free if n != "jitter"]
+    optimised = [n for n in free if n != problem.noise_parameter]
     lower, upper = _optimiser_bounds(problem, optimised)
     index = [free.index(n) for n in optimised]
     gaussian = [(optimised.index(n), p.mean, p.sd) for n, p in (priors or {}).items()
@@ -340,8 +341,8 @@ def fit_least_squares(
     found, template = best
     vector = template.copy()
     vector[index] = found.x
-    if "jitter" in free:
-        vector[free.index("jitter")] = _best_jitter(problem, vector)
+    if problem.noise_parameter in free:
+        vector[free.index(problem.noise_parameter)] = _best_jitter(problem, vector)
     values = problem.values(vector)
 
     scales = [_characteristic_scale(problem, n, values[n]) for n in optimised]

@@ -6,10 +6,12 @@ added in quadrature, :mod:`gonio.fitting.problem`).  The model is evaluated thro
 fixed-geometry fast path (``Model.at``), built once by :class:`FitProblem`.
 
 Convergence follows the emcee documentation (Foreman-Mackey et al. 2013; emcee
-"Autocorrelation analysis & convergence" tutorial): every ``check_every`` steps the
-integrated autocorrelation time tau of each parameter is estimated; the run stops when the
-chain is at least ``tau_multiple`` (default 50) times the largest tau long *and* the tau
-estimate changed by less than ``tau_rtol`` since the previous check.  If ``max_steps`` is
+"Autocorrelation analysis & convergence" tutorial) and Vehtari et al. (2021): every
+``check_every`` steps the integrated autocorrelation time tau of each parameter is
+estimated; the run stops when the chain is at least ``tau_multiple`` (default 50) times
+the largest tau long, the tau estimate changed by less than ``tau_rtol`` since the
+previous check, *and* the rank-normalised split R-hat of every parameter (ArviZ, each
+walker a chain, after burn-in) is below 1.01 (:mod:`gonio.fitting.diagnostics`).  If ``max_steps`` is
 reached first the result is marked not converged and a :class:`ConvergenceWarning` is
 issued: its numbers must not be trusted without a longer run.  The burn-in discarded is
 2 max(tau) steps and the samples are thinned by max(1, min(tau)/2), as that tutorial
@@ -32,11 +34,12 @@ from typing import Callable, Mapping
 import emcee
 import numpy as np
 
+from .diagnostics import RHAT_LIMIT, convergence_diagnostics
 from .least_squares import LeastSquaresResult
 from .priors import Prior, default_prior
 from .problem import FitProblem
 
-__all__ = ["ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "LogPosterior"]
+__all__ = ["ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "start_spread", "LogPosterior"]
 
 
 class ConvergenceWarning(UserWarning):
@@ -131,6 +134,8 @@ class McmcResult:
         Likelihood evaluations (inside the prior support).
     tau_history : list of (int, float)
         (steps, max tau) at each check.
+    diagnostics : dict
+        ``{name: {"r_hat", "ess_bulk", "ess_tail"}}`` of the chain after burn-in (ArviZ).
     """
 
     free: tuple[str, ...]
@@ -149,6 +154,8 @@ class McmcResult:
     evaluations: int
     tau_history: list[tuple[int, float]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    diagnostics: dict[str, dict[str, float]] = field(default_factory=dict)
+    rhat_limit: float = RHAT_LIMIT
 
     @property
     def n_steps(self) -> int:
@@ -206,6 +213,7 @@ def sample_posterior(
     check_every: int = 100,
     seed: int | None = 0,
     progress: Callable[[int, int, float], None] | None = None,
+    rhat_limit: float = RHAT_LIMIT,
 ) -> tuple[McmcResult, dict[str, Prior]]:
     """Sample the posterior with emcee until the autocorrelation criterion holds.
 
@@ -214,8 +222,7 @@ def sample_posterior(
     problem : FitProblem
         Model, data, fixed parameters.
     start : LeastSquaresResult
-        The walkers start in a small Gaussian ball around its optimum (width: a tenth of the
-        standard error, or 1e-3 of the prior width where the error is undetermined).
+        The walkers start in a small Gaussian ball around its optimum (:func:`start_spread`).
     priors : mapping, optional
         Overrides of the default priors (module :mod:`gonio.fitting.priors`).
     n_walkers : int
@@ -224,6 +231,8 @@ def sample_posterior(
         Step limit; reaching it marks the result not converged (loud warning).
     tau_multiple, tau_rtol : float
         Convergence criterion (module docstring).  Values below 50 are for quick tests.
+    rhat_limit : float
+        Largest R-hat of a converged chain (default 1.01; larger values are for quick tests).
     check_every : int
         Steps between autocorrelation estimates and progress reports.
     seed : int, optional
@@ -247,9 +256,7 @@ def sample_posterior(
     centre = np.array([start.values[name] for name in problem.free])
     spread = []
     for name, value in zip(problem.free, centre):
-        error = start.stderr.get(name, math.nan)
-        width = priors[name].width()
-        spread.append(0.1 * error if math.isfinite(error) and error > 0 else 1e-3 * width)
+        spread.append(start_spread(problem, name, float(value), start.stderr.get(name, math.nan)))
         # Keep the ball clear of a bound the optimum sits on, so walkers start inside.
         lo, hi = problem.spec(name).bounds
         centre[problem.free.index(name)] = min(max(value, lo + spread[-1]), hi - spread[-1]) if math.isfinite(hi - lo) else value
@@ -266,6 +273,7 @@ def sample_posterior(
     steps = 0
     began = time.perf_counter()
     tau = np.full(ndim, np.nan)
+    next_rhat = 0
     while steps < max_steps:
         n = min(check_every, max_steps - steps)
         state = sampler.run_mcmc(state, n, progress=False)
@@ -276,9 +284,14 @@ def sample_posterior(
         if progress is not None:
             progress(steps, max_steps, largest)
         stable = bool(np.all(np.abs(previous - tau) < tau_rtol * tau))
-        if math.isfinite(largest) and steps >= tau_multiple * largest and stable:
-            converged = True
-            break
+        if math.isfinite(largest) and steps >= tau_multiple * largest and stable and steps >= next_rhat:
+            # R-hat costs ~0.1 s: computed on the thinned chain, and again only after it grew by 25 %
+            burn, thin = min(int(math.ceil(2.0 * largest)), steps // 2), max(1, int(0.5 * float(np.min(tau))))
+            r_hat = convergence_diagnostics(sampler.get_chain()[burn::thin], problem.free, ess=False)
+            next_rhat = int(1.25 * steps)
+            if all(d["r_hat"] < rhat_limit for d in r_hat.values()):
+                converged = True
+                break
         previous = tau
     wall = time.perf_counter() - began
 
@@ -291,13 +304,16 @@ def sample_posterior(
     else:
         burn_in, thin = steps // 2, 1
     acceptance = np.asarray(sampler.acceptance_fraction, float)
+    diagnostics = convergence_diagnostics(chain[burn_in::thin], problem.free)
     if not converged:
         largest = float(np.nanmax(tau)) if np.any(np.isfinite(tau)) else math.nan
+        worst = max(diagnostics.items(), key=lambda item: np.nan_to_num(item[1]["r_hat"], nan=np.inf))
         message = (
             f"CHAIN NOT CONVERGED: {steps} steps reached the limit max_steps = {max_steps} but the "
             f"criterion needs {tau_multiple:g} x tau = {tau_multiple * largest:.0f} steps with a stable tau "
-            f"(tau = {largest:.1f}); the posterior numbers are unreliable. Run longer (--max-steps), "
-            "fix degenerate parameters, or simplify the model."
+            f"(tau = {largest:.1f}) and R-hat < {rhat_limit:g} (largest: {worst[0]} {worst[1]['r_hat']:.3g}); "
+            "the posterior numbers are unreliable. Run longer (--max-steps), fix degenerate parameters, "
+            "or simplify the model."
         )
         notes.append(message)
         warnings.warn(message, ConvergenceWarning, stacklevel=2)
@@ -327,5 +343,29 @@ def sample_posterior(
         evaluations=posterior.calls,
         tau_history=history,
         warnings=notes,
+        diagnostics=diagnostics,
+        rhat_limit=float(rhat_limit),
     )
     return result, priors
+
+
+def start_spread(problem: FitProblem, name: str, value: float, error: float) -> float:
+    """Width of the walkers' start ball for one parameter, from the least-squares optimum.
+
+    A tenth of the least-squares standard error; where that is undetermined, 1e-3 of the
+    optimum's magnitude, and for an extra-noise parameter a tenth of the larger of its
+    optimum and a tenth of the typical stated uncertainty (never a fraction of the prior's
+    width: 1e-3 of the jitter's range once started walkers 100 times too high, where two of
+    32 stayed stuck).
+    """
+    if math.isfinite(error) and error > 0:
+        return 0.1 * error
+    data = problem.dataset
+    if name == "jitter":
+        return 0.1 * max(abs(value), 0.1 * float(np.median(data.sigma)))
+    if name == "rel_jitter":
+        typical = float(np.median(data.sigma / np.maximum(np.abs(data.value), 1e-300)))
+        return 0.1 * max(abs(value), 0.1 * typical)
+    lo, hi = problem.spec(name).bounds
+    floor = 1e-6 * (hi - lo) if math.isfinite(hi - lo) else 1e-12
+    return 1e-3 * max(abs(value), floor)

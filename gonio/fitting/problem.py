@@ -13,7 +13,10 @@ Nuisance parameters
 ``jitter`` [data units]
     Optional extra noise, added in quadrature to every measurement's uncertainty:
     sigma_tot^2 = sigma^2 + jitter^2 (for correlated data, ``jitter^2`` is added to the
-    covariance's diagonal).  It absorbs scatter the quoted uncertainties miss
+    covariance's diagonal).
+``rel_jitter`` [-]
+    The relative (multiplicative) form: sigma_tot^2 = sigma^2 + (rel_jitter x prediction)^2,
+    for scatter that grows with the signal (an unmonitored lamp, speckle). Range [0, 10].  It absorbs scatter the quoted uncertainties miss
     (speckle, sample inhomogeneity, model error).  Its physical range is taken as
     [0, 10 (max|value| + max sigma)]: scatter ten times the signal would make the data
     meaningless, and a finite range gives it a proper uniform prior.
@@ -43,6 +46,23 @@ __all__ = ["FitProblem", "combine_prediction", "predict_quantity"]
 
 _SCALE_DESCRIPTION = "radiance per unit BRDF and unit cos(theta_i): irradiance times detector gain"
 _JITTER_DESCRIPTION = "extra noise added in quadrature to the measurement uncertainties"
+_REL_JITTER_DESCRIPTION = "extra noise proportional to the prediction, added in quadrature to the uncertainties"
+#: The extra-noise parameter of each jitter mode.
+NOISE_PARAMETERS = {"absolute": "jitter", "relative": "rel_jitter"}
+
+
+def jitter_mode(jitter: bool | str | None) -> str | None:
+    """``None`` (no extra noise), ``"absolute"`` (``jitter``) or ``"relative"`` (``rel_jitter``).
+
+    ``True`` means absolute. Examples: ``jitter_mode(True) == "absolute"``.
+    """
+    if jitter in (None, False):
+        return None
+    if jitter is True:
+        return "absolute"
+    if jitter not in NOISE_PARAMETERS:
+        raise ValueError(f"jitter={jitter!r} is not one of False, True, 'absolute', 'relative'")
+    return str(jitter)
 
 
 def combine_prediction(
@@ -140,8 +160,9 @@ class FitProblem:
         Parameter values held fixed (any subset of the model parameters and nuisances).
     options : mapping, optional
         Discrete model options (see ``Model.options``).
-    jitter : bool
-        Add the free extra-noise parameter ``jitter`` (module docstring).
+    jitter : bool or {"absolute", "relative"}
+        Add a free extra-noise parameter: ``jitter`` (True or "absolute") or ``rel_jitter``
+        ("relative"); see the module docstring.
 
     Raises
     ------
@@ -164,7 +185,7 @@ class FitProblem:
         dataset: Dataset,
         fixed: Mapping[str, Any] | None = None,
         options: Mapping[str, Any] | None = None,
-        jitter: bool = False,
+        jitter: bool | str = False,
     ) -> None:
         #: The registered model the user asked for.
         self.base_model = models.get(model) if isinstance(model, str) else model
@@ -175,13 +196,17 @@ class FitProblem:
         self.model = evaluated_model(self.base_model, dataset)
         self.dataset = dataset
         self.options = dict(options or {})
-        self.jitter = bool(jitter)
+        #: The extra-noise mode (None, "absolute", "relative") and its parameter's name.
+        self.jitter = jitter_mode(jitter)
+        self.noise_parameter = NOISE_PARAMETERS.get(self.jitter) if self.jitter else None
         specs = list(self.model.params)
         if dataset.quantity == "radiance":
             specs.append(Param("scale", "arb. units sr", 1.0, (0.0, math.inf), _SCALE_DESCRIPTION, open_lower=True))
-        if self.jitter:
+        if self.jitter == "absolute":
             upper = 10.0 * (float(np.max(np.abs(dataset.value))) + float(np.max(dataset.sigma)))
             specs.append(Param("jitter", "arb. units" if dataset.unit.startswith("arb") else dataset.unit, 0.0, (0.0, upper), _JITTER_DESCRIPTION))
+        elif self.jitter == "relative":
+            specs.append(Param("rel_jitter", "-", 0.0, (0.0, 10.0), _REL_JITTER_DESCRIPTION))
         self.specs: tuple[Param, ...] = tuple(specs)
         self._spec = {p.name: p for p in self.specs}
         self.fixed: dict[str, float] = {}
@@ -204,6 +229,7 @@ class FitProblem:
             self._normal_index = index
         self._cos_i = np.cos(np.radians(dataset.theta_i))
         self._cholesky = None if dataset.covariance is None else np.linalg.cholesky(dataset.covariance)
+        self._precision: np.ndarray | None = None  # C^-1, computed on first use
         self._model_names = set(self.model.param_names)
         # Free model parameters, checked on each evaluation from a vector; fixed values were
         # checked above and defaults lie inside their bounds.
@@ -279,25 +305,36 @@ class FitProblem:
         params = {name: values[name] for name in self.model.param_names}
         return values, self._predict_checked(values, params)
 
-    def total_sigma(self, values: Mapping[str, float]) -> np.ndarray:
-        """Measurement uncertainty with the jitter added in quadrature."""
-        jitter = values.get("jitter", 0.0)
-        if jitter == 0.0:
-            return self.dataset.sigma
-        return np.sqrt(self.dataset.sigma**2 + jitter**2)
+    def extra_variance(self, values: Mapping[str, float], predicted: np.ndarray) -> np.ndarray | float:
+        """The extra noise's variance per measurement: ``jitter^2`` or ``(rel_jitter x prediction)^2``."""
+        if self.jitter == "relative":
+            return (values.get("rel_jitter", 0.0) * np.asarray(predicted, float)) ** 2
+        return values.get("jitter", 0.0) ** 2
 
-    def whiten(self, difference: np.ndarray, jitter: float = 0.0) -> tuple[np.ndarray, float]:
+    def total_sigma(self, values: Mapping[str, float], predicted: np.ndarray | None = None) -> np.ndarray:
+        """Measurement uncertainty with the extra noise added in quadrature (the prediction
+        is needed for the relative form; it is computed when not given)."""
+        if self.jitter == "relative" and predicted is None:
+            predicted = self.predict(values)
+        extra = self.extra_variance(values, predicted) if self.jitter else 0.0
+        if np.all(np.asarray(extra) == 0.0):
+            return self.dataset.sigma
+        return np.sqrt(self.dataset.sigma**2 + extra)
+
+    def whiten(self, difference: np.ndarray, extra: np.ndarray | float = 0.0) -> tuple[np.ndarray, float]:
         """Whitened residuals of ``difference`` (prediction - value) and log det of their factor.
 
-        ``L^-1 difference`` with ``L`` the Cholesky factor of the covariance (plus
-        ``jitter^2`` on its diagonal), or ``difference / sigma_tot`` for independent errors.
+        ``L^-1 difference`` with ``L`` the Cholesky factor of the covariance (plus the extra
+        noise's variance ``extra`` on its diagonal), or ``difference / sigma_tot`` for
+        independent errors.
         """
+        extra_zero = np.all(np.asarray(extra) == 0.0)
         if self._cholesky is None:
-            sigma = self.dataset.sigma if jitter == 0.0 else np.sqrt(self.dataset.sigma**2 + jitter**2)
+            sigma = self.dataset.sigma if extra_zero else np.sqrt(self.dataset.sigma**2 + extra)
             return difference / sigma, float(np.sum(np.log(sigma)))
         factor = self._cholesky
-        if jitter:
-            factor = np.linalg.cholesky(self.dataset.covariance + jitter**2 * np.eye(self.dataset.n))
+        if not extra_zero:
+            factor = np.linalg.cholesky(self.dataset.covariance + np.diag(np.broadcast_to(extra, (self.dataset.n,))))
         from scipy.linalg import solve_triangular
 
         return solve_triangular(factor, difference, lower=True, check_finite=False), float(np.sum(np.log(np.diag(factor))))
@@ -314,7 +351,7 @@ class FitProblem:
         return self.whiten(difference)[0]
 
     def log_likelihood(self, vector: Any) -> float:
-        """Gaussian log-likelihood of the data (with jitter when it is a parameter).
+        """Gaussian log-likelihood of the data (with the extra noise when it is a parameter).
 
         ``-inf`` when the prediction is undefined (normalised data of a black sample).
         """
@@ -322,11 +359,36 @@ class FitProblem:
         difference = predicted - self.dataset.value
         if not np.all(np.isfinite(difference)):
             return -math.inf
-        z, log_det = self.whiten(difference, values.get("jitter", 0.0))
+        z, log_det = self.whiten(difference, self.extra_variance(values, predicted) if self.jitter else 0.0)
         chi2 = float(np.dot(z, z))
         if not math.isfinite(chi2):
             return -math.inf
         return -0.5 * chi2 - log_det - 0.5 * z.size * math.log(2.0 * math.pi)
+
+    def pointwise_log_likelihood(self, vector: Any) -> np.ndarray:
+        """Log predictive density of each measurement given the others, at ``vector``.
+
+        For independent errors, ``log N(value_i | prediction_i, sigma_tot_i)``. For
+        correlated ones the leave-one-out conditional of the multivariate normal: with
+        ``Q = C^-1`` and ``g = Q r``, ``y_i | y_-i ~ N(y_i - g_i / Q_ii, 1 / Q_ii)``, so
+        ``-1/2 log(2 pi / Q_ii) - g_i^2 / (2 Q_ii)`` (Buerkner, Gabry & Vehtari 2021, eq 7-8),
+        which is what PSIS-LOO needs for non-factorised models.
+        """
+        values, predicted = self._predict_vector(vector)
+        difference = predicted - self.dataset.value
+        extra = self.extra_variance(values, predicted) if self.jitter else 0.0
+        if self._cholesky is None:
+            sigma = self.total_sigma(values, predicted)
+            return -0.5 * (difference / sigma) ** 2 - np.log(sigma) - 0.5 * math.log(2.0 * math.pi)
+        if np.all(np.asarray(extra) == 0.0):
+            if self._precision is None:
+                self._precision = np.linalg.inv(self.dataset.covariance)
+            precision = self._precision
+        else:
+            precision = np.linalg.inv(self.dataset.covariance + np.diag(np.broadcast_to(extra, (self.dataset.n,))))
+        g = precision @ difference
+        q = np.diag(precision)
+        return -0.5 * np.log(2.0 * math.pi / q) - 0.5 * g**2 / q
 
     def chi_square(self, values: Mapping[str, float]) -> float:
         """Sum of squared whitened residuals with the measurement uncertainties only."""

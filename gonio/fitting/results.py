@@ -18,6 +18,7 @@ import datetime as _dt
 import io
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -28,18 +29,27 @@ import gonio
 from gonio import models
 from gonio.files import write_atomic
 
+from .adequacy import Adequacy, assess
+from .diagnostics import RHAT_LIMIT
 from .dataset import Dataset
 from .least_squares import LeastSquaresResult, _with_unit
 from .mcmc import LogPosterior, McmcResult
 from .priors import Prior, prior_from_dict
-from .problem import FitProblem, evaluated_model, predict_quantity
+from .problem import FitProblem, evaluated_model, jitter_mode, predict_quantity
 from .selection import information_criteria
 
-__all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE", "SUMMARY_FILE", "RESULT_FORMAT", "is_fit_result"]
+__all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE", "SUMMARY_FILE", "INFERENCE_DATA_FILE", "RESULT_FORMAT",
+           "is_fit_result", "EXIT_BAD_INPUT", "EXIT_NOT_CONVERGED", "EXIT_INADEQUATE"]
 
 RESULT_FILE = "result.json"
 CHAIN_FILE = "chain.npz"
 SUMMARY_FILE = "summary.txt"
+#: The posterior as ArviZ InferenceData (netCDF), written with MCMC.
+INFERENCE_DATA_FILE = "posterior.nc"
+#: Exit status of ``gonio fit`` / ``gonio demo`` / ``gonio curet fit`` (docs/fitting.md).
+EXIT_BAD_INPUT = 2
+EXIT_NOT_CONVERGED = 3
+EXIT_INADEQUATE = 4
 #: The ``format`` field of every result.json gonio writes.
 RESULT_FORMAT = "gonio-fit-result"
 
@@ -103,14 +113,18 @@ class FitResult:
     least_squares : LeastSquaresResult
     mcmc : McmcResult or None
     priors : dict of Prior
-    jitter : bool
-        Whether the extra-noise parameter was fitted.
+    jitter : str or None
+        The extra-noise term fitted: None, ``"absolute"`` (``jitter``) or ``"relative"``
+        (``rel_jitter``).
     posterior : dict
         ``median``, ``p16``, ``p84``, ``p2_5``, ``p97_5``, ``map`` (dicts by name),
         ``correlation`` (matrix over ``free``), ``tau``, ``ess`` (dicts by name),
         ``acceptance_fraction`` (mean) and the run's bookkeeping; empty without MCMC.
     flags : list of str
         Every warning, least squares and MCMC.
+    adequacy : Adequacy or None
+        The goodness-of-fit verdict (:mod:`gonio.fitting.adequacy`): chi-square and
+        posterior predictive p-values, extra noise relative to the stated uncertainties.
     """
 
     model: str
@@ -121,11 +135,12 @@ class FitResult:
     least_squares: LeastSquaresResult
     mcmc: McmcResult | None = None
     priors: dict[str, Prior] = field(default_factory=dict)
-    jitter: bool = False
+    jitter: str | None = None
     posterior: dict[str, Any] = field(default_factory=dict)
     flags: list[str] = field(default_factory=list)
     created: str = ""
     gonio_version: str = ""
+    adequacy: Adequacy | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -154,7 +169,23 @@ class FitResult:
         if mcmc is not None:
             result.posterior = _summarise(problem, least_squares, mcmc, result.priors)
             result.flags += mcmc.warnings + _posterior_flags(problem, result.posterior)
+        result.adequacy = assess(problem, least_squares, mcmc.samples() if mcmc is not None else None)
+        if not result.adequacy.adequate:
+            result.flags.insert(0, result.adequacy.headline())
         return result
+
+    @property
+    def adequate(self) -> bool | None:
+        """Whether the model explains the data (None for a result saved without a verdict)."""
+        return None if self.adequacy is None else self.adequacy.adequate
+
+    def exit_code(self) -> int:
+        """The command line's exit status for this fit (docs/fitting.md, "Exit codes")."""
+        if self.converged is False:
+            return EXIT_NOT_CONVERGED
+        if self.adequate is False:
+            return EXIT_INADEQUATE
+        return 0
 
     # ------------------------------------------------------------------ access
     @property
@@ -247,6 +278,7 @@ class FitResult:
             "information_criteria": self.information(),
             "posterior": self.posterior,
             "flags": self.flags,
+            "adequacy": self.adequacy.to_dict() if self.adequacy is not None else None,
             "dataset": self.dataset.to_dict(),
         }
         if self.mcmc is not None:
@@ -260,6 +292,7 @@ class FitResult:
                 "tau": m.tau.tolist(),
                 "acceptance_fraction": m.acceptance_fraction.tolist(),
                 "tau_multiple": m.tau_multiple,
+                "rhat_limit": m.rhat_limit,
                 "tau_rtol": m.tau_rtol,
                 "max_steps": m.max_steps,
                 "wall_seconds": m.wall_seconds,
@@ -267,13 +300,15 @@ class FitResult:
                 "evaluations": m.evaluations,
                 "tau_history": [list(h) for h in m.tau_history],
                 "warnings": m.warnings,
+                "diagnostics": m.diagnostics,
                 "chain_file": CHAIN_FILE,
+                "inference_data_file": INFERENCE_DATA_FILE,
             }
         return _clean(out)
 
     def saved_files(self) -> tuple[str, ...]:
         """Names of the files :meth:`save` writes for this result (chain only with MCMC)."""
-        return (RESULT_FILE, SUMMARY_FILE) + ((CHAIN_FILE,) if self.mcmc is not None else ())
+        return (RESULT_FILE, SUMMARY_FILE) + ((CHAIN_FILE, INFERENCE_DATA_FILE) if self.mcmc is not None else ())
 
     def save(self, directory: str | Path) -> Path:
         """Write ``result.json``, ``chain.npz`` (with MCMC) and ``summary.txt`` into a folder.
@@ -301,8 +336,41 @@ class FitResult:
             buffer = io.BytesIO()
             np.savez_compressed(buffer, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob)
             write_atomic(directory / CHAIN_FILE, buffer.getvalue())
+            self._write_inference_data(directory / INFERENCE_DATA_FILE)
         write_atomic(directory / SUMMARY_FILE, self.summary() + "\n")
         return path
+
+    def inference_data(self):
+        """The posterior as an ArviZ ``InferenceData`` (walkers as chains, after burn-in and
+        thinning), with the pointwise log-likelihood for PSIS-LOO and the observed values."""
+        from .diagnostics import inference_data
+
+        if self.mcmc is None:
+            raise ValueError("no posterior: the fit ran without MCMC")
+        m = self.mcmc
+        chain = m.chain[m.burn_in :: m.thin]
+        problem = self.problem()
+        pointwise = np.array([[problem.pointwise_log_likelihood(v) for v in step] for step in chain])
+        return inference_data(chain, m.log_prob[m.burn_in :: m.thin], self.free, pointwise, self.dataset.value,
+                              {"model": self.model, "quantity": self.dataset.quantity, "gonio_version": self.gonio_version})
+
+    def _write_inference_data(self, path: Path) -> None:
+        import tempfile
+
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
+        os.close(fd)
+        try:
+            self.inference_data().to_netcdf(tmp)
+            write_atomic(path, Path(tmp).read_bytes())
+        finally:
+            Path(tmp).unlink(missing_ok=True)
+
+    def loo(self):
+        """PSIS-LOO of the fit (ArviZ ``loo``): expected log predictive density, its error
+        and the Pareto k diagnostics (Vehtari, Gelman & Gabry 2017)."""
+        from .diagnostics import arviz
+
+        return arviz().loo(self.inference_data(), pointwise=True)
 
     @classmethod
     def load(cls, path: str | Path) -> "FitResult":
@@ -342,6 +410,8 @@ class FitResult:
                 evaluations=int(m["evaluations"]),
                 tau_history=[(int(s), _nan(t)) for s, t in m["tau_history"]],
                 warnings=list(m["warnings"]),
+                diagnostics={k: {kk: _nan(vv) for kk, vv in v.items()} for k, v in m.get("diagnostics", {}).items()},
+                rhat_limit=float(m.get("rhat_limit", RHAT_LIMIT)),
             )
         posterior = data["posterior"]
         for key, value in list(posterior.items()):
@@ -362,11 +432,12 @@ class FitResult:
             least_squares=LeastSquaresResult.from_dict(ls),
             mcmc=mcmc,
             priors={k: prior_from_dict(v) for k, v in data["priors"].items()},
-            jitter=bool(data["jitter"]),
+            jitter=jitter_mode(data["jitter"]),
             posterior=posterior,
             flags=list(data["flags"]),
             created=data.get("created", ""),
             gonio_version=data.get("gonio_version", ""),
+            adequacy=Adequacy.from_dict(data["adequacy"]) if data.get("adequacy") else None,
         )
 
     # ------------------------------------------------------------------ text
@@ -381,8 +452,9 @@ class FitResult:
             row["value"] = self.fixed.get(name, ls.values.get(name))
             row["stderr"] = ls.stderr.get(name, math.nan)
             if post and name in post["median"]:
-                for key in ("median", "p16", "p84", "p2_5", "p97_5", "map", "tau", "ess"):
-                    row[key] = post[key][name]
+                for key in ("median", "p16", "p84", "p2_5", "p97_5", "map", "tau", "ess", "r_hat", "ess_bulk",
+                            "ess_tail"):
+                    row[key] = post.get(key, {}).get(name, math.nan)
             row["prior"] = str(self.priors[name]) if name in self.priors else ""
             rows.append(row)
         return rows
@@ -427,6 +499,9 @@ def _summarise(
         "correlation": np.atleast_2d(correlation).tolist(),
         "tau": dict(zip(names, mcmc.tau.tolist())),
         "ess": dict(zip(names, ess.tolist())),
+        "r_hat": {n: mcmc.diagnostics.get(n, {}).get("r_hat", math.nan) for n in names},
+        "ess_bulk": {n: mcmc.diagnostics.get(n, {}).get("ess_bulk", math.nan) for n in names},
+        "ess_tail": {n: mcmc.diagnostics.get(n, {}).get("ess_tail", math.nan) for n in names},
         "acceptance_fraction": float(mcmc.acceptance_fraction.mean()),
         "n_samples": int(samples.shape[0]),
         "median_log_posterior": float(np.median(log_prob)) if log_prob.size else math.nan,
@@ -472,6 +547,20 @@ def _fmt(x: Any, digits: int = 5) -> str:
     return f"{x:.{digits}g}"
 
 
+def _adequacy_lines(result: FitResult) -> list[str]:
+    """The goodness-of-fit numbers of the summary."""
+    a = result.adequacy
+    if a is None:
+        return []
+    lines = [f"    chi-square p-value = {_fmt(a.chi2_p, 3)} (least-squares optimum, fitted noise)",
+             f"    post. predictive p = {_fmt(a.ppc_p, 3)}"]
+    if math.isfinite(a.extra_noise_ratio):
+        lines.append(f"    extra noise / stated uncertainty = {_fmt(a.extra_noise_ratio, 3)}")
+    lines.append(f"    verdict            = {'adequate' if a.adequate else 'MODEL INADEQUATE'} (limit p >= {a.alpha:g}, "
+                 "extra noise <= stated)")
+    return lines
+
+
 def _data_notes(metadata: Mapping[str, Any]) -> list[str]:
     """Summary lines on what the reduction left out or could not measure."""
     lines = []
@@ -490,7 +579,10 @@ def _summary_text(result: FitResult) -> str:
     data = result.dataset
     model = models.get(result.model)
     info = result.information()
-    lines = ["[[Model]]", f"    {result.model}: {model.description}", f"    reference: {model.reference}"]
+    lines = []
+    if result.adequacy is not None:
+        lines += [result.adequacy.headline(), ""]
+    lines += ["[[Model]]", f"    {result.model}: {model.description}", f"    reference: {model.reference}"]
     if result.options:
         lines.append("    options: " + ", ".join(f"{k}={v}" for k, v in result.options.items()))
     lines += [
@@ -510,6 +602,7 @@ def _summary_text(result: FitResult) -> str:
         f"    reduced chi-square = {_fmt(ls.redchi)}",
         f"    Akaike info crit   = {_fmt(info['aic'])}",
         f"    Bayesian info crit = {_fmt(info['bic'])}",
+        *_adequacy_lines(result),
         "[[Variables]]",
     ]
     rows = result.parameter_rows()
@@ -527,7 +620,7 @@ def _summary_text(result: FitResult) -> str:
     if result.posterior and result.mcmc is not None:
         m = result.mcmc
         status = (
-            f"converged: length >= {m.tau_multiple:g} tau"
+            f"converged: length >= {m.tau_multiple:g} tau and R-hat < {m.rhat_limit:g}"
             if m.converged
             else "!!! NOT CONVERGED: step limit reached, numbers unreliable !!!"
         )
@@ -535,7 +628,8 @@ def _summary_text(result: FitResult) -> str:
             f"[[Posterior]] (emcee: {m.n_walkers} walkers x {m.n_steps} steps, burn-in {m.burn_in}, thin {m.thin}; {status})",
             f"    mean acceptance fraction = {result.posterior['acceptance_fraction']:.3f}; "
             f"samples kept = {result.posterior['n_samples']}",
-            f"    {'name':<{width}} {'median':>10} {'-1sig':>9} {'+1sig':>9} {'2.5%':>10} {'97.5%':>10} {'MAP':>10} {'tau':>7} {'ESS':>8}  prior",
+            f"    {'name':<{width}} {'median':>10} {'-1sig':>9} {'+1sig':>9} {'2.5%':>10} {'97.5%':>10} {'MAP':>10} "
+            f"{'tau':>7} {'R-hat':>7} {'ESS bulk':>9} {'ESS tail':>9}  prior",
         ]
         for r in rows:
             if r["fixed"] or "median" not in r:
@@ -543,7 +637,8 @@ def _summary_text(result: FitResult) -> str:
             lines.append(
                 f"    {r['name']:<{width}} {_fmt(r['median']):>10} {_fmt(r['median'] - r['p16'], 3):>9} "
                 f"{_fmt(r['p84'] - r['median'], 3):>9} {_fmt(r['p2_5']):>10} {_fmt(r['p97_5']):>10} "
-                f"{_fmt(r['map']):>10} {_fmt(r['tau'], 3):>7} {_fmt(r['ess'], 4):>8}  {r['prior']}"
+                f"{_fmt(r['map']):>10} {_fmt(r['tau'], 3):>7} {_fmt(r['r_hat'], 4):>7} {_fmt(r['ess_bulk'], 4):>9} "
+                f"{_fmt(r['ess_tail'], 4):>9}  {r['prior']}"
             )
     correlations = []
     matrix = np.asarray(result.posterior["correlation"], float) if result.posterior else ls.correlation

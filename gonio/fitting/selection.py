@@ -7,15 +7,28 @@ Two families of criteria, both computed from the weighted least-squares optimum:
   correction), BIC = -2 ln L + k ln n (Schwarz 1978);
 * the Bayesian evidence Z = integral of likelihood x prior, in the Laplace approximation
   around the optimum: ln Z ~ ln L + ln prior(theta*) + (k/2) ln(2 pi) + (1/2) ln det C,
-  with C the least-squares covariance.  Unlike the information criteria it charges each
-  parameter for the prior range it could have taken (Occam factor).  It is NaN when a
-  parameter is undetermined (degenerate), and overestimates Z by up to a factor 2 per
-  parameter sitting on a bound of a uniform prior (half the Gaussian falls outside).
+  with C the covariance of the posterior at its mode.  Unlike the information criteria it
+  charges each parameter for the prior range it could have taken (Occam factor).  The
+  likelihood and the priors are exactly those of :func:`gonio.fitting.fit` (the calibration
+  prior on ``scale``, the extra-noise term, the aperture averaging of the dataset), so the
+  comparison and the fit speak of the same posterior.  Laplace overestimates Z by up to a
+  factor 2 per parameter sitting on a bound of a uniform prior (half the Gaussian falls
+  outside); docs/evidence.md measures it against nested sampling.
 
-:func:`compare_models` fits each candidate and picks the simplest model whose evidence is
-within ``threshold`` (natural-log units; default 1, "not worth more than a bare mention" on
-the scale of Kass & Raftery 1995, 2 ln B < 2) of the best; where an evidence is undefined it
-uses Delta BIC / 2, which approximates -Delta ln Z for large n.
+:func:`compare_models` fits each candidate, tests its goodness of fit
+(:func:`gonio.fitting.adequacy.assess` at the optimum) and chooses by this rule:
+
+1. only candidates that pass the goodness-of-fit test are *adequate*; a model that fails
+   it is never chosen while another passes;
+2. among the adequate ones, those whose evidence is within ``threshold`` (natural-log
+   units; default 1, "not worth more than a bare mention" on the scale of Kass & Raftery
+   1995, 2 ln B < 2) of the best adequate evidence compete, and the one with the fewest
+   free parameters wins (the higher evidence breaks a tie);
+3. if no candidate is adequate, the best by evidence is reported with the statement that
+   none explains the data.
+
+Where an evidence is undefined (a Hessian not positive definite) the rule uses Delta BIC / 2,
+which approximates -Delta ln Z for large n, and says so.
 
 References
 ----------
@@ -52,6 +65,13 @@ def information_criteria(log_likelihood: float, k: int, n: int) -> dict[str, flo
 def laplace_log_evidence(problem, least_squares, priors) -> float:
     """Laplace approximation of ln Z (module docstring); NaN if the covariance is undetermined.
 
+    The covariance is the least-squares one (the inverse Hessian of the log posterior at
+    its mode when Gaussian priors entered the fit); with an extra-noise parameter, which
+    least squares does not cover, or where the likelihood alone leaves a direction
+    undetermined (rho x scale on relative radiance without a calibration prior), it is the
+    inverse of the log posterior's Hessian by finite differences
+    (:func:`_numerical_covariance`), so that the priors bound every direction.
+
     Parameters
     ----------
     problem : FitProblem
@@ -60,9 +80,9 @@ def laplace_log_evidence(problem, least_squares, priors) -> float:
         Prior of every free parameter.
     """
     names = list(problem.free)
-    if "jitter" in names:
-        return math.nan  # the least-squares covariance does not cover the jitter
     covariance = np.asarray(least_squares.covariance, float)
+    if problem.noise_parameter in names or not np.all(np.isfinite(covariance)):
+        covariance = _numerical_covariance(problem, least_squares.values, priors)
     if not np.all(np.isfinite(covariance)):
         return math.nan
     sign, log_det = np.linalg.slogdet(covariance)
@@ -72,7 +92,46 @@ def laplace_log_evidence(problem, least_squares, priors) -> float:
     if not math.isfinite(log_prior):
         return math.nan
     k = len(names)
-    return least_squares.log_likelihood + log_prior + 0.5 * k * math.log(2.0 * math.pi) + 0.5 * log_det
+    log_likelihood = problem.log_likelihood(np.array([least_squares.values[n] for n in names]))
+    return log_likelihood + log_prior + 0.5 * k * math.log(2.0 * math.pi) + 0.5 * log_det
+
+
+def _numerical_covariance(problem, values: Mapping[str, float], priors) -> np.ndarray:
+    """Inverse Hessian of -ln(likelihood x prior) at ``values`` by finite differences.
+
+    Steps of 1e-4 of each parameter's physical range (of its magnitude when unbounded);
+    a parameter within two steps of a bound is differenced away from it.
+    """
+    names = list(problem.free)
+    x = np.array([values[n] for n in names], float)
+
+    def negative_log_posterior(vector: np.ndarray) -> float:
+        prior = sum(priors[n].logpdf(float(v)) for n, v in zip(names, vector))
+        return -(problem.log_likelihood(vector) + prior) if math.isfinite(prior) else math.inf
+
+    steps, centre = [], x.copy()
+    for k, name in enumerate(names):
+        lo, hi = problem.spec(name).bounds
+        h = 1e-4 * ((hi - lo) if math.isfinite(hi - lo) else max(abs(x[k]), 1e-12))
+        centre[k] = min(max(x[k], lo + 2 * h), hi - 2 * h) if math.isfinite(hi - lo) else x[k]
+        steps.append(h)
+    k = len(names)
+    hessian = np.empty((k, k))
+    f0 = negative_log_posterior(centre)
+    for i in range(k):
+        for j in range(i, k):
+            ei, ej = np.eye(k)[i] * steps[i], np.eye(k)[j] * steps[j]
+            if i == j:
+                value = (negative_log_posterior(centre + ei) - 2 * f0 + negative_log_posterior(centre - ei)) / steps[i] ** 2
+            else:
+                value = (negative_log_posterior(centre + ei + ej) - negative_log_posterior(centre + ei - ej)
+                         - negative_log_posterior(centre - ei + ej) + negative_log_posterior(centre - ei - ej)) / (
+                    4 * steps[i] * steps[j])
+            hessian[i, j] = hessian[j, i] = value
+    try:
+        return np.linalg.inv(hessian)
+    except np.linalg.LinAlgError:
+        return np.full((k, k), np.nan)
 
 
 @dataclass
@@ -82,9 +141,10 @@ class ModelComparison:
     Attributes
     ----------
     rows : list of dict
-        Per candidate: ``model``, ``fixed``, ``k``, ``chi2``, ``redchi``, ``aic``, ``aicc``,
-        ``bic``, ``delta_bic``, ``log_evidence``, ``delta_log_evidence``, ``values``,
-        ``warnings``.
+        Per candidate: ``label``, ``model``, ``fixed``, ``k``, ``chi2``, ``redchi``,
+        ``chi2_p`` (goodness-of-fit p-value), ``adequate``, ``adequacy`` (the verdict's
+        headline), ``aic``, ``aicc``, ``bic``, ``delta_bic``, ``log_evidence``,
+        ``delta_log_evidence``, ``values``, ``warnings``.
     chosen : str
         The selected model.
     reason : str
@@ -97,19 +157,45 @@ class ModelComparison:
     threshold: float = 1.0
     fits: dict[str, Any] = field(default_factory=dict, repr=False)
 
+    @property
+    def chosen_adequate(self) -> bool:
+        """True when the chosen model passed its goodness-of-fit test."""
+        return self.row(self.chosen)["adequate"]
+
+    def row(self, label: str) -> dict[str, Any]:
+        """The row of the candidate ``label``."""
+        for row in self.rows:
+            if row["label"] == label:
+                return row
+        raise KeyError(f"no candidate {label!r}; candidates are {[r['label'] for r in self.rows]}")
+
     def summary(self) -> str:
         """A plain-text table, best first."""
-        header = f"{'model':<28} {'k':>2} {'chi2':>10} {'redchi':>8} {'AIC':>10} {'BIC':>10} {'dBIC':>8} {'lnZ':>10} {'dlnZ':>7}"
+        header = (f"{'model':<34} {'k':>2} {'chi2':>10} {'redchi':>8} {'p(chi2)':>8} {'fit':>10} {'BIC':>10} "
+                  f"{'dBIC':>8} {'lnZ':>10} {'dlnZ':>7}")
         lines = [header, "-" * len(header)]
         for row in self.rows:
             mark = " <- chosen" if row["label"] == self.chosen else ""
             lines.append(
-                f"{row['label']:<28} {row['k']:>2} {row['chi2']:>10.4g} {row['redchi']:>8.3g} {row['aic']:>10.4g} "
+                f"{row['label']:<34} {row['k']:>2} {row['chi2']:>10.4g} {row['redchi']:>8.3g} "
+                f"{_format_p(row['chi2_p']):>8} {'adequate' if row['adequate'] else 'INADEQUATE':>10} "
                 f"{row['bic']:>10.4g} {row['delta_bic']:>8.3g} {row['log_evidence']:>10.4g} "
                 f"{row['delta_log_evidence']:>7.3g}{mark}"
             )
         lines.append(f"chosen: {self.chosen} ({self.reason})")
         return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The comparison as JSON-ready data (the fits left out)."""
+        keep = ("label", "model", "fixed", "k", "chi2", "redchi", "chi2_p", "adequate", "adequacy", "aic", "aicc",
+                "bic", "delta_bic", "log_evidence", "delta_log_evidence", "values")
+        rows = [{k: row[k] for k in keep} for row in self.rows]
+        return {"chosen": self.chosen, "chosen_adequate": self.chosen_adequate, "reason": self.reason,
+                "threshold": self.threshold, "rows": rows}
+
+
+def _format_p(p: float) -> str:
+    return "n/a" if not math.isfinite(p) else (f"{p:.2g}" if p >= 1e-4 else f"{p:.0e}")
 
 
 def candidate_label(name: str, fixed: Mapping[str, float]) -> str:
@@ -129,8 +215,9 @@ def compare_models(
     threshold: float = 1.0,
     n_starts: int = 6,
     priors: Mapping[str, Any] | None = None,
+    jitter: bool | str = False,
 ) -> ModelComparison:
-    """Fit several models by least squares and choose the simplest adequate one.
+    """Fit several models by least squares and choose the simplest adequate one (module docstring).
 
     Parameters
     ----------
@@ -148,6 +235,8 @@ def compare_models(
         candidates that have that free parameter. They enter the least-squares fits (a
         Gaussian prior makes them posterior modes) and the Laplace evidence, as in
         :func:`gonio.fitting.fit`.
+    jitter : bool or {"absolute", "relative"}
+        The extra-noise term of every candidate, as in :func:`gonio.fitting.fit`.
 
     Returns
     -------
@@ -162,6 +251,7 @@ def compare_models(
     >>> comparison.chosen
     'lambert'
     """
+    from .adequacy import assess
     from .least_squares import fit_least_squares
     from .mcmc import resolve_priors
     from .problem import FitProblem
@@ -172,12 +262,13 @@ def compare_models(
     fits = {}
     for candidate in candidates:
         name, fixed = (candidate, {}) if isinstance(candidate, str) else (candidate[0], dict(candidate[1]))
-        problem = FitProblem(name, dataset, fixed)
+        problem = FitProblem(name, dataset, fixed, jitter=jitter)
         given = {k: v for k, v in (priors or {}).items() if k in problem.free}
         ls = fit_least_squares(problem, n_starts=n_starts, priors=given)
         candidate_priors = resolve_priors(problem, ls.values, given)
         label = candidate_label(name, fixed)
         info = information_criteria(ls.log_likelihood, len(problem.free), problem.n_informative)
+        verdict = assess(problem, ls)
         rows.append(
             {
                 "label": label,
@@ -186,6 +277,9 @@ def compare_models(
                 "k": len(problem.free),
                 "chi2": ls.chi2,
                 "redchi": ls.redchi,
+                "chi2_p": verdict.chi2_p,
+                "adequate": verdict.adequate,
+                "adequacy": verdict.headline(),
                 **info,
                 "log_evidence": laplace_log_evidence(problem, ls, candidate_priors),
                 "values": ls.values,
@@ -193,20 +287,36 @@ def compare_models(
             }
         )
         fits[label] = ls
+    use_evidence = _annotate_deltas(rows)
+    chosen, reason = _choose(rows, threshold, use_evidence)
+    rows.sort(key=lambda r: -r["log_evidence"] if use_evidence else r["bic"])
+    return ModelComparison(rows=rows, chosen=chosen["label"], reason=reason, threshold=threshold, fits=fits)
+
+
+def _annotate_deltas(rows: list[dict[str, Any]]) -> bool:
+    """Add ``delta_bic`` and ``delta_log_evidence`` to every row; True if every evidence is finite."""
     best_bic = min(r["bic"] for r in rows)
-    evidences = [r["log_evidence"] for r in rows]
-    use_evidence = all(math.isfinite(z) for z in evidences)
-    best_z = max(evidences) if use_evidence else math.nan
+    use_evidence = all(math.isfinite(r["log_evidence"]) for r in rows)
+    best_z = max(r["log_evidence"] for r in rows) if use_evidence else math.nan
     for row in rows:
         row["delta_bic"] = row["bic"] - best_bic
         row["delta_log_evidence"] = row["log_evidence"] - best_z if use_evidence else math.nan
-    # Support of each model relative to the best, in ln units (>= 0, 0 for the best).
-    deficit = [(-r["delta_log_evidence"] if use_evidence else 0.5 * r["delta_bic"]) for r in rows]
-    adequate = [r for r, d in zip(rows, deficit) if d <= threshold]
-    chosen = min(adequate, key=lambda r: (r["k"], -r["log_evidence"] if use_evidence else r["bic"]))
+    return use_evidence
+
+
+def _choose(rows: list[dict[str, Any]], threshold: float, use_evidence: bool) -> tuple[dict[str, Any], str]:
+    """The chosen row and the reason, by the rule of the module docstring."""
+    support = (lambda r: r["log_evidence"]) if use_evidence else (lambda r: -0.5 * r["bic"])
     criterion = "Laplace evidence" if use_evidence else "BIC (an evidence was undefined)"
-    reason = (
-        f"fewest free parameters among the models within {threshold:g} ln-units of the best by {criterion}"
-    )
-    rows.sort(key=lambda r: -r["log_evidence"] if use_evidence else r["bic"])
-    return ModelComparison(rows=rows, chosen=chosen["label"], reason=reason, threshold=threshold, fits=fits)
+    pool = [r for r in rows if r["adequate"]]
+    if not pool:
+        best = max(rows, key=support)
+        return best, (f"NO candidate passes the goodness-of-fit test; the best by {criterion} is shown, "
+                      "but no candidate explains the data")
+    best = max(support(r) for r in pool)
+    close = [r for r in pool if best - support(r) <= threshold]
+    chosen = min(close, key=lambda r: (r["k"], -support(r)))
+    failed = len(rows) - len(pool)
+    note = f"; {failed} candidate(s) fail the goodness-of-fit test" if failed else ""
+    return chosen, (f"fewest free parameters among the adequate models within {threshold:g} ln-units of the best "
+                    f"adequate one by {criterion}{note}")

@@ -21,12 +21,13 @@ def fit(
     fixed: Mapping[str, float] | None = None,
     priors: Mapping[str, Prior] | None = None,
     mcmc: bool = True,
-    jitter: bool = False,
+    jitter: bool | str = False,
     options: Mapping[str, Any] | None = None,
     start: Mapping[str, float] | None = None,
     n_walkers: int = 32,
     max_steps: int = 20000,
     tau_multiple: float = 50.0,
+    rhat_limit: float = 1.01,
     seed: int | None = 0,
     progress: Callable[[int, int, float], None] | None = None,
 ) -> FitResult:
@@ -44,13 +45,14 @@ def fit(
         Overrides of the default priors (uniform over the physical bounds).
     mcmc : bool
         Sample the posterior with emcee after the least-squares fit.
-    jitter : bool
-        Fit an extra noise term added in quadrature to the uncertainties.
+    jitter : bool or {"absolute", "relative"}
+        Fit an extra noise term added in quadrature to the uncertainties: ``jitter`` (True
+        or "absolute") or ``rel_jitter`` ("relative", proportional to the prediction).
     options : mapping, optional
         Discrete model options.
     start : mapping, optional
         Least-squares starting values.
-    n_walkers, max_steps, tau_multiple, seed, progress
+    n_walkers, max_steps, tau_multiple, rhat_limit, seed, progress
         Passed to :func:`gonio.fitting.mcmc.sample_posterior`.
 
     Returns
@@ -77,6 +79,7 @@ def fit(
         n_walkers=n_walkers,
         max_steps=max_steps,
         tau_multiple=tau_multiple,
+        rhat_limit=rhat_limit,
         seed=seed,
         progress=progress,
     )

@@ -6,9 +6,10 @@ Each function takes a :class:`gonio.fitting.FitResult` and returns a
 * :func:`geometry_figure` - what was measured: source and viewing directions on the
   hemisphere (polar plot: radius theta [deg], angle phi [deg]);
 * :func:`data_figure` - data with error bars and the posterior predictive band (median,
-  68 % and 95 %) for each incidence: in-plane data against the signed viewing angle
-  (positive on the source side, DESIGN.md), out-of-plane data against theta_r for each
-  azimuth difference;
+  68 % and 95 %), one panel per incidence in the plane it was measured in: in-plane data
+  against the signed viewing angle (positive on the source side, DESIGN.md), off-plane
+  data against theta_r with one series per azimuth difference (an incidence measured in
+  both gets two adjacent panels);
 * :func:`residual_figure` - normalised residuals (data - model) / sigma;
 * :func:`corner_figure` - one- and two-dimensional marginals of the posterior;
 * :func:`trace_figure` - walker traces with the burn-in shaded, and the log posterior.
@@ -16,20 +17,35 @@ Each function takes a :class:`gonio.fitting.FitResult` and returns a
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 from scipy import ndimage
 
-from gonio.fitting.dataset import QUANTITY_LABELS
+from gonio.fitting.dataset import QUANTITY_LABELS, Dataset
 from gonio.fitting.results import FitResult
-from gonio.geometry import in_plane_angles
+from gonio.geometry import azimuth_difference, in_plane_angles
 
-__all__ = ["geometry_figure", "data_figure", "residual_figure", "corner_figure", "trace_figure", "MAX_INCIDENCE_PANELS"]
+__all__ = [
+    "geometry_figure", "data_figure", "residual_figure", "corner_figure", "trace_figure",
+    "MAX_INCIDENCE_PANELS", "MAX_AZIMUTH_SERIES",
+]
 
-#: At most this many incidences get their own panel in the data figure (evenly chosen).
-MAX_INCIDENCE_PANELS = 8
+#: At most this many incidences are drawn in the data figure (evenly chosen).
+MAX_INCIDENCE_PANELS = 12
+#: At most this many azimuth differences get a series of their own in an off-plane panel
+#: (those with the most measurements); the legend says how many were left out.
+MAX_AZIMUTH_SERIES = 6
 _BAND_POINTS = 121
+# Width and height of one panel of the data figure [in].
+_PANEL_SIZE_IN = (4.4, 3.2)
+# The data figure's panels share one vertical axis when the data of every panel span at
+# least this fraction of the common range (no panel is flattened to a line).
+_SHARED_Y_MIN_FRACTION = 0.25
 
 
 def _param_label(result: FitResult, name: str) -> str:
@@ -70,10 +86,11 @@ def geometry_figure(result: FitResult) -> Figure:
     return fig
 
 
-def _band_axes(ax, x, band, colour, label):
-    ax.fill_between(x, band[0], band[4], color=colour, alpha=0.15, lw=0, label="95 % band" if label else None)
-    ax.fill_between(x, band[1], band[3], color=colour, alpha=0.3, lw=0, label="68 % band" if label else None)
-    ax.plot(x, band[2], color=colour, lw=1.6, label="posterior median" if label else None)
+def _band_axes(ax: Axes, x: np.ndarray, band: np.ndarray, colour: str) -> None:
+    """Draw the 95 % and 68 % bands and the median of ``band`` (rows: 2.5, 16, 50, 84, 97.5 %)."""
+    ax.fill_between(x, band[0], band[4], color=colour, alpha=0.15, lw=0)
+    ax.fill_between(x, band[1], band[3], color=colour, alpha=0.3, lw=0)
+    ax.plot(x, band[2], color=colour, lw=1.6)
 
 
 def _span(x: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
@@ -83,99 +100,278 @@ def _span(x: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
     return max(float(x.min()) - 5.0, lo), min(float(x.max()) + 5.0, hi)
 
 
-def _data_ylim(ax, value: np.ndarray, sigma: np.ndarray) -> None:
-    """Vertical range from the data (the model may diverge outside them, e.g. Minnaert)."""
-    if value.size == 0:
-        return
+def _data_range(value: np.ndarray, sigma: np.ndarray) -> tuple[float, float]:
+    """Vertical range from the data (the model may diverge outside them, e.g. Minnaert).
+
+    The range starts at zero when the data come close to it, so that nearly flat data
+    are not drawn as a strong trend.
+    """
     low, high = float(np.min(value - sigma)), float(np.max(value + sigma))
     margin = 0.12 * (high - low) if high > low else 0.1 * max(abs(high), 1e-12)
-    ax.set_ylim(min(low - margin, 0.0) if low >= 0 and low < 0.25 * high else low - margin, high + margin)
+    bottom = min(low - margin, 0.0) if 0.0 <= low < 0.25 * high else low - margin
+    return bottom, high + margin
+
+
+@dataclass(frozen=True, eq=False)
+class _Panel:
+    """One panel of the data figure: the measurements of one incidence in one plane.
+
+    Attributes
+    ----------
+    theta_i, phi_i : float
+        Source polar angle and azimuth [deg].
+    in_plane : bool
+        True for the plane of incidence (x = signed viewing angle), False for off-plane
+        sweeps (x = theta_r, one series per azimuth difference).
+    selection : numpy.ndarray of bool
+        The dataset's measurements drawn in the panel.
+    title : str
+        The incidence, and the plane when the incidence has panels in both.
+    """
+
+    theta_i: float
+    phi_i: float
+    in_plane: bool
+    selection: np.ndarray
+    title: str
+
+
+def _incidence_label(theta_i: float, phi_i: float, with_azimuth: bool) -> str:
+    """Panel title of an incidence, e.g. ``'theta_i = 45 deg, phi_i = 0 deg'``."""
+    label = f"theta_i = {theta_i:.4g} deg"
+    return label + (f", phi_i = {phi_i + 0.0:.4g} deg" if with_azimuth else "")  # + 0.0: no "-0"
+
+
+def _incidence_panels(data: Dataset, mask: np.ndarray, source: np.ndarray, label: str) -> list[_Panel]:
+    """The one or two panels of one incidence, each in the plane its data were measured in.
+
+    Parameters
+    ----------
+    data : Dataset
+        The fitted measurements.
+    mask : numpy.ndarray of bool
+        The measurements of this incidence.
+    source : numpy.ndarray
+        (theta_i, phi_i) [deg] of the incidence.
+    label : str
+        The incidence's title (:func:`_incidence_label`).
+
+    Returns
+    -------
+    list of _Panel
+        An in-plane panel when the incidence has in-plane views other than the normal
+        view (or nothing else), an off-plane panel when it has off-plane views; an
+        incidence with both gets both, in-plane first. The normal view (theta_r = 0) lies
+        on every azimuth: it is drawn in the in-plane panel when there is one, else as the
+        start of the off-plane sweep.
+    """
+    theta_i, phi_i = (float(angle) for angle in source)
+    in_plane_views = mask & data.in_plane
+    off_plane_views = mask & ~data.in_plane
+    beside_normal = in_plane_views & (data.theta_r != 0.0)
+    draw_in_plane = bool(np.any(beside_normal)) or not np.any(off_plane_views)
+    draw_off_plane = bool(np.any(off_plane_views))
+    both = draw_in_plane and draw_off_plane
+    panels = []
+    if draw_in_plane:
+        panels.append(_Panel(theta_i, phi_i, True, in_plane_views,
+                             f"{label}, in plane" if both else label))
+    if draw_off_plane:
+        off_plane_selection = off_plane_views if draw_in_plane else mask
+        panels.append(_Panel(theta_i, phi_i, False, off_plane_selection,
+                             f"{label}, out of plane" if both else label))
+    return panels
+
+
+def _data_panels(result: FitResult) -> list[list[_Panel]]:
+    """The panels of the data figure, grouped by incidence (at most MAX_INCIDENCE_PANELS)."""
+    data = result.dataset
+    sources, index, shown = _incidence_groups(result)
+    several_azimuths = len({round(float(p), 6) for p in sources[:, 1]}) > 1
+    return [
+        _incidence_panels(data, index == k, sources[k], _incidence_label(*sources[k], several_azimuths))
+        for k in shown
+    ]
+
+
+def _grid_columns(n_panels: int) -> int:
+    """Columns of the panel grid: one row up to three panels, then 2, 3 or 4 columns."""
+    if n_panels <= 3:
+        return max(n_panels, 1)
+    if n_panels == 4:
+        return 2
+    return 3 if n_panels <= 9 else 4
+
+
+def _grid_positions(group_sizes: list[int], columns: int) -> list[tuple[int, int]]:
+    """(row, column) of every panel, row by row; an incidence's panels stay on one row."""
+    positions = []
+    row, column = 0, 0
+    for size in group_sizes:
+        if column + size > columns:
+            row, column = row + 1, 0
+        positions.extend((row, column + j) for j in range(size))
+        column += size
+    return positions
+
+
+def _shared_ylim(data: Dataset, panels: list[_Panel]) -> tuple[float, float] | None:
+    """Common vertical range of all panels, or None when one would be flattened by it."""
+    low = [float(np.min(data.value[p.selection] - data.sigma[p.selection])) for p in panels]
+    high = [float(np.max(data.value[p.selection] + data.sigma[p.selection])) for p in panels]
+    common = max(high) - min(low)
+    if common <= 0.0 or min(h - lo for lo, h in zip(low, high)) < _SHARED_Y_MIN_FRACTION * common:
+        return None
+    selection = np.logical_or.reduce([p.selection for p in panels])
+    return _data_range(data.value[selection], data.sigma[selection])
+
+
+def _draw_in_plane_panel(ax: Axes, result: FitResult, panel: _Panel, n_draws: int) -> None:
+    """In-plane data and model band against the signed viewing angle (+ source side)."""
+    data = result.dataset
+    view = data.signed_view[panel.selection]
+    x = np.linspace(*_span(view, -89.0, 89.0), _BAND_POINTS)
+    band = result.posterior_predictive(*in_plane_angles(panel.theta_i, x, panel.phi_i), n_draws=n_draws)
+    _band_axes(ax, x, band, "C0")
+    ax.errorbar(view, data.value[panel.selection], data.sigma[panel.selection], fmt="o", ms=4, color="k",
+                capsize=2, lw=1)
+    ax.axvline(panel.theta_i, color="0.6", ls=":", lw=1)
+    ax.set_xlim(-90, 90)
+    ax.set_xlabel("signed viewing angle theta_r [deg] (+ source side)")
+
+
+def _azimuth_series(data: Dataset, selection: np.ndarray) -> tuple[list[float], np.ndarray, int]:
+    """The azimuth differences drawn in an off-plane panel and the series of each point.
+
+    Returns
+    -------
+    offsets : list of float
+        Rounded azimuth differences phi_r - phi_i [deg] that get a series, ascending (at
+        most MAX_AZIMUTH_SERIES: those with the most measurements).
+    series : numpy.ndarray of int
+        For each selected measurement, its position in ``offsets``, or -1 when its series
+        is not drawn. Normal views (theta_r = 0, no azimuth) join the nearest series.
+    n_offsets : int
+        Number of distinct azimuth differences of the off-plane views.
+    """
+    difference = data.azimuth_difference[selection]
+    rounded = np.round(difference)
+    off_plane = ~data.in_plane[selection]
+    distinct, counts = np.unique(rounded[off_plane], return_counts=True)
+    busiest = np.argsort(-counts, kind="stable")[:MAX_AZIMUTH_SERIES]
+    offsets = sorted(float(distinct[j]) for j in busiest)
+    series = np.full(difference.shape, -1)
+    for j, offset in enumerate(offsets):
+        series[off_plane & (rounded == offset)] = j
+    # The model does not depend on the azimuth at theta_r = 0: any series may hold it.
+    distance = np.abs(azimuth_difference(np.asarray(offsets)[None, :], difference[:, None]))
+    series[~off_plane] = np.argmin(distance[~off_plane], axis=1)
+    return offsets, series, len(distinct)
+
+
+def _draw_off_plane_panel(ax: Axes, result: FitResult, panel: _Panel, n_draws: int) -> None:
+    """Off-plane data and model bands against theta_r, one colour per azimuth difference."""
+    data = result.dataset
+    offsets, series, n_offsets = _azimuth_series(data, panel.selection)
+    picked = np.flatnonzero(panel.selection)
+    for j, offset in enumerate(offsets):
+        colour = f"C{(j + 1) % 10}"
+        pick = picked[series == j]
+        x = np.linspace(*_span(data.theta_r[pick], 0.0, 89.0), _BAND_POINTS)
+        ti, pi_, tr, pr = np.broadcast_arrays(panel.theta_i, panel.phi_i, x, panel.phi_i + offset)
+        _band_axes(ax, x, result.posterior_predictive(ti, pi_, tr, pr, n_draws=n_draws), colour)
+        ax.errorbar(data.theta_r[pick], data.value[pick], data.sigma[pick], fmt="o", ms=4, color=colour,
+                    mec="k", mew=0.5, capsize=2, lw=1, label=f"phi_r - phi_i = {offset:g} deg")
+    ax.set_xlim(0, 90)
+    ax.set_xlabel("viewing angle theta_r [deg]")
+    omitted = f"{len(offsets)} of {n_offsets} azimuths" if n_offsets > len(offsets) else None
+    ax.legend(fontsize=7.5, title=omitted, title_fontsize=7.5)
+
+
+def _band_legend(fig: Figure, band_name: str, with_source: bool, columns: int) -> None:
+    """Figure legend of what every panel shows: bands, median, measurements, source."""
+    handles = [
+        Patch(color="0.35", alpha=0.15, lw=0, label="95 % band"),
+        Patch(color="0.35", alpha=0.3, lw=0, label="68 % band"),
+        Line2D([], [], color="0.35", lw=1.6, label="posterior median"),
+        Line2D([], [], color="k", marker="o", ms=4, ls="none", label="measured +/- 1 sigma"),
+    ]
+    if with_source:
+        handles.append(Line2D([], [], color="0.6", ls=":", lw=1, label="source direction (in plane)"))
+    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles) if columns > 1 else 3, fontsize=8,
+               title=band_name, title_fontsize=8, frameon=False)
 
 
 def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
-    """Data with the posterior predictive band for each incidence (module docstring)."""
+    """Data with the model band of each incidence, drawn in the plane it was measured in.
+
+    Parameters
+    ----------
+    result : FitResult
+        The fit; its dataset's incidences are drawn (at most MAX_INCIDENCE_PANELS,
+        evenly chosen).
+    n_draws : int, optional
+        Posterior draws behind the bands.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        A grid with one panel per incidence: in-plane data against the signed viewing
+        angle, off-plane data against theta_r with one series per azimuth difference; an
+        incidence measured in both gets two adjacent panels. The panels share the vertical
+        axis when their data ranges are comparable.
+    """
     data = result.dataset
-    sources, index, shown = _incidence_groups(result)
-    in_plane = data.in_plane
-    has_out = bool(np.any(~in_plane))
-    has_in = bool(np.any(in_plane))
-    columns = int(has_in) + int(has_out)
-    fig = Figure(figsize=(5.6 * columns, 2.9 * len(shown) + 0.6), layout="constrained")
-    axes = fig.subplots(len(shown), columns, squeeze=False)
-    ylabel = QUANTITY_LABELS[data.quantity]
-    band_name = "posterior predictive" if result.mcmc is not None else "least-squares model"
-    several_azimuths = len({round(float(p), 6) for p in sources[:, 1]}) > 1
-    for row, k in enumerate(shown):
-        theta_i, phi_i = sources[k]
-        mask = index == k
-        incidence = f"theta_i = {theta_i:g} deg" + (f", phi_i = {phi_i:g} deg" if several_azimuths else "")
-        in_sel, out_sel = mask & in_plane, mask & ~in_plane
-        if np.any(out_sel):  # an off-plane sweep: its normal view (theta_r = 0) belongs to it
-            at_normal = data.theta_r == 0.0
-            in_sel, out_sel = in_sel & ~at_normal, out_sel | (mask & at_normal)
-        column = 0
-        if has_in:
-            ax = axes[row, column]
-            column += 1
-            sel = in_sel
-            if not np.any(sel):
-                ax.text(0.5, 0.5, f"{incidence}:\nno in-plane data", transform=ax.transAxes,
-                        ha="center", va="center", color="0.5")
-                ax.set_axis_off()
-            else:
-                x = np.linspace(*_span(data.signed_view[sel], -89.0, 89.0), _BAND_POINTS)
-                geometry = in_plane_angles(theta_i, x, phi_i)
-                band = result.posterior_predictive(*geometry, n_draws=n_draws)
-                _band_axes(ax, x, band, "C0", row == 0)
-                ax.errorbar(data.signed_view[sel], data.value[sel], data.sigma[sel], fmt="o", ms=4, color="k",
-                            capsize=2, lw=1, label="measured" if row == 0 else None)
-                ax.axvline(theta_i, color="0.6", ls=":", lw=1, label="source direction" if row == 0 else None)
-                ax.set_xlim(-90, 90)
-                _data_ylim(ax, data.value[sel], data.sigma[sel])
-                ax.set_xlabel("signed viewing angle theta_r [deg] (+ source side)")
-                ax.set_ylabel(ylabel)
-                ax.set_title(f"in plane, {incidence}", fontsize=10)
-                if row == 0:
-                    ax.legend(fontsize=8, title=band_name, title_fontsize=8)
-        if has_out:
-            ax = axes[row, column]
-            sel = out_sel
-            if not np.any(sel):
-                ax.text(0.5, 0.5, f"{incidence}:\nno out-of-plane data", transform=ax.transAxes,
-                        ha="center", va="center", color="0.5")
-                ax.set_axis_off()
-                continue
-            offsets = np.round(data.azimuth_difference[sel])
-            x = np.linspace(*_span(data.theta_r[sel], 0.0, 89.0), _BAND_POINTS)
-            for j, offset in enumerate(np.unique(offsets)[:6]):
-                colour = f"C{(j + 1) % 10}"
-                ti, pi_, tr, pr = np.broadcast_arrays(theta_i, phi_i, x, phi_i + offset)
-                band = result.posterior_predictive(ti, pi_, tr, pr, n_draws=n_draws)
-                _band_axes(ax, x, band, colour, False)
-                pick = np.flatnonzero(sel)[offsets == offset]
-                ax.errorbar(data.theta_r[pick], data.value[pick], data.sigma[pick], fmt="o", ms=4, color=colour,
-                            mec="k", mew=0.5, capsize=2, lw=1, label=f"phi_r - phi_i = {offset:g} deg")
-            ax.set_xlim(0, 90)
-            _data_ylim(ax, data.value[sel], data.sigma[sel])
-            ax.set_xlabel("viewing angle theta_r [deg]")
-            ax.set_ylabel(ylabel)
-            ax.set_title(f"out of plane, {incidence}", fontsize=10)
-            ax.legend(fontsize=8)
-    for ax in axes.flat:
+    groups = _data_panels(result)
+    panels = [panel for group in groups for panel in group]
+    columns = _grid_columns(len(panels))
+    positions = _grid_positions([len(group) for group in groups], columns)
+    rows = positions[-1][0] + 1
+    width, height = _PANEL_SIZE_IN
+    fig = Figure(figsize=(width * columns, height * rows + 0.9), layout="constrained")
+    grid = fig.add_gridspec(rows, columns)
+    shared_ylim = _shared_ylim(data, panels)
+    first = None
+    for panel, (row, column) in zip(panels, positions):
+        ax = fig.add_subplot(grid[row, column], sharey=first if shared_ylim else None)
+        if first is None:
+            first = ax
+        if panel.in_plane:
+            _draw_in_plane_panel(ax, result, panel, n_draws)
+        else:
+            _draw_off_plane_panel(ax, result, panel, n_draws)
+        ax.set_ylim(shared_ylim or _data_range(data.value[panel.selection], data.sigma[panel.selection]))
+        ax.set_title(panel.title, fontsize=10)
         ax.grid(alpha=0.3)
-    if len(shown) < len(sources):
-        fig.suptitle(f"{len(shown)} of {len(sources)} incidences shown", fontsize=9)
+        if column == 0:
+            ax.set_ylabel(QUANTITY_LABELS[data.quantity])
+        elif shared_ylim:
+            ax.tick_params(labelleft=False)
+    band_name = "posterior predictive" if result.mcmc is not None else "least-squares model"
+    _band_legend(fig, band_name, any(panel.in_plane for panel in panels), columns)
+    n_incidences = len(data.incidences()[0])
+    if len(groups) < n_incidences:
+        fig.suptitle(f"{len(groups)} of {n_incidences} incidences shown", fontsize=9)
     return fig
 
 
 def residual_figure(result: FitResult) -> Figure:
-    """Normalised residuals (data - posterior median model) / sigma against the viewing angle
-    (sigma includes the fitted extra-noise term ``jitter`` in quadrature when there is one)."""
+    """Normalised residuals (data - posterior median model) / sigma against the viewing angle.
+
+    sigma is each value's total uncertainty under the fit's likelihood: the stated one with
+    the fitted extra noise (``jitter``, or ``rel_jitter`` x prediction) in quadrature. The
+    title's chi-square is the fit's own, with the data's covariance where they have one.
+    """
     data = result.dataset
     sources, index = data.incidences()
-    model = result.predict(*data.geometry)
-    jitter = result.best_values().get("jitter", 0.0)  # fitted extra noise, in quadrature
-    z = (data.value - model) / np.hypot(data.sigma, jitter)
+    problem = result.problem()
+    values = result.best_values()
+    model = problem.predict(values)
+    extra = problem.extra_variance(values, model) if problem.jitter else 0.0
+    z = (data.value - model) / problem.total_sigma(values, model)
+    whitened = problem.whiten(model - data.value, extra)[0]
+    noise_label = {None: "sigma", "absolute": "hypot(sigma, jitter)",
+                   "relative": "hypot(sigma, rel_jitter x model)"}[problem.jitter]
     x = np.where(data.in_plane, data.signed_view, data.theta_r)
     fig = Figure(figsize=(7.5, 3.8), layout="constrained")
     ax = fig.add_subplot()
@@ -197,9 +393,11 @@ def residual_figure(result: FitResult) -> Figure:
     limit = max(3.5, float(np.nanmax(np.abs(z))) * 1.1) if z.size else 3.5
     ax.set_ylim(-limit, limit)
     ax.set_xlabel("signed viewing angle theta_r [deg] (in plane; + source side)")
-    ax.set_ylabel("(data - model) / sigma [-]" if not jitter else "(data - model) / hypot(sigma, jitter) [-]")
-    chi2 = float(np.sum(z**2))
-    ax.set_title(f"Normalised residuals at the posterior median: chi2 = {chi2:.1f} for {data.n} points", fontsize=10)
+    ax.set_ylabel(f"(data - model) / {noise_label} [-]")
+    chi2 = float(np.dot(whitened, whitened))
+    correlated = " (with the data's covariance)" if data.covariance is not None else ""
+    ax.set_title(f"Normalised residuals at the posterior median: chi2{correlated} = {chi2:.1f} for {data.n} points",
+                 fontsize=10)
     ax.legend(fontsize=8, ncol=2, loc="upper left")
     ax.grid(alpha=0.3)
     return fig

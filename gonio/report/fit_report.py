@@ -58,6 +58,7 @@ th, td { border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }
 th { background: #f2f2f2; } td.name, th.name { text-align: left; }
 .flags { background: #fff3f0; border: 2px solid #d9534f; padding: 0.6em 1em; border-radius: 4px; }
 .ok { background: #f0fff3; border: 1px solid #5cb85c; padding: 0.6em 1em; border-radius: 4px; }
+.verdict { font-size: 1.1em; margin: 0.6em 0 1em 0; }
 figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #eee; }
 figcaption { font-size: 0.9em; color: #555; }
 pre { background: #f7f7f7; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
@@ -121,22 +122,70 @@ def _diagnostics_table(result: FitResult) -> str:
         items += [
             ("walkers &times; steps", f"{m.n_walkers} &times; {m.n_steps} (limit {m.max_steps})"),
             ("burn-in / thin", f"{m.burn_in} / {m.thin}"),
-            ("converged", "yes (length &ge; %g &tau;, stable &tau;)" % m.tau_multiple if m.converged
-             else "<b style='color:#d9534f'>NO: step limit reached</b>"),
+            ("converged", "yes (length &ge; %g &tau;, stable &tau;, R-hat &lt; %g)" % (m.tau_multiple, m.rhat_limit)
+             if m.converged else "<b style='color:#d9534f'>NO: step limit reached</b>"),
             ("mean acceptance fraction", f"{float(m.acceptance_fraction.mean()):.3f} "
              f"(walkers {float(m.acceptance_fraction.min()):.2f}&ndash;{float(m.acceptance_fraction.max()):.2f})"),
             ("sampling time", f"{m.wall_seconds:.2f} s, of which model evaluation {m.model_seconds:.2f} s"),
         ]
+    items += _adequacy_items(result)
     rows = "".join(f"<tr><th class=name>{k}</th><td>{v if isinstance(v, str) else _number(v)}</td></tr>" for k, v in items)
     table = f"<table>{rows}</table>"
     if result.mcmc is not None:
-        head = "<tr><th class=name>parameter</th><th>&tau; [steps]</th><th>chain length / &tau;</th><th>effective samples</th></tr>"
-        body = ""
-        for name, tau, ess in zip(result.free, result.mcmc.tau, result.mcmc.ess):
-            length = result.mcmc.n_steps / tau if math.isfinite(tau) and tau > 0 else math.nan
-            body += f"<tr><td class=name>{html.escape(name)}</td><td>{_number(float(tau), 3)}</td><td>{_number(length, 3)}</td><td>{_number(float(ess), 4)}</td></tr>"
-        table += f"<table>{head}{body}</table>"
+        table += _chain_table(result)
     return table
+
+
+def _adequacy_items(result: FitResult) -> list[tuple[str, Any]]:
+    """Goodness-of-fit rows of the diagnostics table (gonio.fitting.adequacy)."""
+    a = result.adequacy
+    if a is None:
+        return []
+    items = [("chi-square p-value (least-squares optimum)", _number(a.chi2_p, 3)),
+             ("posterior predictive p-value", _number(a.ppc_p, 3))]
+    if math.isfinite(a.extra_noise_ratio):
+        items.append(("fitted extra noise / stated uncertainty", _number(a.extra_noise_ratio, 3)))
+    verdict = "adequate" if a.adequate else "<b style='color:#d9534f'>MODEL INADEQUATE</b>"
+    items.append(("goodness of fit", f"{verdict} (limits: p &ge; {a.alpha:g}, extra noise &le; stated)"))
+    return items
+
+
+def _chain_table(result: FitResult) -> str:
+    """Per parameter: autocorrelation time, chain length in tau, R-hat, bulk and tail ESS."""
+    m = result.mcmc
+    head = ("<tr><th class=name>parameter</th><th>&tau; [steps]</th><th>chain length / &tau;</th>"
+            "<th>effective samples (emcee)</th><th>R-hat (rank, split)</th><th>ESS bulk</th><th>ESS tail</th></tr>")
+    body = ""
+    for name, tau, ess in zip(result.free, m.tau, m.ess):
+        length = m.n_steps / tau if math.isfinite(tau) and tau > 0 else math.nan
+        d = m.diagnostics.get(name, {})
+        r_hat = d.get("r_hat", math.nan)
+        style = " style='color:#d9534f;font-weight:bold'" if not r_hat < m.rhat_limit else ""
+        body += (f"<tr><td class=name>{html.escape(name)}</td><td>{_number(float(tau), 3)}</td>"
+                 f"<td>{_number(length, 3)}</td><td>{_number(float(ess), 4)}</td>"
+                 f"<td{style}>{_number(r_hat, 4)}</td><td>{_number(d.get('ess_bulk'), 4)}</td>"
+                 f"<td>{_number(d.get('ess_tail'), 4)}</td></tr>")
+    return (f"<table>{head}{body}</table><p class=meta>R-hat and ESS (Vehtari et al. 2021) computed by ArviZ with "
+            "each walker as one chain, after burn-in and thinning. The posterior is in posterior.nc (ArviZ "
+            "InferenceData) for use in other tools.</p>")
+
+
+def _verdict(result: FitResult) -> str:
+    """The report's opening lines: goodness of fit and convergence."""
+    parts, bad = [], False
+    if result.adequacy is not None:
+        parts.append(html.escape(result.adequacy.headline()))
+        bad = not result.adequacy.adequate
+    if result.mcmc is not None:
+        if result.mcmc.converged:
+            parts.append("chain converged (length &ge; %g &tau; and R-hat &lt; %g)"
+                         % (result.mcmc.tau_multiple, result.mcmc.rhat_limit))
+        else:
+            parts.append("CHAIN NOT CONVERGED: posterior numbers are unreliable")
+            bad = True
+    if not parts:
+        return ""
+    return f"<div class='{'flags' if bad else 'ok'} verdict'>" + "<br>".join(parts) + "</div>"
 
 
 def _budget_table(result: FitResult) -> str:
@@ -236,6 +285,7 @@ def write_report(source: str | Path | FitResult, out: str | Path | None = None) 
     body = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title><style>{_STYLE}</style></head><body>
 <h1>{title}</h1>
+{_verdict(result)}
 <p class=meta>Model <b>{html.escape(model.name)}</b>: {html.escape(model.description)}.
 Reference: {html.escape(model.reference)}.<br>
 Data: {data.n} measurements of {html.escape(data.quantity)} [{html.escape(data.unit)}] at {len(data.incidences()[0])} incidences.

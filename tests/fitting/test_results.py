@@ -11,7 +11,7 @@ from gonio.fitting import FitResult, compare_models, fit, information_criteria
 
 from .synthetic import synthetic_dataset
 
-QUICK = dict(n_walkers=16, tau_multiple=20.0, max_steps=6000)
+QUICK = dict(n_walkers=16, tau_multiple=20.0, max_steps=6000, rhat_limit=1.05)  # quick: not the 50 tau, 1.01 defaults
 
 
 @pytest.fixture(scope="module")
@@ -22,7 +22,7 @@ def minnaert_result():
 
 def test_json_round_trip_preserves_every_number(minnaert_result, tmp_path):
     path = minnaert_result.save(tmp_path / "fit")
-    assert {p.name for p in (tmp_path / "fit").iterdir()} == {"result.json", "chain.npz", "summary.txt"}
+    assert {p.name for p in (tmp_path / "fit").iterdir()} == {"result.json", "chain.npz", "summary.txt", "posterior.nc"}
     json.loads(path.read_text())  # strict JSON (no NaN literals)
     back = FitResult.load(tmp_path / "fit")
     assert back.summary() == minnaert_result.summary()
