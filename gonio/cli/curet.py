@@ -638,11 +638,24 @@ def _run_fit(args: argparse.Namespace) -> int:
             (out / COMPARISON_JSON).unlink()  # the earlier run's comparison, not this one's
         lines += ["", f"No model comparison: {', '.join(with_options)} set model options, which the comparison "
                       "does not take; fit them in a separate run."]
+    lines += _loo_lines(summary_rows)
     text = "\n".join(lines)
     (out / COMPARISON_TEXT).write_text(text + "\n")
     print(text)
     print(f"results: {out}")
     return fit_exit_code([result for _, _, result, _ in summary_rows], comparison)
+
+
+def _loo_lines(summary_rows) -> list[str]:
+    """The PSIS-LOO comparison of the candidates' MCMC fits, as lines of comparison.txt."""
+    from gonio.fitting import compare_loo
+    from gonio.fitting.selection import loo_summary
+
+    sampled = {label: result for label, _, result, _ in summary_rows if result.mcmc is not None}
+    if len(sampled) < 2:
+        return []
+    return ["", "Predictive comparison (PSIS-LOO of the MCMC fits, Vehtari, Gelman & Gabry 2017):",
+            loo_summary(compare_loo(sampled))]
 
 
 def fit_exit_code(results: Sequence[Any], comparison) -> int:

@@ -20,7 +20,7 @@ from .mcmc import ConvergenceWarning, McmcResult, sample_posterior
 from .priors import LogUniform, Normal, Prior, Uniform, parse_prior
 from .problem import FitProblem, predict_quantity
 from .results import FitResult
-from .selection import ModelComparison, compare_models, information_criteria
+from .selection import ModelComparison, compare_loo, compare_models, information_criteria
 from .workflow import fit
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "sample_posterior",
     "FitResult",
     "ModelComparison",
+    "compare_loo",
     "compare_models",
     "information_criteria",
     "fit",

@@ -45,7 +45,8 @@ import numpy as np
 
 from .dataset import Dataset
 
-__all__ = ["information_criteria", "laplace_log_evidence", "ModelComparison", "compare_models", "candidate_label"]
+__all__ = ["information_criteria", "laplace_log_evidence", "ModelComparison", "compare_models", "candidate_label",
+           "compare_loo", "loo_summary"]
 
 
 def information_criteria(log_likelihood: float, k: int, n: int) -> dict[str, float]:
@@ -70,7 +71,14 @@ def laplace_log_evidence(problem, least_squares, priors) -> float:
     least squares does not cover, or where the likelihood alone leaves a direction
     undetermined (rho x scale on relative radiance without a calibration prior), it is the
     inverse of the log posterior's Hessian by finite differences
-    (:func:`_numerical_covariance`), so that the priors bound every direction.
+    (:func:`_numerical_covariance`).
+
+    An albedo-like factor that only multiplies the free ``scale`` of relative radiance
+    (:func:`scale_degenerate_factor`), with no calibration prior to tell them apart, leaves
+    the likelihood a function of their product alone; the evidence is then the Laplace
+    integral over the product, whose prior is the one the two priors induce
+    (:func:`_product_log_evidence`). It agrees with direct quadrature over both parameters
+    (tests/fitting/test_adequacy.py) and is finite for every candidate.
 
     Parameters
     ----------
@@ -81,6 +89,10 @@ def laplace_log_evidence(problem, least_squares, priors) -> float:
     """
     names = list(problem.free)
     covariance = np.asarray(least_squares.covariance, float)
+    if not np.all(np.isfinite(covariance)):
+        factor = scale_degenerate_factor(problem, least_squares)
+        if factor is not None:
+            return _product_log_evidence(problem, least_squares, priors, factor)
     if problem.noise_parameter in names or not np.all(np.isfinite(covariance)):
         covariance = _numerical_covariance(problem, least_squares.values, priors)
     if not np.all(np.isfinite(covariance)):
@@ -94,6 +106,78 @@ def laplace_log_evidence(problem, least_squares, priors) -> float:
     k = len(names)
     log_likelihood = problem.log_likelihood(np.array([least_squares.values[n] for n in names]))
     return log_likelihood + log_prior + 0.5 * k * math.log(2.0 * math.pi) + 0.5 * log_det
+
+
+def scale_degenerate_factor(problem, least_squares) -> str | None:
+    """The free parameter that only multiplies the free ``scale`` (relative radiance), if any.
+
+    Tested directly: the prediction is unchanged (to 1e-9) when the parameter is multiplied
+    by 0.9 and ``scale`` divided by 0.9 (rho of Lambert on relative radiance without a
+    calibration prior: only rho x scale is determined).
+    """
+    if "scale" not in problem.free:
+        return None
+    values = dict(least_squares.values)
+    base = problem.predict(values)
+    for name in problem.free:
+        lo, hi = problem.spec(name).bounds
+        if name in ("scale", problem.noise_parameter) or not (math.isfinite(lo) and math.isfinite(hi)):
+            continue
+        if not values[name] > 0 or not problem.spec(name).contains(0.9 * values[name]):
+            continue
+        moved = problem.predict(dict(values, **{name: 0.9 * values[name], "scale": values["scale"] / 0.9}))
+        if np.allclose(moved, base, rtol=1e-9, atol=0.0):
+            return name
+    return None
+
+
+class _ProductPrior:
+    """Prior of ``scale`` when the factor is held at ``reference``: the density of
+    ``factor x scale / reference`` under the two independent priors (a 1-D integral)."""
+
+    def __init__(self, factor_prior, scale_prior, factor_bounds: tuple[float, float], reference: float):
+        self.factor_prior, self.scale_prior = factor_prior, scale_prior
+        self.bounds, self.reference = factor_bounds, reference
+
+    def logpdf(self, x: float) -> float:
+        from scipy.integrate import quad
+
+        if not x > 0:
+            return -math.inf
+        product = self.reference * float(x)
+        lo, hi = max(self.bounds[0], 1e-300), self.bounds[1]
+        s_lo, s_hi = getattr(self.scale_prior, "lower", 0.0), getattr(self.scale_prior, "upper", math.inf)
+        lo, hi = max(lo, product / s_hi if s_hi > 0 else lo), min(hi, product / s_lo if s_lo > 0 else hi)
+        if not lo < hi:
+            return -math.inf
+
+        def integrand(r: float) -> float:
+            return math.exp(self.factor_prior.logpdf(r) + self.scale_prior.logpdf(product / r)) / r
+
+        value = quad(integrand, lo, hi, limit=200, epsrel=1e-8)[0]
+        return math.log(self.reference * value) if value > 0 else -math.inf
+
+
+def _product_log_evidence(problem, least_squares, priors, factor: str) -> float:
+    """Laplace evidence over ``factor x scale`` for an exactly degenerate pair.
+
+    The factor is held at its least-squares value r0 and ``scale`` carries the product
+    (``scale' = factor x scale / r0``), with the prior the two priors induce on it; the
+    prior of the factor is integrated out in that induced prior, so nothing is counted
+    twice.
+    """
+    from .least_squares import fit_least_squares
+    from .problem import FitProblem
+
+    reference = least_squares.values[factor]
+    if not reference > 0:
+        return math.nan
+    fixed = dict(problem.fixed, **{factor: reference})
+    reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter)
+    reduced_ls = fit_least_squares(reduced, start=least_squares.values, n_starts=1)
+    reduced_priors = {n: p for n, p in priors.items() if n in reduced.free}
+    reduced_priors["scale"] = _ProductPrior(priors[factor], priors["scale"], problem.spec(factor).bounds, reference)
+    return laplace_log_evidence(reduced, reduced_ls, reduced_priors)
 
 
 def _numerical_covariance(problem, values: Mapping[str, float], priors) -> np.ndarray:
@@ -144,7 +228,8 @@ class ModelComparison:
         Per candidate: ``label``, ``model``, ``fixed``, ``k``, ``chi2``, ``redchi``,
         ``chi2_p`` (goodness-of-fit p-value), ``adequate``, ``adequacy`` (the verdict's
         headline), ``aic``, ``aicc``, ``bic``, ``delta_bic``, ``log_evidence``,
-        ``delta_log_evidence``, ``values``, ``warnings``.
+        ``delta_log_evidence``, ``values``, ``warnings``, ``undetermined`` (a parameter only
+        its product with ``scale`` determines, see :func:`scale_degenerate_factor`).
     chosen : str
         The selected model.
     reason : str
@@ -182,13 +267,17 @@ class ModelComparison:
                 f"{row['bic']:>10.4g} {row['delta_bic']:>8.3g} {row['log_evidence']:>10.4g} "
                 f"{row['delta_log_evidence']:>7.3g}{mark}"
             )
+        for row in self.rows:
+            for name in row.get("undetermined", ()):
+                lines.append(f"note: {row['label']}: {name} is undetermined, only {name} x scale is (relative radiance "
+                             f"without a calibration prior); its evidence integrates over the product")
         lines.append(f"chosen: {self.chosen} ({self.reason})")
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
         """The comparison as JSON-ready data (the fits left out)."""
         keep = ("label", "model", "fixed", "k", "chi2", "redchi", "chi2_p", "adequate", "adequacy", "aic", "aicc",
-                "bic", "delta_bic", "log_evidence", "delta_log_evidence", "values")
+                "bic", "delta_bic", "log_evidence", "delta_log_evidence", "values", "undetermined")
         rows = [{k: row[k] for k in keep} for row in self.rows]
         return {"chosen": self.chosen, "chosen_adequate": self.chosen_adequate, "reason": self.reason,
                 "threshold": self.threshold, "rows": rows}
@@ -280,6 +369,7 @@ def compare_models(
                 "chi2_p": verdict.chi2_p,
                 "adequate": verdict.adequate,
                 "adequacy": verdict.headline(),
+                "undetermined": _undetermined(problem, ls),
                 **info,
                 "log_evidence": laplace_log_evidence(problem, ls, candidate_priors),
                 "values": ls.values,
@@ -291,6 +381,14 @@ def compare_models(
     chosen, reason = _choose(rows, threshold, use_evidence)
     rows.sort(key=lambda r: -r["log_evidence"] if use_evidence else r["bic"])
     return ModelComparison(rows=rows, chosen=chosen["label"], reason=reason, threshold=threshold, fits=fits)
+
+
+def _undetermined(problem, least_squares) -> list[str]:
+    """The factor only its product with ``scale`` determines, when nothing else does."""
+    if np.all(np.isfinite(np.asarray(least_squares.covariance, float))):
+        return []
+    factor = scale_degenerate_factor(problem, least_squares)
+    return [factor] if factor else []
 
 
 def _annotate_deltas(rows: list[dict[str, Any]]) -> bool:
@@ -320,3 +418,56 @@ def _choose(rows: list[dict[str, Any]], threshold: float, use_evidence: bool) ->
     note = f"; {failed} candidate(s) fail the goodness-of-fit test" if failed else ""
     return chosen, (f"fewest free parameters among the adequate models within {threshold:g} ln-units of the best "
                     f"adequate one by {criterion}{note}")
+
+
+def compare_loo(results: Mapping[str, Any]):
+    """The predictive comparison of MCMC fits by PSIS-LOO (ArviZ ``compare``).
+
+    The expected log pointwise predictive density of each fit estimated by Pareto-smoothed
+    importance-sampling leave-one-out cross-validation (Vehtari, Gelman & Gabry 2017),
+    ranked, with its standard error, the difference to the best and its standard error, and
+    the Pareto k warning. It asks which model predicts a new measurement best, where the
+    evidence asks which the data support given the priors; correlated data are left out
+    one value at a time with the others' conditional (gonio.fitting.problem).
+
+    Parameters
+    ----------
+    results : mapping of label to FitResult
+        Fits of the same dataset, each with an MCMC chain.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ArviZ's comparison table, best first (columns ``elpd_loo``, ``p_loo``,
+        ``elpd_diff``, ``se``, ``dse``, ``warning``, ...).
+
+    References
+    ----------
+    A. Vehtari, A. Gelman, J. Gabry, "Practical Bayesian model evaluation using leave-one-out
+    cross-validation and WAIC", Statistics and Computing 27, 1413 (2017).
+    """
+    from .diagnostics import arviz
+
+    if len(results) < 2:
+        raise ValueError(f"compare_loo needs at least two fits, got {len(results)}")
+    missing = [label for label, result in results.items() if result.mcmc is None]
+    if missing:
+        raise ValueError(f"compare_loo needs MCMC fits; {missing[0]!r} ran without MCMC")
+    import warnings
+
+    data = {label: result.inference_data() for label, result in results.items()}
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Estimated shape parameter of Pareto", category=UserWarning)
+        warnings.filterwarnings("ignore", message="The inplace keyword")  # ArviZ's use of pandas
+        return arviz().compare(data, ic="loo")  # the table's 'warning' column says it
+
+
+def loo_summary(table) -> str:
+    """A plain-text form of :func:`compare_loo`'s table."""
+    lines = [f"{'model':<34} {'elpd_loo':>10} {'SE':>7} {'p_loo':>7} {'d_elpd':>8} {'dSE':>7}  Pareto k",
+             "-" * 86]
+    for label, row in table.iterrows():
+        warning = "k > 0.7 for some values" if bool(row["warning"]) else "ok"
+        lines.append(f"{label:<34} {row['elpd_loo']:>10.2f} {row['se']:>7.2f} {row['p_loo']:>7.2f} "
+                     f"{row['elpd_diff']:>8.2f} {row['dse']:>7.2f}  {warning}")
+    return "\n".join(lines)

@@ -1,0 +1,223 @@
+"""Goodness of fit, the verdict, the extra-noise forms, one likelihood for selection, and the
+convergence diagnostics: every fit says when its model cannot explain the data."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from gonio.cli import main
+from gonio.fitting import ConvergenceWarning, Dataset, FitResult, compare_models, fit
+from gonio.fitting.adequacy import ALPHA, assess, chi2_pvalue
+from gonio.fitting.least_squares import fit_least_squares
+from gonio.fitting.problem import FitProblem, predict_quantity
+from gonio.fitting.results import EXIT_INADEQUATE, EXIT_NOT_CONVERGED
+from gonio.fitting.mcmc import resolve_priors
+from gonio.fitting.selection import laplace_log_evidence
+
+from .synthetic import in_plane_geometry, synthetic_dataset
+
+QUICK = dict(n_walkers=16, max_steps=6000, rhat_limit=1.05)
+
+
+def _exact_plaster(noise: float = 1e-3, seed: int = 3, sigma: float = 30.0) -> Dataset:
+    """Data made by the exact V-cavity model (not by any closed form fitted to it)."""
+    geometry = in_plane_geometry(views=np.arange(-70.0, 71.0, 10.0))
+    exact = predict_quantity("oren-nayar-exact", "brdf", *geometry, {"rho": 0.9, "sigma": sigma})
+    rng = np.random.default_rng(seed)
+    return Dataset(*geometry, exact + noise * rng.standard_normal(exact.shape), np.full(exact.shape, noise),
+                   label="exact V-cavity plaster")
+
+
+def test_chi2_pvalue_matches_the_distribution():
+    assert chi2_pvalue(10.0, 10) == pytest.approx(0.4405, abs=1e-4)
+    assert chi2_pvalue(200.0, 10) < 1e-30
+    assert math.isnan(chi2_pvalue(3.0, 0))
+
+
+def test_the_true_model_is_adequate():
+    data = synthetic_dataset("oren-nayar", dict(rho=0.8, sigma=20.0, ir_weight=1.0), 0.002, seed=5)
+    result = fit(data, "oren-nayar", fixed={"ir_weight": 1.0}, seed=1, **QUICK)
+    a = result.adequacy
+    assert a.adequate and a.chi2_p > ALPHA and a.ppc_p > ALPHA
+    assert result.summary().splitlines()[0].startswith("model adequate")
+    assert result.exit_code() == 0
+
+
+def test_the_approximation_fitted_to_the_exact_model_is_flagged_inadequate(tmp_path):
+    """Eq 33-35 fitted to the exact model with 0.1 % noise: it misses sigma and says so."""
+    data = _exact_plaster()
+    result = fit(data, "oren-nayar", fixed={"ir_weight": 1.0}, mcmc=False)
+    assert result.least_squares.redchi > 10
+    assert result.adequate is False and result.exit_code() == EXIT_INADEQUATE
+    assert result.summary().splitlines()[0].startswith("MODEL INADEQUATE")
+    assert result.flags[0].startswith("MODEL INADEQUATE")
+    result.save(tmp_path / "fit")
+    saved = json.loads((tmp_path / "fit" / "result.json").read_text())
+    assert saved["adequacy"]["adequate"] is False and saved["adequacy"]["chi2_p"] < ALPHA
+    assert FitResult.load(tmp_path / "fit").adequate is False
+
+
+def test_an_extra_noise_term_cannot_swallow_the_misfit():
+    """With jitter the chi-square p-value is fine by construction; the jitter, much larger
+    than the stated uncertainties, still marks the model inadequate."""
+    data = _exact_plaster()
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0}, jitter=True)
+    least_squares = fit_least_squares(problem)
+    verdict = assess(problem, least_squares)
+    assert verdict.chi2_p > ALPHA
+    assert verdict.extra_noise_ratio > 1 and not verdict.adequate
+    assert "extra noise" in verdict.headline()
+
+
+def test_relative_extra_noise_is_recovered():
+    """Stated uncertainties of 0.1 % with 3 % multiplicative scatter: rel_jitter ~ 0.03."""
+    clean = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 1e-300)
+    rng = np.random.default_rng(11)
+    noisy = clean.value * (1 + 0.03 * rng.standard_normal(clean.n))
+    data = Dataset(*clean.geometry, noisy, 0.001 * np.abs(clean.value))
+    result = fit(data, "minnaert", jitter="relative", seed=2, **QUICK)
+    assert result.jitter == "relative" and "rel_jitter" in result.free
+    low, high = result.posterior["p2_5"]["rel_jitter"], result.posterior["p97_5"]["rel_jitter"]
+    assert low < 0.03 < high and high < 0.05
+    problem = result.problem()
+    total = problem.total_sigma(result.best_values())
+    assert np.corrcoef(total, np.abs(clean.value))[0, 1] > 0.99  # grows with the prediction
+
+
+def test_comparison_never_chooses_a_model_that_fails_the_goodness_of_fit_test():
+    data = _exact_plaster(noise=2e-3)
+    comparison = compare_models(data, ["lambert", ("oren-nayar", {"ir_weight": 1.0}), "oren-nayar-tabulated"])
+    rows = {row["label"]: row for row in comparison.rows}
+    assert not rows["lambert"]["adequate"] and not rows["oren-nayar (ir_weight=1)"]["adequate"]
+    assert comparison.chosen == "oren-nayar-tabulated" and comparison.chosen_adequate
+    assert "INADEQUATE" in comparison.summary()
+    only_bad = compare_models(data, ["lambert", ("oren-nayar", {"ir_weight": 1.0})])
+    assert not only_bad.chosen_adequate and only_bad.reason.startswith("NO candidate")
+
+
+def test_evidence_is_finite_for_models_linear_in_rho_on_relative_radiance():
+    """rho x scale is exactly degenerate without a calibration prior; the priors bound it."""
+    data = synthetic_dataset("lambert", dict(rho=0.5, scale=200.0), 0.5, seed=4, quantity="radiance")
+    for name in ("lambert", "oren-nayar-qualitative"):
+        problem = FitProblem(name, data)
+        least_squares = fit_least_squares(problem)
+        priors = resolve_priors(problem, least_squares.values)
+        assert math.isfinite(laplace_log_evidence(problem, least_squares, priors)), name
+
+
+def test_evidence_of_the_degenerate_pair_matches_direct_integration():
+    """Lambert on relative radiance: ln Z over (rho, scale) by quadrature equals the
+    Laplace value over their product (the likelihood is Gaussian in the product)."""
+    from scipy.integrate import quad
+
+    data = synthetic_dataset("lambert", dict(rho=0.5, scale=200.0), 0.5, seed=4, quantity="radiance")
+    problem = FitProblem("lambert", data)
+    least_squares = fit_least_squares(problem)
+    priors = resolve_priors(problem, least_squares.values)
+    product = least_squares.values["rho"] * least_squares.values["scale"]
+    peak = least_squares.log_likelihood
+
+    def over_scale(rho: float) -> float:
+        centre = product / rho
+        density = lambda s: math.exp(problem.log_likelihood(np.array([rho, s])) - peak  # noqa: E731
+                                     + priors["scale"].logpdf(s))
+        return quad(density, 0.98 * centre, 1.02 * centre, points=[centre], epsabs=0, epsrel=1e-9)[0]
+
+    total = quad(lambda r: over_scale(r) * math.exp(priors["rho"].logpdf(r)), 1e-6, 1.0, limit=200, epsrel=1e-8)[0]
+    assert laplace_log_evidence(problem, least_squares, priors) == pytest.approx(peak + math.log(total), abs=1e-3)
+
+
+def test_comparison_uses_the_fits_extra_noise():
+    data = synthetic_dataset("lambert", dict(rho=0.5), 0.003, seed=8)
+    plain = compare_models(data, ["lambert", "minnaert"])
+    noisy = compare_models(data, ["lambert", "minnaert"], jitter=True)
+    assert all("jitter" not in row["values"] for row in plain.rows)
+    assert all("jitter" in row["values"] for row in noisy.rows)
+    assert all(math.isfinite(row["log_evidence"]) for row in noisy.rows)
+    assert noisy.chosen == "lambert"
+
+
+def test_rhat_and_ess_are_reported_and_required_for_convergence(tmp_path):
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.005, seed=2)
+    result = fit(data, "minnaert", seed=0, n_walkers=16, max_steps=8000)
+    d = result.mcmc.diagnostics
+    assert set(d) == {"rho", "k"} and result.converged
+    assert all(v["r_hat"] < 1.01 and v["ess_bulk"] > 400 and v["ess_tail"] > 400 for v in d.values())
+    assert "R-hat" in result.summary() and "ESS bulk" in result.summary()
+    with pytest.warns(ConvergenceWarning):
+        short = fit(data, "minnaert", seed=0, n_walkers=8, max_steps=300)
+    assert short.converged is False and short.exit_code() == EXIT_NOT_CONVERGED
+
+
+def test_posterior_exports_to_arviz_and_offers_psis_loo(tmp_path):
+    import arviz as az
+
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.005, seed=2)
+    result = fit(data, "minnaert", seed=0, **QUICK)
+    result.save(tmp_path / "fit")
+    idata = az.from_netcdf(tmp_path / "fit" / "posterior.nc")
+    m = result.mcmc
+    kept = m.chain[m.burn_in :: m.thin]
+    assert idata.posterior["rho"].shape == (m.n_walkers, kept.shape[0])
+    np.testing.assert_allclose(idata.posterior["k"].values.T, kept[:, :, 1])
+    assert idata.log_likelihood["y"].shape[-1] == data.n
+    loo = result.loo()
+    # for independent Gaussian errors, elpd_loo is close to the log-likelihood at the optimum
+    # minus the number of parameters (the effective number p_loo ~ 2)
+    assert loo.p_loo == pytest.approx(2.0, abs=1.0)
+    assert float(np.max(loo.pareto_k)) < 0.7
+
+
+def test_psis_loo_prefers_the_true_model():
+    from gonio.fitting import compare_loo
+    from gonio.fitting.selection import loo_summary
+
+    data = synthetic_dataset("minnaert", dict(rho=0.6, k=0.7), 0.005, seed=2)
+    fits = {name: fit(data, name, seed=0, **QUICK) for name in ("lambert", "minnaert")}
+    table = compare_loo(fits)
+    assert list(table.index) == ["minnaert", "lambert"]
+    assert table.loc["lambert", "elpd_diff"] > 2 * table.loc["lambert", "dse"]
+    assert "minnaert" in loo_summary(table).splitlines()[2]
+    with pytest.raises(ValueError, match="without MCMC"):
+        compare_loo({"a": fits["lambert"], "b": fit(data, "lambert", mcmc=False)})
+
+
+@pytest.mark.slow
+def test_no_walker_is_stuck_on_lambertian_rig_data(tmp_path):
+    """Oren-Nayar with an extra-noise term on a Lambertian sample measured by the emulated
+    rig: every walker samples the same posterior (once two of 32 started 100 times too
+    high in jitter and stayed at sigma 89.5 deg while the result said converged)."""
+    from gonio import acquisition, protocols
+    from gonio.cli.run import emulated_rig
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "protocols" / "oren-nayar-fig16-plaster.toml").read_text().replace("step = 5", "step = 10")
+    with emulated_rig("lambert:rho=0.8", 4, name="stuck-walkers") as (rig, emulator, change, meta):
+        acquisition.run_protocol(protocols.loads(text), rig, tmp_path / "rec", metadata=meta,
+                                 clock=emulator.control.now, change_sample=lambda which: change(which, 0.99))
+    dataset, priors = acquisition.reduce_recording(tmp_path / "rec").fit_inputs()
+    result = fit(dataset, "oren-nayar", fixed={"ir_weight": 1.0}, priors=priors, jitter=True, seed=0)
+    assert result.converged
+    m = result.mcmc
+    sigma = m.chain[m.burn_in :, :, list(result.free).index("sigma")]
+    per_walker = np.median(sigma, axis=0)
+    assert per_walker.max() < 20.0, np.round(per_walker, 1)  # no walker far out at large sigma
+    assert result.posterior["p97_5"]["sigma"] < 20.0
+    assert m.diagnostics["sigma"]["r_hat"] < 1.01
+
+
+def test_cli_fit_exit_status_says_inadequate(tmp_path, capsys):
+    path = _exact_plaster().to_csv(tmp_path / "plaster.csv")
+    code = main(["fit", str(path), "--model", "oren-nayar", "--fix", "ir_weight=1", "--no-mcmc", "--quiet"])
+    assert code == EXIT_INADEQUATE
+    captured = capsys.readouterr()
+    assert captured.out.splitlines()[0].startswith("MODEL INADEQUATE")
+    assert "MODEL INADEQUATE" in captured.err
+    assert main(["fit", str(path), "--model", "lambert", "--model", "oren-nayar", "--fix", "ir_weight=1"]) == \
+        EXIT_INADEQUATE
+    assert main(["fit", str(path), "--model", "oren-nayar-tabulated", "--no-mcmc", "--quiet",
+                 "--out", str(tmp_path / "table")]) == 0
