@@ -11,8 +11,9 @@ model (lambert; oren-nayar-qualitative, eq 36; oren-nayar, eq 33-35, with ir_wei
 at 1 and free; and, as a worthwhile extra for the samples with a forward sheen,
 oren-nayar+torrance-sparrow, eq 38, kd = 1, unity Fresnel):
 
-* least squares under the noise model and the model comparison (chi-square, reduced
-  chi-square, AIC, BIC, Laplace evidence; gonio.fitting.compare_models);
+* the model comparison under the fits' likelihood, the noise model plus a fitted jitter
+  (chi-square, reduced chi-square, goodness of fit, AIC, BIC, Laplace evidence;
+  gonio.fitting.compare_models);
 * MCMC (emcee, 32 walkers, run to 50 autocorrelation times) with a fitted jitter, giving
   posterior medians and 95 % intervals;
 * how well each model fits: relative rms of data/model - 1, and where the misfit sits
@@ -81,8 +82,9 @@ def run_sample(data, number: int) -> dict:
     dataset, noise = curet_dataset(data, number)
     slug = sample_slug(dataset)
     print(f"== {dataset.label}: {dataset.n} geometries, s = {noise.relative:.4f}", flush=True)
-    comparison = compare_models(dataset, CANDIDATES)
-    paper = compare_models(dataset, CANDIDATES[:PAPER_MODELS])
+    # one likelihood for the comparison and the fits: the noise model plus a fitted jitter
+    comparison = compare_models(dataset, CANDIDATES, jitter=True)
+    paper = compare_models(dataset, CANDIDATES[:PAPER_MODELS], jitter=True)
     rows = {row["label"]: row for row in comparison.rows}
     fits = []
     for name, fixed in CANDIDATES:
@@ -204,10 +206,17 @@ def _interval(result: FitResult, name: str) -> str:
     return text
 
 
+def _verdict_cell(result) -> str:
+    """'adequate' or '**inadequate**' with the fitted jitter over the estimated noise."""
+    a = result.adequacy
+    word = "adequate" if a.adequate else "**inadequate**"
+    return f"{word} (jitter {a.extra_noise_ratio:.2g} x noise)" if math.isfinite(a.extra_noise_ratio) else word
+
+
 def parameter_table(study: dict) -> list[str]:
     names = ["rho", "sigma", "ir_weight", "ks", "sigma_s", "jitter"]
-    head = "| model | " + " | ".join(names) + " | redchi | rel. rms | ln Z | dBIC | MCMC |"
-    lines = [head, "|" + "---|" * (len(names) + 6)]
+    head = "| model | " + " | ".join(names) + " | redchi | rel. rms | goodness of fit | ln Z | dBIC | MCMC |"
+    lines = [head, "|" + "---|" * (len(names) + 7)]
     for f in study["fits"]:
         r = f["result"]
         cells = []
@@ -220,8 +229,9 @@ def parameter_table(study: dict) -> list[str]:
                 cells.append("")
         row = f["comparison"]
         status = f"{r.mcmc.n_steps} steps, {'converged' if r.converged else '**not converged**'}"
+        verdict = _verdict_cell(r)
         lines.append(f"| {f['label']} | " + " | ".join(cells) + f" | {row['redchi']:.2f} | {f['relative_rms']:.3f} | "
-                     f"{row['log_evidence']:.1f} | {row['delta_bic']:.1f} | {status} |")
+                     f"{verdict} | {row['log_evidence']:.1f} | {row['delta_bic']:.1f} | {status} |")
     return lines
 
 
@@ -264,9 +274,11 @@ def markdown(studies: list[dict], figures: dict[int, list[Path]], timing: dict) 
         "1 means *as good as the best smooth description the data support*, and larger values measure",
         "systematic misfit. Estimated s: "
         + ", ".join(f"{s['dataset'].label.replace('CUReT ', '')} {s['noise'].relative:.4f}" for s in studies) + ".",
-        "The model comparison (AIC, BIC, Laplace evidence) uses this noise model alone. The MCMC",
-        "additionally fits `jitter` (extra noise in quadrature, [1/sr]) so that the posterior intervals",
-        "widen where a model misfits instead of being quoted at the (too small) noise level.",
+        "Every fit, and the model comparison, uses this noise model plus a fitted `jitter` (extra noise",
+        "in quadrature, [1/sr]), so that the posterior intervals widen where a model misfits instead of",
+        "being quoted at the (too small) noise level, and the comparison judges the models under the",
+        "likelihood they were fitted with. A jitter larger than the estimated noise marks a model",
+        "inadequate (docs/fitting.md).",
         "",
         "**Geometries.** All 205 are used for every sample. None of the four has a negative value",
         "(the 29 negative values of the database are in other samples, 28 in sample 61), and none",
@@ -287,9 +299,9 @@ def markdown(studies: list[dict], figures: dict[int, list[Path]], timing: dict) 
         "",
         "## Results",
         "",
-        "Posterior medians with 95 % intervals (2.5-97.5 %), MCMC with jitter; redchi, ln Z (Laplace",
-        "evidence) and dBIC (relative to the best of all five models of that sample) from least squares",
-        "under the noise model without jitter; rel. rms = rms of data/model - 1 at the posterior",
+        "Posterior medians with 95 % intervals (2.5-97.5 %), MCMC with jitter; redchi (chi-square of the",
+        "noise model alone over the degrees of freedom), ln Z (Laplace evidence) and dBIC (relative to the",
+        "best of all five models of that sample) at the posterior mode with the jitter; rel. rms = rms of data/model - 1 at the posterior",
         "median. sigma and sigma_s in degrees, jitter in sr^-1. `oren-nayar+torrance-sparrow` is an extra",
         "(eq 38 of Oren & Nayar, unity Fresnel, kd = 1 because kd and rho only enter as a product).",
         "",
@@ -299,8 +311,11 @@ def markdown(studies: list[dict], figures: dict[int, list[Path]], timing: dict) 
         overall = best_fit(study, paper_only=False)
         lines += [f"### {study['dataset'].label}", ""]
         lines += parameter_table(study)
-        lines += ["", f"Chosen among the paper's models (evidence within 1 ln unit, then fewest parameters): "
-                      f"**{paper['label']}**; among all five: **{overall['label']}**.", ""]
+        lines += ["", f"Chosen among the paper's models (adequate, evidence within 1 ln unit of the best adequate, "
+                      f"then fewest parameters): **{paper['label']}**"
+                      f"{'' if study['paper_comparison'].chosen_adequate else ' (none adequate)'}; among all five: "
+                      f"**{overall['label']}**{'' if study['comparison'].chosen_adequate else ' (none adequate)'}.",
+                  ""]
         lines += _findings(study)
         lines += [""]
         for path in figures[study["number"]]:

@@ -11,9 +11,10 @@ Two families of criteria, both computed from the weighted least-squares optimum:
   charges each parameter for the prior range it could have taken (Occam factor).  The
   likelihood and the priors are exactly those of :func:`gonio.fitting.fit` (the calibration
   prior on ``scale``, the extra-noise term, the aperture averaging of the dataset), so the
-  comparison and the fit speak of the same posterior.  Laplace overestimates Z by up to a
-  factor 2 per parameter sitting on a bound of a uniform prior (half the Gaussian falls
-  outside); docs/evidence.md measures it against nested sampling.
+  comparison and the fit speak of the same posterior.  Laplace's formula is corrected for
+  the supports' truncation of the Gaussian and for a profile that is not Gaussian near a
+  bound (:mod:`gonio.fitting.evidence`); docs/evidence.md measures the result against nested
+  sampling and quadrature.
 
 :func:`compare_models` fits each candidate, tests its goodness of fit
 (:func:`gonio.fitting.adequacy.assess` at the optimum) and chooses by this rule:
@@ -44,6 +45,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .dataset import Dataset
+from .evidence import laplace_evidence, laplace_log_evidence, scale_degenerate_factor
 
 __all__ = ["information_criteria", "laplace_log_evidence", "ModelComparison", "compare_models", "candidate_label",
            "compare_loo", "loo_summary"]
@@ -63,161 +65,6 @@ def information_criteria(log_likelihood: float, k: int, n: int) -> dict[str, flo
     return {"aic": aic, "aicc": aicc, "bic": bic}
 
 
-def laplace_log_evidence(problem, least_squares, priors) -> float:
-    """Laplace approximation of ln Z (module docstring); NaN if the covariance is undetermined.
-
-    The covariance is the least-squares one (the inverse Hessian of the log posterior at
-    its mode when Gaussian priors entered the fit); with an extra-noise parameter, which
-    least squares does not cover, or where the likelihood alone leaves a direction
-    undetermined (rho x scale on relative radiance without a calibration prior), it is the
-    inverse of the log posterior's Hessian by finite differences
-    (:func:`_numerical_covariance`).
-
-    An albedo-like factor that only multiplies the free ``scale`` of relative radiance
-    (:func:`scale_degenerate_factor`), with no calibration prior to tell them apart, leaves
-    the likelihood a function of their product alone; the evidence is then the Laplace
-    integral over the product, whose prior is the one the two priors induce
-    (:func:`_product_log_evidence`). It agrees with direct quadrature over both parameters
-    (tests/fitting/test_adequacy.py) and is finite for every candidate.
-
-    Parameters
-    ----------
-    problem : FitProblem
-    least_squares : LeastSquaresResult
-    priors : mapping of Prior
-        Prior of every free parameter.
-    """
-    names = list(problem.free)
-    covariance = np.asarray(least_squares.covariance, float)
-    if not np.all(np.isfinite(covariance)):
-        factor = scale_degenerate_factor(problem, least_squares)
-        if factor is not None:
-            return _product_log_evidence(problem, least_squares, priors, factor)
-    if problem.noise_parameter in names or not np.all(np.isfinite(covariance)):
-        covariance = _numerical_covariance(problem, least_squares.values, priors)
-    if not np.all(np.isfinite(covariance)):
-        return math.nan
-    sign, log_det = np.linalg.slogdet(covariance)
-    if sign <= 0:
-        return math.nan
-    log_prior = sum(priors[n].logpdf(least_squares.values[n]) for n in names)
-    if not math.isfinite(log_prior):
-        return math.nan
-    k = len(names)
-    log_likelihood = problem.log_likelihood(np.array([least_squares.values[n] for n in names]))
-    return log_likelihood + log_prior + 0.5 * k * math.log(2.0 * math.pi) + 0.5 * log_det
-
-
-def scale_degenerate_factor(problem, least_squares) -> str | None:
-    """The free parameter that only multiplies the free ``scale`` (relative radiance), if any.
-
-    Tested directly: the prediction is unchanged (to 1e-9) when the parameter is multiplied
-    by 0.9 and ``scale`` divided by 0.9 (rho of Lambert on relative radiance without a
-    calibration prior: only rho x scale is determined).
-    """
-    if "scale" not in problem.free:
-        return None
-    values = dict(least_squares.values)
-    base = problem.predict(values)
-    for name in problem.free:
-        lo, hi = problem.spec(name).bounds
-        if name in ("scale", problem.noise_parameter) or not (math.isfinite(lo) and math.isfinite(hi)):
-            continue
-        if not values[name] > 0 or not problem.spec(name).contains(0.9 * values[name]):
-            continue
-        moved = problem.predict(dict(values, **{name: 0.9 * values[name], "scale": values["scale"] / 0.9}))
-        if np.allclose(moved, base, rtol=1e-9, atol=0.0):
-            return name
-    return None
-
-
-class _ProductPrior:
-    """Prior of ``scale`` when the factor is held at ``reference``: the density of
-    ``factor x scale / reference`` under the two independent priors (a 1-D integral)."""
-
-    def __init__(self, factor_prior, scale_prior, factor_bounds: tuple[float, float], reference: float):
-        self.factor_prior, self.scale_prior = factor_prior, scale_prior
-        self.bounds, self.reference = factor_bounds, reference
-
-    def logpdf(self, x: float) -> float:
-        from scipy.integrate import quad
-
-        if not x > 0:
-            return -math.inf
-        product = self.reference * float(x)
-        lo, hi = max(self.bounds[0], 1e-300), self.bounds[1]
-        s_lo, s_hi = getattr(self.scale_prior, "lower", 0.0), getattr(self.scale_prior, "upper", math.inf)
-        lo, hi = max(lo, product / s_hi if s_hi > 0 else lo), min(hi, product / s_lo if s_lo > 0 else hi)
-        if not lo < hi:
-            return -math.inf
-
-        def integrand(r: float) -> float:
-            return math.exp(self.factor_prior.logpdf(r) + self.scale_prior.logpdf(product / r)) / r
-
-        value = quad(integrand, lo, hi, limit=200, epsrel=1e-8)[0]
-        return math.log(self.reference * value) if value > 0 else -math.inf
-
-
-def _product_log_evidence(problem, least_squares, priors, factor: str) -> float:
-    """Laplace evidence over ``factor x scale`` for an exactly degenerate pair.
-
-    The factor is held at its least-squares value r0 and ``scale`` carries the product
-    (``scale' = factor x scale / r0``), with the prior the two priors induce on it; the
-    prior of the factor is integrated out in that induced prior, so nothing is counted
-    twice.
-    """
-    from .least_squares import fit_least_squares
-    from .problem import FitProblem
-
-    reference = least_squares.values[factor]
-    if not reference > 0:
-        return math.nan
-    fixed = dict(problem.fixed, **{factor: reference})
-    reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter)
-    reduced_ls = fit_least_squares(reduced, start=least_squares.values, n_starts=1)
-    reduced_priors = {n: p for n, p in priors.items() if n in reduced.free}
-    reduced_priors["scale"] = _ProductPrior(priors[factor], priors["scale"], problem.spec(factor).bounds, reference)
-    return laplace_log_evidence(reduced, reduced_ls, reduced_priors)
-
-
-def _numerical_covariance(problem, values: Mapping[str, float], priors) -> np.ndarray:
-    """Inverse Hessian of -ln(likelihood x prior) at ``values`` by finite differences.
-
-    Steps of 1e-4 of each parameter's physical range (of its magnitude when unbounded);
-    a parameter within two steps of a bound is differenced away from it.
-    """
-    names = list(problem.free)
-    x = np.array([values[n] for n in names], float)
-
-    def negative_log_posterior(vector: np.ndarray) -> float:
-        prior = sum(priors[n].logpdf(float(v)) for n, v in zip(names, vector))
-        return -(problem.log_likelihood(vector) + prior) if math.isfinite(prior) else math.inf
-
-    steps, centre = [], x.copy()
-    for k, name in enumerate(names):
-        lo, hi = problem.spec(name).bounds
-        h = 1e-4 * ((hi - lo) if math.isfinite(hi - lo) else max(abs(x[k]), 1e-12))
-        centre[k] = min(max(x[k], lo + 2 * h), hi - 2 * h) if math.isfinite(hi - lo) else x[k]
-        steps.append(h)
-    k = len(names)
-    hessian = np.empty((k, k))
-    f0 = negative_log_posterior(centre)
-    for i in range(k):
-        for j in range(i, k):
-            ei, ej = np.eye(k)[i] * steps[i], np.eye(k)[j] * steps[j]
-            if i == j:
-                value = (negative_log_posterior(centre + ei) - 2 * f0 + negative_log_posterior(centre - ei)) / steps[i] ** 2
-            else:
-                value = (negative_log_posterior(centre + ei + ej) - negative_log_posterior(centre + ei - ej)
-                         - negative_log_posterior(centre - ei + ej) + negative_log_posterior(centre - ei - ej)) / (
-                    4 * steps[i] * steps[j])
-            hessian[i, j] = hessian[j, i] = value
-    try:
-        return np.linalg.inv(hessian)
-    except np.linalg.LinAlgError:
-        return np.full((k, k), np.nan)
-
-
 @dataclass
 class ModelComparison:
     """Result of :func:`compare_models`.
@@ -227,8 +74,10 @@ class ModelComparison:
     rows : list of dict
         Per candidate: ``label``, ``model``, ``fixed``, ``k``, ``chi2``, ``redchi``,
         ``chi2_p`` (goodness-of-fit p-value), ``adequate``, ``adequacy`` (the verdict's
-        headline), ``aic``, ``aicc``, ``bic``, ``delta_bic``, ``log_evidence``,
-        ``delta_log_evidence``, ``values``, ``warnings``, ``undetermined`` (a parameter only
+        headline), ``aic``, ``aicc``, ``bic``, ``delta_bic``, ``log_evidence`` (corrected;
+        ``log_evidence_laplace``, ``evidence_truncation`` and ``evidence_shape`` its terms,
+        :class:`gonio.fitting.evidence.LaplaceEvidence`), ``delta_log_evidence``,
+        ``values``, ``warnings``, ``undetermined`` (a parameter only
         its product with ``scale`` determines, see :func:`scale_degenerate_factor`).
     chosen : str
         The selected model.
@@ -277,7 +126,8 @@ class ModelComparison:
     def to_dict(self) -> dict[str, Any]:
         """The comparison as JSON-ready data (the fits left out)."""
         keep = ("label", "model", "fixed", "k", "chi2", "redchi", "chi2_p", "adequate", "adequacy", "aic", "aicc",
-                "bic", "delta_bic", "log_evidence", "delta_log_evidence", "values", "undetermined")
+                "bic", "delta_bic", "log_evidence", "log_evidence_laplace", "evidence_truncation", "evidence_shape",
+                "delta_log_evidence", "values", "undetermined")
         rows = [{k: row[k] for k in keep} for row in self.rows]
         return {"chosen": self.chosen, "chosen_adequate": self.chosen_adequate, "reason": self.reason,
                 "threshold": self.threshold, "rows": rows}
@@ -371,7 +221,7 @@ def compare_models(
                 "adequacy": verdict.headline(),
                 "undetermined": _undetermined(problem, ls),
                 **info,
-                "log_evidence": laplace_log_evidence(problem, ls, candidate_priors),
+                **_evidence_terms(laplace_evidence(problem, ls, candidate_priors)),
                 "values": ls.values,
                 "warnings": ls.warnings,
             }
@@ -381,6 +231,12 @@ def compare_models(
     chosen, reason = _choose(rows, threshold, use_evidence)
     rows.sort(key=lambda r: -r["log_evidence"] if use_evidence else r["bic"])
     return ModelComparison(rows=rows, chosen=chosen["label"], reason=reason, threshold=threshold, fits=fits)
+
+
+def _evidence_terms(evidence) -> dict[str, Any]:
+    """``log_evidence`` (corrected) and its terms, for a row of the comparison."""
+    return {"log_evidence": evidence.log_evidence, "log_evidence_laplace": evidence.raw,
+            "evidence_truncation": evidence.truncation, "evidence_shape": dict(evidence.shape)}
 
 
 def _undetermined(problem, least_squares) -> list[str]:

@@ -221,3 +221,43 @@ def test_cli_fit_exit_status_says_inadequate(tmp_path, capsys):
         EXIT_INADEQUATE
     assert main(["fit", str(path), "--model", "oren-nayar-tabulated", "--no-mcmc", "--quiet",
                  "--out", str(tmp_path / "table")]) == 0
+
+
+def test_truncation_mass_of_gaussians_cut_by_bounds():
+    from gonio.fitting.evidence import _log_mass_inside
+
+    assert _log_mass_inside(np.array([1.0]), np.array([[0.01]]), [(0.0, 1.0)]) == pytest.approx(math.log(0.5))
+    r = 0.55
+    covariance = np.array([[1.0, r], [r, 1.0]]) * 1e-4
+    corner = _log_mass_inside(np.array([1.0, 1.0]), covariance, [(0.0, 1.0), (0.0, 1.0)])
+    assert corner == pytest.approx(math.log(0.25 + math.asin(r) / (2 * math.pi)), abs=1e-4)
+    assert _log_mass_inside(np.array([0.5]), np.array([[1e-4]]), [(0.0, 1.0)]) == 0.0  # far from both bounds
+
+
+def test_evidence_at_the_stationary_sigma_0_matches_quadrature():
+    """Oren-Nayar on Lambertian data with its optimum on sigma = 0, where the BRDF depends
+    on sigma^2 and the curvature vanishes: Laplace's formula is 1.8 too high; with the
+    truncation and profile corrections it matches a 2-D quadrature."""
+    from gonio.fitting.evidence import laplace_evidence
+    from gonio.geometry import in_plane_angles
+
+    views = np.arange(-80.0, 81.0, 5.0)
+    geometry = in_plane_angles(np.repeat([30.0, 45.0, 60.0], views.size), np.tile(views, 3))
+    exact = predict_quantity("lambert", "brdf", *geometry, {"rho": 0.5})
+    sigma = 0.01 * exact
+    data = Dataset(*geometry, exact + sigma * np.random.default_rng(100).standard_normal(exact.size), sigma)
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0})
+    least_squares = fit_least_squares(problem)
+    priors = resolve_priors(problem, least_squares.values)
+    assert least_squares.values["sigma"] < 1e-6
+    evidence = laplace_evidence(problem, least_squares, priors)
+    rho0, rho_sd = least_squares.values["rho"], least_squares.stderr["rho"]
+    rhos = np.linspace(rho0 - 8 * rho_sd, rho0 + 8 * rho_sd, 161)
+    sigmas = np.linspace(0.0, 4.0, 161)
+    log_post = np.array([[problem.log_likelihood(np.array([r, s])) + priors["rho"].logpdf(r)
+                          + priors["sigma"].logpdf(s) for s in sigmas] for r in rhos])
+    peak = log_post.max()
+    assert log_post[:, -1].max() < peak - 20  # the grid holds the whole posterior
+    quadrature = peak + math.log(np.trapezoid(np.trapezoid(np.exp(log_post - peak), sigmas, axis=1), rhos))
+    assert evidence.raw - quadrature > 1.0
+    assert evidence.log_evidence == pytest.approx(quadrature, abs=0.02)

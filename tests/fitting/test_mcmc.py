@@ -8,7 +8,6 @@ deviation, which is all the assertions below resolve.
 """
 from __future__ import annotations
 
-import math
 import warnings
 
 import numpy as np
