@@ -25,8 +25,8 @@ corrections are added (:class:`LaplaceEvidence`):
   within two standard deviations, the Gaussian's integral along it is replaced by the
   numerical integral of the profile (Gauss-Legendre on each side of the mode, out to where
   the profile has dropped by 15). This repairs a mode held on a bound by a slope (the data
-  pull beyond it) and the stationary sigma = 0; it assumes the others' conditional volume
-  does not change along the profile.
+  pull beyond it), the stationary sigma = 0 and an extra-noise term at or near 0; it
+  assumes the others' conditional volume does not change along the profile.
 
 Where the likelihood alone leaves ``scale`` and an albedo-like factor undetermined
 (relative radiance without a calibration prior), the evidence is the Laplace integral over
@@ -177,7 +177,7 @@ def _shape_correction(problem, least_squares, priors, k: int, covariance: np.nda
     centre = float(least_squares.values[name])
     sd = math.sqrt(covariance[k, k])
     lo, hi = support
-    if name == problem.noise_parameter or not (centre - lo < SHAPE_SDS * sd or hi - centre < SHAPE_SDS * sd):
+    if not (centre - lo < SHAPE_SDS * sd or hi - centre < SHAPE_SDS * sd):
         return None
 
     def profile(x: float) -> float:
@@ -194,7 +194,7 @@ def _shape_correction(problem, least_squares, priors, k: int, covariance: np.nda
 
 def _side_integral(profile, centre: float, edge: float, sd: float) -> float:
     """Integral of exp(profile) from ``centre`` towards ``edge``, out to where it is negligible."""
-    if edge == centre:
+    if abs(edge - centre) < 1e-6 * sd:  # the mode is on this bound: nothing on this side
         return 0.0
     direction = 1.0 if edge > centre else -1.0
     reach = sd
@@ -211,10 +211,10 @@ def _profile_log_posterior(problem, least_squares, priors, name: str, value: flo
     from .least_squares import fit_least_squares
     from .problem import FitProblem
 
-    fixed = dict(problem.fixed, **{name: value})
-    reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter)
     values = dict(least_squares.values, **{name: value})
-    if reduced.free:
+    if len(problem.free) > 1:
+        fixed = dict(problem.fixed, **{name: value})
+        reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter)
         gaussian = {n: priors[n] for n in reduced.free if isinstance(priors[n], Normal)}
         values.update(fit_least_squares(reduced, start=values, n_starts=1, priors=gaussian).values)
     return _log_posterior(problem, priors, np.array([values[n] for n in problem.free], float))

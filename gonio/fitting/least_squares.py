@@ -261,8 +261,9 @@ def _best_jitter(problem: FitProblem, vector: np.ndarray) -> float:
 
 
 def _whitened(problem: FitProblem, vector: np.ndarray) -> np.ndarray:
-    """Residuals whitened by the total uncertainty (the extra noise at its value in ``vector``)."""
-    if problem.noise_parameter not in problem.free:
+    """Residuals whitened by the total uncertainty (the extra noise at its value in ``vector``,
+    or held fixed)."""
+    if not problem.jitter:
         return problem.residuals(vector)
     values, predicted = problem._predict_vector(vector)
     difference = predicted - problem.dataset.value
