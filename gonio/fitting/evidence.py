@@ -112,7 +112,9 @@ def laplace_evidence(problem, least_squares, priors) -> LaplaceEvidence:
             return _product_evidence(problem, least_squares, priors, factor)
     if problem.noise_parameter in names or not np.all(np.isfinite(covariance)):
         covariance = _numerical_covariance(problem, least_squares.values, priors)
-    if not np.all(np.isfinite(covariance)):
+    if not _positive_definite(covariance):
+        # an indefinite curvature (e.g. a parameter stalled on a flat bound whose profile
+        # rises away from it): no Gaussian approximation exists, the evidence is undefined
         return LaplaceEvidence(math.nan)
     sign, log_det = np.linalg.slogdet(covariance)
     mode = np.array([least_squares.values[n] for n in names], float)
@@ -128,6 +130,17 @@ def laplace_evidence(problem, least_squares, priors) -> LaplaceEvidence:
         if correction is not None:
             shape[name] = correction
     return LaplaceEvidence(raw, truncation, shape)
+
+
+def _positive_definite(matrix: np.ndarray) -> bool:
+    """Whether a covariance matrix is finite and positive definite (its Cholesky exists)."""
+    if not np.all(np.isfinite(matrix)):
+        return False
+    try:
+        np.linalg.cholesky(matrix)
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 def _log_posterior(problem, priors, vector: np.ndarray) -> float:

@@ -261,3 +261,21 @@ def test_evidence_at_the_stationary_sigma_0_matches_quadrature():
     quadrature = peak + math.log(np.trapezoid(np.trapezoid(np.exp(log_post - peak), sigmas, axis=1), rhos))
     assert evidence.raw - quadrature > 1.0
     assert evidence.log_evidence == pytest.approx(quadrature, abs=0.02)
+
+
+def test_an_indefinite_curvature_gives_an_undefined_evidence_not_an_error():
+    """A least-squares optimum whose covariance is not positive definite (a parameter
+    stalled on a bound where the posterior rises away from it; seen with the Oren-Nayar +
+    Torrance-Sparrow candidate on Lambertian rig data) has no Laplace approximation: the
+    evidence is NaN (the comparison then falls back to BIC), never a math domain error."""
+    import dataclasses
+
+    from gonio.fitting.evidence import laplace_evidence
+
+    data = _exact_plaster()
+    problem = FitProblem("oren-nayar-qualitative", data)
+    least_squares = fit_least_squares(problem)
+    priors = resolve_priors(problem, least_squares.values)
+    stalled = dataclasses.replace(least_squares, values=dict(least_squares.values, sigma=1e-7),
+                                  covariance=np.array([[-1e-6, 0.0], [0.0, -4.0]]))
+    assert math.isnan(laplace_evidence(problem, stalled, priors).log_evidence)
