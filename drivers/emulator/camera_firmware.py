@@ -9,6 +9,7 @@ from .ccd import CCDSensor, Exposure
 from .clock import SimClock
 from .monitor import LampMonitor
 from .scpi import ScpiError, ScpiInstrument, definite_length_block, expect_args, format_number, parse_number
+from .status import OPERATION_BITS, QUESTIONABLE_BITS
 from .world import Optics
 
 __all__ = ["CameraFirmware", "roi_statistics"]
@@ -48,6 +49,15 @@ def roi_statistics(frame: np.ndarray, saturated: np.ndarray, roi: tuple[int, int
 class CameraFirmware(ScpiInstrument):
     """SCPI command set of the CCD camera.
 
+    ``ACQuire`` is an overlapped command (IEEE 488.2 12): it starts the exposure and
+    returns; the exposure and its readout complete ``EXP + 50 ms`` of simulated time later.
+    Every device command sent meanwhile (a setting, ``ROI:STAT?``, ``FRAMe?``, another
+    ``ACQ``) and ``*WAI``, ``*OPC?``, ``*TST?`` wait for that moment; the status commands
+    do not, so ``STAT:OPER:COND?`` reports bit 4 (MEASuring) while the exposure runs and
+    ``*OPC`` sets the OPC event bit when it has completed.  STATus:QUEStionable bit 9 is set
+    while the ROI of the last frame holds saturated pixels; ``*TST?`` replies 1 while the
+    camera has an internal fault.
+
     Parameters
     ----------
     clock : SimClock
@@ -81,6 +91,8 @@ class CameraFirmware(ScpiInstrument):
         self.serial = serial
         self.fault = False  # side channel: an internal camera fault (ACQ fails with -200)
         self.last: Exposure | None = None
+        self.busy_until: float | None = None
+        self._saturation_cache: tuple[int, tuple[int, int, int, int], bool] | None = None
         self.reset()
         self.add("EXPosure", False, self._set_exposure)
         self.add("EXPosure", True, lambda a: self._no_args(a) or format_number(self.exposure_s))
@@ -96,7 +108,7 @@ class CameraFirmware(ScpiInstrument):
         self.add("ROI:DATA", True, self._roi_data)
         self.add("SENSe:INFO", True, self._info)
         self.add("TEMPerature", True, lambda a: self._no_args(a) or format_number(self.sensor.params.temperature_c))
-        self.add("*OPT", True, lambda a: self._no_args(a) or ("MON" if self.monitor is not None else "0"))
+        self.add("*OPT", True, lambda a: self._no_args(a) or ("MON" if self.monitor is not None else "0"), waits=False)
         if self.monitor is not None:
             self.add("MONitor", True, self._monitor)
 
@@ -109,6 +121,37 @@ class CameraFirmware(ScpiInstrument):
         self.shutter_open = True
         self.roi = (0, 0, self.optics.width, self.optics.height)
         self.last = None
+        self.busy_until = None  # *RST abandons an exposure in progress
+
+    # -- status (drivers.emulator.status) -------------------------------------------------
+    def pending_until(self) -> float | None:
+        """End of the exposure in progress (exposure + readout) [s], None when idle."""
+        return self.busy_until
+
+    def operation_condition(self) -> int:
+        """Bit 4 (MEASuring) while an exposure or its readout is in progress."""
+        exposing = self.busy_until is not None and self.clock.now() < self.busy_until
+        return (1 << OPERATION_BITS["MEASURING"]) if exposing else 0
+
+    def questionable_condition(self) -> int:
+        """Bit 9 while the ROI of the last frame holds saturated pixels."""
+        return (1 << QUESTIONABLE_BITS["DEVICE"]) if self._roi_saturated() else 0
+
+    def _roi_saturated(self) -> bool:
+        """Whether the last frame has a saturated pixel inside the ROI (cached per frame and ROI)."""
+        if self.last is None:
+            return False
+        key = (id(self.last), self.roi)
+        cache = self._saturation_cache
+        if cache is None or cache[:2] != key:
+            x0, y0, w, h = self.roi
+            cache = (*key, bool(self.last.saturated[y0:y0 + h, x0:x0 + w].any()))
+            self._saturation_cache = cache
+        return cache[2]
+
+    def self_test(self) -> int:
+        """1 while the camera has an internal fault, else 0."""
+        return 1 if self.fault else 0
 
     @staticmethod
     def _no_args(args: list[str]) -> None:
@@ -157,7 +200,7 @@ class CameraFirmware(ScpiInstrument):
         self.last = self.sensor.expose(photons, self.exposure_s, self.gain, self.rng)
         if self.monitor is not None:  # the monitor sees the lamp whatever the shutter does
             self.last_monitor_v = self.monitor.read(lamp, self.exposure_s)
-        self.clock.wait_until(t0 + self.exposure_s + self.sensor.params.readout_s)
+        self.busy_until = t0 + self.exposure_s + self.sensor.params.readout_s  # overlapped: see the class doc
 
     def _monitor(self, args: list[str]) -> str:
         expect_args(args, 0)

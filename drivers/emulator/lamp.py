@@ -157,6 +157,27 @@ class Lamp:
         warm = 1.0 - p.warmup_deficit * np.exp(-dt / p.warmup_time_constant_s)
         return float(relative_output_steady(self.voltage_setpoint_v, p) * filament * warm * (1.0 + self.drift(t)))
 
+    def settled(self, t: float, tolerance: float = 1e-3) -> bool:
+        """Whether the warm-up and the filament's rise are within ``tolerance`` of steady state at ``t``.
+
+        True once both transient terms of :meth:`output` have decayed below ``tolerance``
+        (relative): ``dt >= tau_f ln(1/tol)`` and ``dt >= tau_w ln(w/tol)`` after switch-on
+        (366 s with the defaults).  False while the output is off.
+
+        Examples
+        --------
+        >>> lamp = Lamp(); lamp.switch(True, t=0.0)
+        >>> lamp.settled(300.0), lamp.settled(400.0)
+        (False, True)
+        """
+        if not self.on:
+            return False
+        p = self.params
+        dt = t - self.switched_at
+        filament = p.filament_time_constant_s * np.log(1.0 / tolerance)
+        warm = p.warmup_time_constant_s * np.log(p.warmup_deficit / tolerance) if p.warmup_deficit > tolerance else 0.0
+        return bool(dt >= max(filament, warm))
+
     def mean_output(self, t0: float, t1: float, n: int = 9) -> float:
         """Mean of :meth:`output` over [t0, t1] (Simpson's rule on ``n`` points) [-]."""
         if t1 <= t0:

@@ -6,12 +6,19 @@ import numpy as np
 from .clock import SimClock
 from .lamp import Lamp
 from .scpi import ScpiError, ScpiInstrument, expect_args, format_number, parse_number
+from .status import OPERATION_BITS, QUESTIONABLE_BITS
 
 __all__ = ["LampFirmware"]
 
 
 class LampFirmware(ScpiInstrument):
     """SCPI command set of the lamp power supply driving a :class:`~drivers.emulator.lamp.Lamp`.
+
+    Status (docs/protocol.md, "Status reporting"): STATus:OPERation bit 1 (SETTling) while
+    the output is on and the lamp has not yet settled (:meth:`Lamp.settled
+    <drivers.emulator.lamp.Lamp.settled>`); STATus:QUEStionable bit 3 (POWer) while the output
+    is on and the light is not stable (warming up or burnt out) and bit 9 while the lamp is
+    burnt out; ``*TST?`` replies 1 for a burnt-out lamp.  No command is overlapped.
 
     Parameters
     ----------
@@ -38,6 +45,25 @@ class LampFirmware(ScpiInstrument):
         self.add("MEASure:VOLTage", True, self._measure_voltage)
         self.add("MEASure:CURRent", True, self._measure_current)
         self.add("STATus:LAMP", True, lambda a: expect_args(a, 0) or ("FAULT" if self.lamp.burnt_out else "OK"))
+        self.add("*OPT", True, lambda a: expect_args(a, 0) or "0", waits=False)
+
+    def operation_condition(self) -> int:
+        """Bit 1 (SETTling) while the output is on and the lamp is still warming up."""
+        lamp = self.lamp
+        settling = lamp.on and not lamp.burnt_out and not lamp.settled(self.clock.now())
+        return (1 << OPERATION_BITS["SETTLING"]) if settling else 0
+
+    def questionable_condition(self) -> int:
+        """Bit 3 (POWer) while the light of a lamp that is on is not stable; bit 9 while burnt out."""
+        lamp = self.lamp
+        bits = (1 << QUESTIONABLE_BITS["DEVICE"]) if lamp.burnt_out else 0
+        if lamp.on and (lamp.burnt_out or not lamp.settled(self.clock.now())):
+            bits |= 1 << QUESTIONABLE_BITS["POWER"]
+        return bits
+
+    def self_test(self) -> int:
+        """1 for a burnt-out lamp, else 0."""
+        return 1 if self.lamp.burnt_out else 0
 
     def identity(self) -> str:
         return f"GONIO,LPS-300,{self.serial},1.0"

@@ -1,11 +1,21 @@
 """Shared SCPI (IEEE 488.2) machinery of the emulated camera and lamp supply.
 
 Implements what docs/protocol.md specifies for both SCPI instruments: keyword matching in
-long and short form, ``;``-separated message units, common commands (``*IDN?``,
-``*RST``, ``*CLS``, ``*OPC?``, ``*WAI``; none takes a parameter), ``SYSTem:ERRor?`` with
-a bounded error queue, numeric parameters with ``MIN``/``MAX``/``DEF``, strict integer
-parameters, and the IEEE 488.2 rule that a failing query produces no reply (its error is
-queued).
+long and short form, ``;``-separated message units, the IEEE 488.2 mandatory common
+commands (``*IDN?``, ``*RST``, ``*CLS``, ``*ESE``, ``*ESE?``, ``*ESR?``, ``*OPC``,
+``*OPC?``, ``*SRE``, ``*SRE?``, ``*STB?``, ``*TST?``, ``*WAI``) with the status model of
+:mod:`drivers.emulator.status`, the SCPI-1999 required ``SYSTem:ERRor[:NEXT]?``,
+``SYSTem:VERSion?`` and ``STATus`` subsystem (``OPERation``, ``QUEStionable``,
+``PRESet``), a bounded error queue, numeric parameters with ``MIN``/``MAX``/``DEF``,
+strict integer parameters, and the IEEE 488.2 rule that a failing query produces no
+reply (its error is queued).
+
+Overlapped commands (IEEE 488.2 12): a subclass reports the simulated time at which its
+pending operations complete (:meth:`ScpiInstrument.pending_until`, e.g. the camera's
+exposure).  A command registered with ``waits=True`` (every device command, ``*WAI``,
+``*OPC?``, ``*TST?``) first lets that time pass; the status commands do not wait, so the
+status can be polled while an operation runs, and ``*OPC`` sets the OPC event bit when it
+completes.
 
 Every reply is printable ASCII (apart from the bytes of a definite-length block): an
 error text that quotes received input escapes each non-printable or non-ASCII character
@@ -16,21 +26,26 @@ References
 ----------
 IEEE Std 488.2-1992, sections 6.1 (message exchange), 7.7 (program data; 7.7.2 decimal
 numeric program data), 8.7.8 (string response data: an embedded double quote is doubled),
-8.7.9 (definite-length block response data), 10 (common commands, which take no
-parameters here) and 11.5 (``*OPC``); SCPI Consortium, "Standard Commands for Programmable Instruments"
+8.7.9 (definite-length block response data), 8.7.11 and 10.14 (``*IDN?`` replies
+arbitrary ASCII response data, which ends the response message: a later query of the same
+message is error -440), 10 (common commands), 11 (status reporting) and 12
+(synchronisation, ``*OPC``, ``*WAI``); SCPI Consortium, "Standard Commands for Programmable Instruments"
 1999.0, vol. 1 section 6 (keywords, short form) and vol. 2 ``SYSTem:ERRor`` (error
-queue, -350 queue overflow, description at most 255 characters) and section 21.8 (error
-numbers: -108 parameter not allowed, -104 data type error).
+queue, -350 queue overflow, description at most 255 characters; ``SYSTem:VERSion?``),
+section 20 (``STATus`` subsystem) and section 21.8 (error numbers: -108 parameter not
+allowed, -104 data type error, -440 query unterminated after indefinite response).
 """
 from __future__ import annotations
 
 import re
 from collections import deque
-from typing import Callable, Sequence
+from typing import Callable, NamedTuple, Sequence
+
+from .status import StatusModel
 
 __all__ = ["ScpiError", "ErrorQueue", "ScpiInstrument", "keyword_matches", "parse_number", "parse_integer",
            "format_number", "definite_length_block", "expect_args", "escape_nonprintable", "string_response",
-           "MAX_ERROR_DESCRIPTION"]
+           "MAX_ERROR_DESCRIPTION", "SCPI_VERSION"]
 
 #: Standard SCPI error messages used by the emulated instruments.
 MESSAGES = {
@@ -44,7 +59,15 @@ MESSAGES = {
     -221: "Settings conflict",
     -222: "Data out of range",
     -350: "Queue overflow",
+    -440: "Query UNTERMINATED after indefinite response",
 }
+
+#: ``SYSTem:VERSion?`` reply: the SCPI version the instruments comply with.
+SCPI_VERSION = "1999.0"
+#: Largest value of an IEEE 488.2 8-bit status mask (``*ESE``, ``*SRE``).
+MASK_8_BIT = 255
+#: Largest value of a SCPI 16-bit status register parameter (bit 15 is always 0).
+MASK_SCPI_REGISTER = 32767
 
 #: Longest error description (message and device-dependent detail) [characters],
 #: SCPI-1999 vol. 2 ``SYSTem:ERRor``.
@@ -147,13 +170,22 @@ class ErrorQueue:
     ('-113,"Undefined header"', '-350,"Queue overflow"', '0,"No error"')
     """
 
-    def __init__(self, size: int = 16) -> None:
+    def __init__(self, size: int = 16, on_error: Callable[[int], None] | None = None) -> None:
         self.size = size
+        self.on_error = on_error
         self._queue: deque[str] = deque()
 
     def push(self, error: ScpiError) -> None:
-        """Queue an error; when full, the newest entry becomes ``-350`` (SCPI vol. 2)."""
+        """Queue an error; when full, the newest entry becomes ``-350`` (SCPI vol. 2).
+
+        ``on_error(code)`` (the status model: the SESR bit of the error's class) is called
+        for every error, queued or not.
+        """
+        if self.on_error is not None:
+            self.on_error(error.code)
         if len(self._queue) >= self.size:
+            if self.on_error is not None:
+                self.on_error(-350)  # a device-specific error (-300 class): DDE
             self._queue[-1] = ScpiError(-350).text()
             return
         self._queue.append(error.text())
@@ -281,6 +313,16 @@ def definite_length_block(payload: bytes) -> bytes:
 Handler = Callable[[list[str]], "str | bytes | None"]
 
 
+class _Command(NamedTuple):
+    """A registered command: accepted tokens per keyword, query form, handler, whether it waits."""
+
+    keywords: tuple[frozenset[str], ...]
+    query: bool
+    handler: Handler
+    waits: bool
+    header: str
+
+
 def _without_parameters(action: Callable[[], "str | None"]) -> Handler:
     """Handler of a command that takes no parameter: any parameter is -108 (IEEE 488.2, 10)."""
     def handler(args: list[str]) -> "str | None":
@@ -299,25 +341,46 @@ def _reply_bytes(reply: "str | bytes") -> bytes:
 
 
 class ScpiInstrument:
-    """Base class of a SCPI instrument firmware: parse lines, dispatch, queue errors.
+    """Base class of a SCPI instrument firmware: parse lines, dispatch, queue errors, report status.
 
-    Subclasses register commands with :meth:`add` and implement :meth:`reset` and
-    :meth:`identity`.  :meth:`handle_line` returns the complete reply (with its LF
-    terminator) or ``b""`` when the line holds no successful query.
+    Subclasses register commands with :meth:`add`, set ``self.clock`` (a
+    :class:`~drivers.emulator.clock.SimClock`) and implement :meth:`reset` and
+    :meth:`identity`; they may override :meth:`pending_until`,
+    :meth:`operation_condition`, :meth:`questionable_condition` and :meth:`self_test`.
+    :meth:`handle_line` returns the complete reply (with its LF terminator) or ``b""`` when
+    the line holds no successful query.
     """
 
     reply_terminator = b"\n"
+    clock = None  # set by the subclass
 
     def __init__(self) -> None:
-        self.errors = ErrorQueue()
-        self._commands: list[tuple[tuple[frozenset[str], ...], bool, Handler]] = []
-        self.add("*IDN", True, _without_parameters(lambda: self.identity()))
-        self.add("*RST", False, _without_parameters(lambda: self.reset()))
-        self.add("*CLS", False, _without_parameters(self.errors.clear))
-        self.add("*OPC", True, _without_parameters(lambda: "1"))
-        self.add("*WAI", False, _without_parameters(lambda: None))
-        self.add("SYSTem:ERRor", True, _without_parameters(self.errors.pop))
-        self.add("SYSTem:ERRor:NEXT", True, _without_parameters(self.errors.pop))
+        self.status = StatusModel()
+        self.errors = ErrorQueue(on_error=self.status.record_error)
+        self._commands: list[_Command] = []
+        self._replies_waiting = False
+        self._indefinite_reply = False
+        self.add("*IDN", True, _without_parameters(self._identify), waits=False)
+        self.add("*RST", False, _without_parameters(self._reset_command), waits=False)
+        self.add("*CLS", False, _without_parameters(self._clear_status), waits=False)
+        self.add("*ESE", False, self._set_mask("ESE", "ese"), waits=False)
+        self.add("*ESE", True, _without_parameters(lambda: str(self.status.ese)), waits=False)
+        self.add("*ESR", True, _without_parameters(lambda: str(self.status.read_esr())), waits=False)
+        self.add("*SRE", False, self._set_mask("SRE", "sre"), waits=False)
+        self.add("*SRE", True, _without_parameters(lambda: str(self.status.sre)), waits=False)
+        self.add("*STB", True, _without_parameters(self._status_byte), waits=False)
+        self.add("*OPC", False, _without_parameters(self._arm_opc), waits=False)
+        self.add("*OPC", True, _without_parameters(lambda: "1"), waits=True)
+        self.add("*WAI", False, _without_parameters(lambda: None), waits=True)
+        self.add("*TST", True, _without_parameters(lambda: str(self.self_test())), waits=True)
+        self.add("SYSTem:ERRor", True, _without_parameters(self.errors.pop), waits=False)
+        self.add("SYSTem:ERRor:NEXT", True, _without_parameters(self.errors.pop), waits=False)
+        self.add("SYSTem:ERRor:COUNt", True, _without_parameters(lambda: str(len(self.errors))), waits=False)
+        self.add("SYSTem:VERSion", True, _without_parameters(lambda: SCPI_VERSION), waits=False)
+        for name, register in (("OPERation", self.status.operation), ("QUEStionable", self.status.questionable)):
+            self._add_register(name, register)
+        self.add("STATus:PRESet", False, _without_parameters(self.status.preset), waits=False)
+        self.add("SIMulation:TIME", True, _without_parameters(lambda: f"{self.clock.now():.6f}"), waits=False)
 
     # -- to override -------------------------------------------------------------------
     def identity(self) -> str:  # pragma: no cover - overridden
@@ -326,6 +389,98 @@ class ScpiInstrument:
     def reset(self) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
+    def pending_until(self) -> float | None:
+        """Simulated time at which the pending overlapped operations complete, None if none [s]."""
+        return None
+
+    def operation_condition(self) -> int:
+        """The live STATus:OPERation condition bits (0: nothing in progress)."""
+        return 0
+
+    def questionable_condition(self) -> int:
+        """The live STATus:QUEStionable condition bits (0: nothing questionable)."""
+        return 0
+
+    def self_test(self) -> int:
+        """``*TST?`` result: 0 when the self-test passes (IEEE 488.2 10.38)."""
+        return 0
+
+    # -- status ------------------------------------------------------------------------
+    def _pending(self) -> bool:
+        """Whether an overlapped operation is still running at the current simulated time."""
+        until = self.pending_until()
+        return until is not None and until > self.clock.now()
+
+    def refresh_status(self) -> None:
+        """Bring the status registers up to the current simulated time.
+
+        An operation that completed sets the OPC bit of an armed ``*OPC``; the OPERation
+        and QUEStionable conditions are re-read and their transitions latched.
+        """
+        if not self._pending():
+            self.status.operations_completed()
+        self.status.operation.update(self.operation_condition())
+        self.status.questionable.update(self.questionable_condition())
+
+    def complete_pending(self) -> None:
+        """Let simulated time pass until the pending overlapped operations have completed."""
+        until = self.pending_until()
+        if until is not None and until > self.clock.now():
+            self.clock.wait_until(until)
+        self.refresh_status()
+
+    def _identify(self) -> str:
+        self._indefinite_reply = True  # arbitrary ASCII response data (IEEE 488.2 10.14)
+        return self.identity()
+
+    def _reset_command(self) -> None:
+        """``*RST``: device settings to their defaults, an armed ``*OPC`` cancelled."""
+        self.reset()
+        self.status.reset()
+
+    def _clear_status(self) -> None:
+        """``*CLS``: error queue, SESR and event registers cleared (IEEE 488.2 10.3)."""
+        self.errors.clear()
+        self.status.clear()
+
+    def _arm_opc(self) -> None:
+        self.status.arm_opc(self._pending())
+
+    def _status_byte(self) -> str:
+        return str(self.status.status_byte(error_queue_empty=len(self.errors) == 0,
+                                           message_available=self._replies_waiting))
+
+    def _set_mask(self, name: str, attribute: str) -> Handler:
+        """Handler of ``*ESE <n>`` / ``*SRE <n>``: 0..255, rounded to an integer (IEEE 488.2 10.10, 10.34)."""
+        def handler(args: list[str]) -> None:
+            expect_args(args, 1)
+            value = int(round(parse_number(args[0], name, 0, MASK_8_BIT, 0)))
+            if attribute == "sre":
+                value &= ~(1 << 6)  # bit 6 of the SRE is ignored (IEEE 488.2 11.3.2.3)
+            setattr(self.status, attribute, value)
+        return handler
+
+    def _add_register(self, name: str, register) -> None:
+        """The SCPI commands of one status register (SCPI-1999 vol. 2, 20)."""
+        prefix = f"STATus:{name}"
+        read_event = _without_parameters(lambda: str(register.read_event()))
+        self.add(prefix, True, read_event, waits=False)
+        self.add(f"{prefix}:EVENt", True, read_event, waits=False)
+        self.add(f"{prefix}:CONDition", True, _without_parameters(lambda: str(register.condition)), waits=False)
+        for keyword, attribute in (("ENABle", "enable"), ("PTRansition", "ptr"), ("NTRansition", "ntr")):
+            self.add(f"{prefix}:{keyword}", False, self._register_setter(f"{prefix}:{keyword}", register, attribute),
+                     waits=False)
+            self.add(f"{prefix}:{keyword}", True,
+                     _without_parameters(lambda attribute=attribute: str(getattr(register, attribute))), waits=False)
+
+    @staticmethod
+    def _register_setter(header: str, register, attribute: str) -> Handler:
+        def handler(args: list[str]) -> None:
+            expect_args(args, 1)
+            value = int(round(parse_number(args[0], header, 0, MASK_SCPI_REGISTER, 0)))
+            setattr(register, attribute, value)
+        return handler
+
     # -- parameter parsing for subclasses -------------------------------------------------
     @staticmethod
     def parse_integer(text: str, name: str) -> int:
@@ -333,17 +488,22 @@ class ScpiInstrument:
         return parse_integer(text, name)
 
     # -- registration and dispatch ----------------------------------------------------
-    def add(self, header: str, query: bool, handler: Handler) -> None:
-        """Register ``header`` (keywords joined by ``:``, long form with short part in capitals)."""
-        self._commands.append((tuple(_accepted_tokens(k) for k in header.split(":")), query, handler))
+    def add(self, header: str, query: bool, handler: Handler, waits: bool = True) -> None:
+        """Register ``header`` (keywords joined by ``:``, long form with short part in capitals).
 
-    def _find(self, header: str, query: bool) -> Handler:
+        ``waits``: let the pending overlapped operations complete before the command runs
+        (every device command; the status and common commands do not wait).
+        """
+        keywords = tuple(_accepted_tokens(k) for k in header.split(":"))
+        self._commands.append(_Command(keywords, query, handler, waits, header))
+
+    def _find(self, header: str, query: bool) -> _Command:
         tokens = header.lstrip(":").upper().split(":")
-        for keywords, is_query, handler in self._commands:
-            if is_query != query or len(keywords) != len(tokens):
+        for command in self._commands:
+            if command.query != query or len(command.keywords) != len(tokens):
                 continue
-            if all(token in accepted for token, accepted in zip(tokens, keywords)):
-                return handler
+            if all(token in accepted for token, accepted in zip(tokens, command.keywords)):
+                return command
         raise ScpiError(-113, f"{header}{'?' if query else ''}")
 
     def execute_unit(self, unit: str) -> str | bytes | None:
@@ -354,15 +514,25 @@ class ScpiInstrument:
             raise ScpiError(-100, f"'{unit[:40]}'")
         header, question, rest = match.group(1), bool(match.group(2)), match.group(3)
         args = [a.strip() for a in rest.split(",")] if rest is not None and rest.strip() else []
-        handler = self._find(header, question)
-        return handler(args)
+        command = self._find(header, question)
+        if question and self._indefinite_reply:  # IEEE 488.2 8.7.11: nothing may follow *IDN?'s reply
+            raise ScpiError(-440, f"{header}? after *IDN?")
+        if command.waits:
+            self.complete_pending()
+        else:
+            self.refresh_status()
+        reply = command.handler(args)
+        self.refresh_status()  # sample the conditions the command changed (an exposure started)
+        return reply
 
     def handle_line(self, line: str) -> bytes:
         """Process one received line; return the reply bytes (possibly empty)."""
         replies: list[bytes] = []
+        self._indefinite_reply = False
         for unit in line.split(";"):
             if not unit.strip():
                 continue
+            self._replies_waiting = bool(replies)
             try:
                 reply = self.execute_unit(unit)
             except ScpiError as error:
@@ -373,6 +543,7 @@ class ScpiInstrument:
                 continue
             if reply is not None:
                 replies.append(_reply_bytes(reply))
+        self._replies_waiting = False
         if not replies:
             return b""
         return b";".join(replies) + self.reply_terminator

@@ -82,8 +82,12 @@ def test_error_queue_overflow_reports_minus_350(rig):
 def test_acq_takes_exposure_plus_readout_in_simulated_time(rig):
     t0 = rig.control.now()
     ask(rig, "camera", "EXP 0.5;ACQ")
-    # 0.5 s exposure + 50 ms readout + 12 bytes at 115200 baud (1 ms).
-    assert rig.control.now() - t0 == pytest.approx(0.55 + 12 * 10 / 115200, abs=1e-6)
+    # ACQ is overlapped: the line returns after its transfer time, 12 bytes at 115200 baud.
+    assert rig.control.now() - t0 == pytest.approx(12 * 10 / 115200, abs=1e-9)
+    # The next device command waits for the 0.5 s exposure and the 50 ms readout, then its
+    # own 5 + 2 bytes ("EXP?" + LF, "0.5" + LF ... = 5 in, 4 out) take their transfer time.
+    assert ask(rig, "camera", "EXP?") == "0.5\n"
+    assert rig.control.now() - t0 == pytest.approx(0.55 + 9 * 10 / 115200, abs=1e-9)
 
 
 def test_frame_block_matches_roi_statistics(rig):
