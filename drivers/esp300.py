@@ -295,6 +295,14 @@ class ESP300:
         """Set the acceleration (``xxACnn``) [units/s^2]."""
         self.send(f"{self._axis(axis)}AC{value:.6g}")
 
+    def deceleration(self, axis: int) -> float:
+        """Programmed deceleration of moves and stops (``xxAG?``) [units/s^2]."""
+        return self.ask(f"{self._axis(axis)}AG?", float)
+
+    def set_deceleration(self, axis: int, value: float) -> None:
+        """Set the deceleration (``xxAGnn``) [units/s^2]."""
+        self.send(f"{self._axis(axis)}AG{value:.6g}")
+
     # -- motors -----------------------------------------------------------------------------
     def motor_on(self, axis: int) -> None:
         """Power the motor of an axis (``xxMO``)."""

@@ -284,7 +284,7 @@ class Rig:
             self.stage.motor_on(axis)
             self.limits[axis] = self.stage.travel_limits(axis)
             self._velocity[axis] = self.stage.velocity(axis)
-            self._acceleration[axis] = self.stage.acceleration(axis)
+            self._acceleration[axis] = min(self.stage.acceleration(axis), self.stage.deceleration(axis))
             self.encoder_resolution[axis] = self.stage.encoder_resolution(axis)
         self._targets = {a: self.stage.desired_position(a) for a in AXES}
         self.info = self.camera.sensor_info()
@@ -432,8 +432,10 @@ class Rig:
     def set_motion(self, velocity: float | None = None, acceleration: float | None = None) -> None:
         """Program every stage axis with one velocity [deg/s] and/or acceleration [deg/s^2].
 
-        ``None`` leaves the controller's setting. The controller refuses values above an
-        axis's maximum (``x10``/``x11``), which raises :class:`StageError`.
+        The acceleration is programmed as both the acceleration (``AC``) and the
+        deceleration (``AG``) of the moves. ``None`` leaves the controller's setting. The
+        controller refuses values above an axis's maximum (``x10``/``x11``), which raises
+        :class:`StageError`.
         """
         for axis in AXES:
             if velocity is not None:
@@ -441,7 +443,8 @@ class Rig:
                 self._velocity[axis] = self.stage.velocity(axis)
             if acceleration is not None:
                 self.stage.set_acceleration(axis, float(acceleration))
-                self._acceleration[axis] = self.stage.acceleration(axis)
+                self.stage.set_deceleration(axis, float(acceleration))
+                self._acceleration[axis] = min(self.stage.acceleration(axis), self.stage.deceleration(axis))
 
     # -- geometry -------------------------------------------------------------------------
     def _require_initialized(self) -> None:

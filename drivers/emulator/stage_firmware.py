@@ -28,8 +28,9 @@ import numpy as np
 
 from .clock import SimClock
 
-__all__ = ["AxisConfig", "DEFAULT_AXES", "MotionProfile", "trapezoid_profile", "move_duration", "Esp300Firmware",
-           "GENERAL_ERRORS", "AXIS_ERRORS", "MAX_WS_DELAY_MS", "RATE_REFERENCE_TIME_S"]
+__all__ = ["AxisConfig", "DEFAULT_AXES", "MotionProfile", "trapezoid_profile", "move_duration", "crossing_time",
+           "Esp300Firmware", "GENERAL_ERRORS", "AXIS_ERRORS", "MAX_WS_DELAY_MS", "RATE_REFERENCE_TIME_S",
+           "ANGULAR_UNITS", "MAX_COMMAND_LINE"]
 
 #: General (non-axis) error messages, ESP300 manual Appendix A.
 GENERAL_ERRORS = {
@@ -89,6 +90,8 @@ class AxisConfig:
     max_acceleration: float
     resolution: float = 0.001
     repeatability: float = 0.002
+    model: str = "GONIO-ROT"
+    serial_number: str = "SN0001"
 
     @property
     def min_velocity(self) -> float:
@@ -110,10 +113,22 @@ class AxisConfig:
 
 
 DEFAULT_AXES = (
-    AxisConfig(1, "camera swing", 0.0, (-90.0, 90.0), (-95.0, 95.0), 10.0, 20.0, 20.0, 80.0),
-    AxisConfig(2, "lamp polar angle", 45.0, (0.0, 90.0), (-3.0, 93.0), 15.0, 30.0, 30.0, 120.0),
-    AxisConfig(3, "lamp azimuth", 0.0, (-180.0, 180.0), (-185.0, 185.0), 20.0, 40.0, 40.0, 160.0),
+    AxisConfig(1, "camera swing", 0.0, (-90.0, 90.0), (-95.0, 95.0), 10.0, 20.0, 20.0, 80.0,
+               model="GONIO-SWING", serial_number="SN0101"),
+    AxisConfig(2, "lamp polar angle", 45.0, (0.0, 90.0), (-3.0, 93.0), 15.0, 30.0, 30.0, 120.0,
+               model="GONIO-POLAR", serial_number="SN0102"),
+    AxisConfig(3, "lamp azimuth", 0.0, (-180.0, 180.0), (-185.0, 185.0), 20.0, 40.0, 40.0, 160.0,
+               model="GONIO-AZIMUTH", serial_number="SN0103"),
 )
+
+#: ``SN`` unit codes accepted by the rotary axes and their size [deg per unit]; 0 (encoder
+#: count) is the axis's resolution.  The linear units 1 to 6 (motor step, millimetre to
+#: micro-inch) do not apply to a rotary DC-servo stage and are refused with x01.
+ANGULAR_UNITS = {0: None, 7: 1.0, 8: 0.9, 9: 180.0 / math.pi, 10: 0.18 / math.pi, 11: 1.8e-4 / math.pi}
+
+#: Longest command line [characters, terminator excluded], manual 3.4.1 p. 3-8 ("The maximum
+#: number of characters allowed on a command line is 80").
+MAX_COMMAND_LINE = 80
 
 
 @dataclass(frozen=True)
@@ -158,11 +173,13 @@ def _check_motion(name: str, value: float, positive: bool) -> None:
         raise ValueError(f"{name} must be {condition}, got {value!r}")
 
 
-def move_duration(distance: float, velocity: float, acceleration: float) -> float:
+def move_duration(distance: float, velocity: float, acceleration: float, deceleration: float | None = None) -> float:
     """Duration of a point-to-point move from rest to rest [s].
 
-    Trapezoidal profile ``d/v + v/a`` when the axis reaches ``v`` (``d >= v^2/a``),
-    otherwise triangular ``2 sqrt(d/a)``.
+    Trapezoidal profile ``d/v + v/(2a) + v/(2b)`` when the axis reaches ``v``
+    (``d >= v^2/(2a) + v^2/(2b)``), otherwise triangular ``sqrt(2d (a + b) / (a b))``;
+    ``b`` is the deceleration (default: the acceleration, giving ``d/v + v/a`` and
+    ``2 sqrt(d/a)``).
 
     Parameters
     ----------
@@ -171,7 +188,9 @@ def move_duration(distance: float, velocity: float, acceleration: float) -> floa
     velocity : float
         Programmed velocity [deg/s], finite and > 0.
     acceleration : float
-        Acceleration and deceleration [deg/s^2], finite and > 0.
+        Acceleration [deg/s^2], finite and > 0.
+    deceleration : float, optional
+        Deceleration [deg/s^2], finite and > 0 (default: ``acceleration``).
 
     Raises
     ------
@@ -183,20 +202,26 @@ def move_duration(distance: float, velocity: float, acceleration: float) -> floa
     --------
     >>> move_duration(30.0, 10.0, 20.0), move_duration(1.25, 10.0, 20.0)
     (3.5, 0.5)
+    >>> move_duration(30.0, 10.0, 20.0, 10.0)   # slower deceleration: 0.25 s longer
+    3.75
     """
+    deceleration = acceleration if deceleration is None else deceleration
     _check_motion("distance", distance, positive=False)
     _check_motion("velocity", velocity, positive=True)
     _check_motion("acceleration", acceleration, positive=True)
+    _check_motion("deceleration", deceleration, positive=True)
     d = abs(distance)
-    if d >= velocity * velocity / acceleration:
-        duration = d / velocity + velocity / acceleration
+    ramps = 0.5 * velocity * velocity * (1.0 / acceleration + 1.0 / deceleration)
+    if d >= ramps:
+        duration = (d - ramps) / velocity + velocity / acceleration + velocity / deceleration
     else:
-        duration = 2.0 * math.sqrt(d / acceleration)
+        duration = math.sqrt(2.0 * d * (acceleration + deceleration) / (acceleration * deceleration))
     _check_motion("the duration of the move", duration, positive=False)  # e.g. a denormal rate
     return duration
 
 
-def trapezoid_profile(t0: float, start: float, end: float, velocity: float, acceleration: float) -> MotionProfile:
+def trapezoid_profile(t0: float, start: float, end: float, velocity: float, acceleration: float,
+                      deceleration: float | None = None) -> MotionProfile:
     """Rest-to-rest move from ``start`` to ``end`` [deg] beginning at ``t0`` [s] (see :func:`move_duration`).
 
     Raises
@@ -204,31 +229,65 @@ def trapezoid_profile(t0: float, start: float, end: float, velocity: float, acce
     ValueError
         If a time, position or rate is not finite or a rate is not positive.
     """
+    deceleration = acceleration if deceleration is None else deceleration
     for name, value in (("t0", t0), ("start", start), ("end", end)):
         _check_motion(name, value, positive=False)
     _check_motion("velocity", velocity, positive=True)
     _check_motion("acceleration", acceleration, positive=True)
+    _check_motion("deceleration", deceleration, positive=True)
     d = end - start
     s = 1.0 if d >= 0 else -1.0
     dist = abs(d)
     if dist == 0.0:
         return MotionProfile(((t0, start, 0.0, 0.0, 0.0),))
-    if dist >= velocity * velocity / acceleration:
-        t_acc = velocity / acceleration
-        t_flat = dist / velocity - t_acc
+    ramps = 0.5 * velocity * velocity * (1.0 / acceleration + 1.0 / deceleration)
+    if dist >= ramps:
         v_peak = velocity
+        t_flat = (dist - ramps) / velocity
     else:
-        t_acc = math.sqrt(dist / acceleration)
+        v_peak = math.sqrt(2.0 * dist * acceleration * deceleration / (acceleration + deceleration))
         t_flat = 0.0
-        v_peak = acceleration * t_acc
-    _check_motion("the duration of the move", t0 + 2 * t_acc + t_flat, positive=False)  # e.g. a denormal rate
+    t_acc, t_dec = v_peak / acceleration, v_peak / deceleration
+    _check_motion("the duration of the move", t0 + t_acc + t_flat + t_dec, positive=False)  # e.g. a denormal rate
     p1 = start + s * 0.5 * acceleration * t_acc * t_acc
     p2 = p1 + s * v_peak * t_flat
     return MotionProfile((
         (t0, start, 0.0, s * acceleration, t_acc),
         (t0 + t_acc, p1, s * v_peak, 0.0, t_flat),
-        (t0 + t_acc + t_flat, p2, s * v_peak, -s * acceleration, t_acc),
+        (t0 + t_acc + t_flat, p2, s * v_peak, -s * deceleration, t_dec),
     ))
+
+
+def crossing_time(profile: MotionProfile, position: float, after: float) -> float | None:
+    """First time >= ``after`` at which ``profile`` passes ``position`` [s], None if it never does.
+
+    Examples
+    --------
+    >>> move = trapezoid_profile(0.0, 0.0, 30.0, 10.0, 20.0)
+    >>> round(crossing_time(move, 15.0, 0.0), 6)       # half way of a symmetric move
+    1.75
+    >>> crossing_time(move, 40.0, 0.0) is None
+    True
+    """
+    best = None
+    for t0, p0, v0, a, duration in profile.segments:
+        lo = max(after - t0, 0.0)
+        if lo > duration:
+            continue
+        c = p0 - position
+        if a == 0.0:
+            roots = [-c / v0] if v0 != 0.0 else ([lo] if c == 0.0 else [])
+        else:
+            disc = v0 * v0 - 2.0 * a * c
+            if disc < 0:
+                continue
+            r = math.sqrt(disc)
+            roots = [(-v0 - r) / a, (-v0 + r) / a]
+        valid = [t0 + dt for dt in roots if lo - 1e-12 <= dt <= duration + 1e-12]
+        if valid:
+            best = min(valid)
+            break
+    return best
 
 
 def stop_profile(t0: float, position: float, velocity: float, acceleration: float) -> MotionProfile:
@@ -257,18 +316,36 @@ class AxisState:
     motor_on: bool = False
     velocity: float = 0.0
     acceleration: float = 0.0
+    deceleration: float = 0.0
+    estop_deceleration: float = 0.0
+    max_velocity: float = 0.0
+    max_acceleration: float = 0.0
+    homing_velocity: float = 0.0
     left_limit: float = 0.0
     right_limit: float = 0.0
     desired: float = 0.0
+    offset: float = 0.0  # controller position minus mechanical angle [deg] (DH, OR)
+    home_preset: float = 0.0  # position the home switch is given by OR (DH) [deg]
+    units: int = 7
     profile: MotionProfile = field(default=None)  # type: ignore[assignment]
     pending_error: int | None = None  # queued when the current motion ends
 
     def __post_init__(self) -> None:
         c = self.config
-        self.velocity, self.acceleration = c.velocity, c.acceleration
+        self.velocity, self.acceleration, self.deceleration = c.velocity, c.acceleration, c.acceleration
+        self.estop_deceleration = c.max_acceleration
+        self.max_velocity, self.max_acceleration = c.max_velocity, c.max_acceleration
+        self.homing_velocity = c.velocity
         self.left_limit, self.right_limit = c.software_limits
         self.desired = c.home
+        self.home_preset = c.home
         self.profile = MotionProfile(((0.0, c.home, 0.0, 0.0, 0.0),))
+
+    @property
+    def unit_size(self) -> float:
+        """Size of the axis's display unit (``SN``) [deg]."""
+        size = ANGULAR_UNITS[self.units]
+        return self.config.resolution if size is None else size
 
     def position(self, t: float) -> float:
         return self.profile.position(t)
@@ -277,13 +354,13 @@ class AxisState:
         return t < self.profile.end_time
 
     def target(self) -> float:
-        """Where the axis will be at rest (true end point of the current motion)."""
+        """Where the axis will be at rest (true mechanical end point of the current motion) [deg]."""
         return self.profile.position(self.profile.end_time)
 
     def encoder_reading(self, t: float) -> float:
-        """Position at time ``t`` as the encoder reads it: rounded to the resolution [deg]."""
+        """Controller position at time ``t`` as the encoder reads it: rounded to the resolution [deg]."""
         res = self.config.resolution
-        return round(self.position(t) / res) * res
+        return round((self.position(t) + self.offset) / res) * res
 
 
 class _EspError(Exception):
@@ -382,7 +459,14 @@ class Esp300Firmware:
 
     # -- line handling ----------------------------------------------------------------
     def handle_line(self, line: str) -> bytes:
-        """Process one command line; return the reply bytes (one CR LF line per query)."""
+        """Process one command line; return the reply bytes (one CR LF line per query).
+
+        A line longer than :data:`MAX_COMMAND_LINE` characters (manual 3.4.1) executes
+        nothing and queues error 6.
+        """
+        if len(line) > MAX_COMMAND_LINE:
+            self._push(6)
+            return b""
         replies: list[str] = []
         for command in line.split(";"):
             command = _BLANKS.sub("", command)
@@ -426,6 +510,15 @@ class Esp300Firmware:
             raise _EspError(100 * axis.config.number + 1 if axis else 7)
         return float(text)
 
+    def _quantity(self, text: str, axis: AxisState) -> float:
+        """An axis parameter in the axis's units (``SN``), as degrees (or deg/s, deg/s^2)."""
+        return self._number(text, axis) * axis.unit_size
+
+    @staticmethod
+    def _out(axis: AxisState, degrees: float) -> str:
+        """A quantity in degrees as the axis reports it: in its units, 5 decimals."""
+        return _fmt(degrees / axis.unit_size)
+
     def _execute(self, command: str) -> str | None:
         match = _COMMAND.match(command)
         if not match:
@@ -460,16 +553,44 @@ class Esp300Firmware:
             raise _EspError(6)
         return VERSION
 
+    def _cmd_ID(self, digits, rest, query):
+        """Stage model and serial number (manual p. 3-86): ``xxID?`` -> ``<model>, <serial>``."""
+        if not query:
+            raise _EspError(6)
+        config = self._axis(digits).config
+        return f"{config.model}, {config.serial_number}"
+
+    def _cmd_RS(self, digits, rest, query):
+        """Reset the controller: every axis stops at once, power-on state (manual command RS).
+
+        The axes keep their mechanical positions; the coordinates return to the power-on
+        ones (``DH`` and ``SN`` reset), motors are off and the error buffer is empty.
+        """
+        if query or rest or digits:
+            raise _EspError(6)
+        t = self.clock.now()
+        for number, axis in list(self.axes.items()):
+            fresh = AxisState(axis.config)
+            position = axis.position(t)
+            fresh.profile = MotionProfile(((t, position, 0.0, 0.0, 0.0),))
+            fresh.desired = round(position / axis.config.resolution) * axis.config.resolution
+            self.axes[number] = fresh
+        self.errors.clear()
+        self.limit_faults.clear()
+        return None
+
     # -- axis queries -----------------------------------------------------------------
     def _cmd_TP(self, digits, rest, query):
         if not query:
             raise _EspError(6)
-        return _fmt(self._axis(digits).encoder_reading(self.clock.now()))
+        axis = self._axis(digits)
+        return self._out(axis, axis.encoder_reading(self.clock.now()))
 
     def _cmd_DP(self, digits, rest, query):
         if not query:
             raise _EspError(6)
-        return _fmt(self._axis(digits).desired)
+        axis = self._axis(digits)
+        return self._out(axis, axis.desired)
 
     def _cmd_MD(self, digits, rest, query):
         if not query:
@@ -505,46 +626,58 @@ class Esp300Firmware:
         return None
 
     # -- moves ------------------------------------------------------------------------
-    def _start_move(self, axis: AxisState, target: float) -> None:
-        t = self.clock.now()
+    def _check_move(self, axis: AxisState, target: float, software_limits: bool = True) -> None:
+        """Refuse a move of ``axis`` to the controller position ``target`` [deg] (see docs/protocol.md)."""
         n = axis.config.number
         if not axis.motor_on:
             raise _EspError(100 * n + 13)
-        if axis.moving(t):
+        if axis.moving(self.clock.now()):
             raise _EspError(27)
-        if target > axis.right_limit:
+        if software_limits and target > axis.right_limit:
             raise _EspError(100 * n + 6)
-        if target < axis.left_limit:
+        if software_limits and target < axis.left_limit:
             raise _EspError(100 * n + 7)
         if self.interlock is not None:
             ends = [a.target() for _, a in sorted(self.axes.items())]
-            ends[n - 1] = target
+            ends[n - 1] = target - axis.offset
             if not self.interlock(tuple(ends)):
                 raise _EspError(100 * n + 29)
+
+    def _start_move(self, axis: AxisState, target: float, velocity: float | None = None) -> None:
+        """Move ``axis`` to the controller position ``target`` [deg] at ``velocity`` (default ``VA``)."""
+        self._check_move(axis, target)
+        t = self.clock.now()
+        n = axis.config.number
         start = axis.position(t)
-        end = target + axis.config.repeatability * float(self.rng.standard_normal())
+        end = target - axis.offset + axis.config.repeatability * float(self.rng.standard_normal())
         if n in self.limit_faults:  # injected: a limit switch trips half way
             self.limit_faults.discard(n)
-            end = start + 0.5 * (target - start)
-            axis.pending_error = 100 * n + (4 if target >= start else 5)
+            end = start + 0.5 * (target - axis.offset - start)
+            axis.pending_error = 100 * n + (4 if end >= start else 5)
         axis.desired = target
-        axis.profile = trapezoid_profile(t, start, end, axis.velocity, axis.acceleration)
+        axis.profile = trapezoid_profile(t, start, end, velocity or axis.velocity, axis.acceleration,
+                                         axis.deceleration)
 
     def _cmd_PA(self, digits, rest, query):
         axis = self._axis(digits)
         if query:
-            return _fmt(axis.desired)
-        self._start_move(axis, self._number(rest, axis))
+            return self._out(axis, axis.desired)
+        self._start_move(axis, self._quantity(rest, axis))
         return None
 
     def _cmd_PR(self, digits, rest, query):
         axis = self._axis(digits)
         if query:
             raise _EspError(6)
-        self._start_move(axis, axis.desired + self._number(rest, axis))
+        self._start_move(axis, axis.desired + self._quantity(rest, axis))
         return None
 
     def _cmd_OR(self, digits, rest, query):
+        """Home search: move to the home switch at the homing velocity ``OH``.
+
+        The home switch (the axis's mechanical home) is given the position set with ``DH``
+        (power-on: the home angle itself), from this command on.
+        """
         axis = self._axis(digits)
         if query:
             raise _EspError(6)
@@ -552,18 +685,57 @@ class Esp300Firmware:
             mode = self._number(rest, axis)
             if mode not in (0, 1, 2, 3, 4, 5, 6):
                 raise _EspError(100 * axis.config.number + 1)
-        self._start_move(axis, axis.config.home)
+        previous, axis.offset = axis.offset, axis.home_preset - axis.config.home
+        try:
+            self._start_move(axis, axis.home_preset, axis.homing_velocity)
+        except _EspError:
+            axis.offset = previous  # a refused home search changes nothing
+            raise
         return None
 
+    def _cmd_DH(self, digits, rest, query):
+        """Define home: the current position becomes ``nn`` (default 0) [units]; ``DH?`` reads it back.
+
+        Refused with 27 while the axis moves.  Software limits keep their values in the new
+        coordinates.
+        """
+        axis = self._axis(digits)
+        if query:
+            return self._out(axis, axis.home_preset)
+        value = self._quantity(rest, axis) if rest else 0.0
+        t = self.clock.now()
+        if axis.moving(t):
+            raise _EspError(27)
+        shift = value - axis.encoder_reading(t)
+        axis.offset += shift
+        axis.desired += shift
+        axis.home_preset = value
+        return None
+
+    def _stop(self, axes: list[AxisState], deceleration_of: Callable[[AxisState], float]) -> None:
+        t = self.clock.now()
+        for axis in axes:
+            if axis.moving(t):
+                axis.profile = stop_profile(t, axis.position(t), axis.profile.velocity(t), deceleration_of(axis))
+                axis.desired = axis.target() + axis.offset
+                axis.pending_error = None
+
     def _cmd_ST(self, digits, rest, query):
+        """Stop axis ``xx`` (all axes without ``xx``) with its deceleration ``AG``."""
         if query or rest:
             raise _EspError(6)
-        t = self.clock.now()
-        for axis in self._targets(digits):
-            if axis.moving(t):
-                axis.profile = stop_profile(t, axis.position(t), axis.profile.velocity(t), axis.acceleration)
-                axis.desired = axis.target()
-                axis.pending_error = None
+        self._stop(self._targets(digits), lambda axis: axis.deceleration)
+        return None
+
+    def _cmd_AB(self, digits, rest, query):
+        """Abort motion: every axis stops with its e-stop deceleration ``AE`` and its motor is
+        switched off (a software emergency stop; an axis prefix is ignored)."""
+        if query or rest:
+            raise _EspError(6)
+        axes = list(self.axes.values())
+        self._stop(axes, lambda axis: axis.estop_deceleration)
+        for axis in axes:
+            axis.motor_on = False
         return None
 
     def _cmd_WS(self, digits, rest, query):
@@ -581,13 +753,29 @@ class Esp300Firmware:
         self._update(self.clock.now())
         return None
 
+    def _cmd_WP(self, digits, rest, query):
+        """Wait for position: hold command processing until axis ``xx`` passes ``nn`` [units].
+
+        A real controller waits for ever for a position its axis never reaches; the
+        emulator waits until the axis has stopped instead (every wait stays finite).
+        """
+        axis = self._axis(digits)
+        if query:
+            raise _EspError(6)
+        target = self._quantity(rest, axis) - axis.offset
+        t = self.clock.now()
+        when = crossing_time(axis.profile, target, t)
+        self.clock.wait_until(axis.profile.end_time if when is None else max(when, t))
+        self._update(self.clock.now())
+        return None
+
     # -- settings ---------------------------------------------------------------------
     def _setting(self, digits: str, rest: str, query: bool, attribute: str,
                  check: Callable[[AxisState, float], None]) -> str | None:
         axis = self._axis(digits)
         if query:
-            return _fmt(getattr(axis, attribute))
-        value = self._number(rest, axis)
+            return self._out(axis, getattr(axis, attribute))
+        value = self._quantity(rest, axis)
         check(axis, value)
         setattr(axis, attribute, value)
         return None
@@ -601,53 +789,98 @@ class Esp300Firmware:
         if not value >= low:  # zero, negative and absurdly small (denormal) rates
             raise _EspError(100 * n + 1)
 
-    def _cmd_VA(self, digits, rest, query):
-        """Velocity: ``min_velocity <= nn <= max_velocity`` [deg/s], else x01 / x10."""
+    def _velocity_command(self, digits, rest, query, attribute):
+        """A velocity [units/s]: ``min_velocity <= nn <= VU``, else x01 / x10."""
         def check(axis, value):
-            c = axis.config
-            self._check_rate(axis, value, c.min_velocity, c.max_velocity, 10)
-        return self._setting(digits, rest, query, "velocity", check)
+            self._check_rate(axis, value, axis.config.min_velocity, axis.max_velocity, 10)
+        return self._setting(digits, rest, query, attribute, check)
+
+    def _acceleration_command(self, digits, rest, query, attribute):
+        """An acceleration [units/s^2]: ``min_acceleration <= nn <= AU``, else x01 / x11."""
+        def check(axis, value):
+            self._check_rate(axis, value, axis.config.min_acceleration, axis.max_acceleration, 11)
+        return self._setting(digits, rest, query, attribute, check)
+
+    def _cmd_VA(self, digits, rest, query):
+        """Velocity of moves [units/s], at most ``VU``."""
+        return self._velocity_command(digits, rest, query, "velocity")
+
+    def _cmd_OH(self, digits, rest, query):
+        """Homing velocity of ``OR`` [units/s], at most ``VU``."""
+        return self._velocity_command(digits, rest, query, "homing_velocity")
 
     def _cmd_AC(self, digits, rest, query):
-        """Acceleration: ``min_acceleration <= nn <= max_acceleration`` [deg/s^2], else x01 / x11."""
+        """Acceleration of moves [units/s^2], at most ``AU``."""
+        return self._acceleration_command(digits, rest, query, "acceleration")
+
+    def _cmd_AG(self, digits, rest, query):
+        """Deceleration of moves and of ``ST`` [units/s^2], at most ``AU``."""
+        return self._acceleration_command(digits, rest, query, "deceleration")
+
+    def _cmd_AE(self, digits, rest, query):
+        """E-stop deceleration of ``AB`` [units/s^2], at most ``AU``."""
+        return self._acceleration_command(digits, rest, query, "estop_deceleration")
+
+    def _cmd_VU(self, digits, rest, query):
+        """Maximum velocity [units/s], up to the stage's own maximum (x10 above, x01 below the
+        minimum); velocities above a lowered ``VU`` are lowered to it."""
         def check(axis, value):
-            c = axis.config
-            self._check_rate(axis, value, c.min_acceleration, c.max_acceleration, 11)
-        return self._setting(digits, rest, query, "acceleration", check)
+            self._check_rate(axis, value, axis.config.min_velocity, axis.config.max_velocity, 10)
+        reply = self._setting(digits, rest, query, "max_velocity", check)
+        if not query:
+            axis = self._axis(digits)
+            axis.velocity = min(axis.velocity, axis.max_velocity)
+            axis.homing_velocity = min(axis.homing_velocity, axis.max_velocity)
+        return reply
+
+    def _cmd_AU(self, digits, rest, query):
+        """Maximum acceleration and deceleration [units/s^2], up to the stage's own maximum (x11
+        above); ``AC``, ``AG`` and ``AE`` above a lowered ``AU`` are lowered to it."""
+        def check(axis, value):
+            self._check_rate(axis, value, axis.config.min_acceleration, axis.config.max_acceleration, 11)
+        reply = self._setting(digits, rest, query, "max_acceleration", check)
+        if not query:
+            axis = self._axis(digits)
+            for attribute in ("acceleration", "deceleration", "estop_deceleration"):
+                setattr(axis, attribute, min(getattr(axis, attribute), axis.max_acceleration))
+        return reply
 
     def _cmd_SL(self, digits, rest, query):
         def check(axis, value):
             lo, hi = axis.config.hardware_limits
-            if not lo <= value <= hi or value > axis.right_limit:
+            if not lo <= value - axis.offset <= hi or value > axis.right_limit:
                 raise _EspError(100 * axis.config.number + 1)
         return self._setting(digits, rest, query, "left_limit", check)
 
     def _cmd_SR(self, digits, rest, query):
         def check(axis, value):
             lo, hi = axis.config.hardware_limits
-            if not lo <= value <= hi or value < axis.left_limit:
+            if not lo <= value - axis.offset <= hi or value < axis.left_limit:
                 raise _EspError(100 * axis.config.number + 1)
         return self._setting(digits, rest, query, "right_limit", check)
 
     def _cmd_SN(self, digits, rest, query):
+        """Display units: the angular codes of :data:`ANGULAR_UNITS` (0, 7 to 11), else x01."""
         axis = self._axis(digits)
         if query:
-            return "7"
+            return str(axis.units)
         value = self._number(rest, axis)
-        if value != 7:
+        if not value.is_integer() or int(value) not in ANGULAR_UNITS:
             raise _EspError(100 * axis.config.number + 1)
+        axis.units = int(value)
         return None
 
     def _cmd_SU(self, digits, rest, query):
-        """Encoder resolution [deg per encoder count] (manual, command ``SU``).
+        """Encoder resolution [units per encoder count] (manual, command ``SU``).
 
-        ``xxSU?`` replies the axis's resolution.  The emulated encoders are fixed
-        hardware, so ``xxSUnn`` accepts only the axis's own resolution (a no-op) and
-        refuses any other value with x01, as ``SN`` accepts only 7.
+        ``xxSU?`` replies the axis's resolution in its units.  The emulated encoders are
+        fixed hardware, so ``xxSUnn`` accepts only the axis's own resolution (a no-op) and
+        refuses any other value with x01.
         """
         axis = self._axis(digits)
         if query:
-            return _fmt(axis.config.resolution)
-        if self._number(rest, axis) != axis.config.resolution:
+            return self._out(axis, axis.config.resolution)
+        value = self._quantity(rest, axis)
+        if not math.isclose(value, axis.config.resolution, rel_tol=1e-9):
             raise _EspError(100 * axis.config.number + 1)
         return None
