@@ -1,9 +1,12 @@
 """Speed and accuracy of the drivers on the emulated rig.
 
-Measures, over the in-process pyserial URL (``gonio-sim://``) and over real
-pseudo-terminals:
+Measures, in one run, over the in-process pyserial URL (``gonio-sim://``), real
+pseudo-terminals and TCP on the loopback interface (``socket://``):
 
 - query round trips per second (camera ``EXP?``, stage ``1TP``);
+- a command without a reply followed by a query (``EXP 0.001`` then ``SYST:ERR?``) from a
+  plain pyserial client that sets no socket option (the exchange Nagle's algorithm and
+  delayed ACKs stall on TCP unless the emulator acknowledges at once);
 - ROI measurements per second (``ACQ`` + ``ROI:STAT?`` at a fixed 1 ms exposure) and
   full :meth:`drivers.rig.Rig.measure` calls per second (automatic exposure, dark model,
   lamp readings);
@@ -13,6 +16,9 @@ pseudo-terminals:
 and the accuracy of the sweep: a Lambertian sample must read the same radiance at every
 geometry up to cos(theta_i); ``relative_error`` is the rms relative deviation of
 ``radiance / cos(theta_i)`` from its mean (lamp drift and flicker, ~0.1 %).
+
+The TCP figures are reported as ratios to the pty figures of the same run
+(``tcp_over_pty``; target: within 1.3).
 
 Writes docs/benchmarks/rig.json and docs/benchmarks/rig.png. Run:
 ``python benchmarks/bench_rig.py``.
@@ -25,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import serial
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -62,6 +69,23 @@ def sweep_geometries(n=200):
     return out
 
 
+LABELS = {"url": "in-process URL", "pty": "pty", "tcp": "TCP"}
+
+
+def plain_client_pair(address, n=200):
+    """Seconds per ``EXP 0.001`` + ``SYST:ERR?`` exchange of a plain pyserial client (no socket options)."""
+    port = serial.serial_for_url(address, baudrate=115200, timeout=5.0)
+    try:
+        def pair():
+            port.write(b"EXP 0.001\n")
+            port.write(b"SYST:ERR?\n")
+            if not port.readline().startswith(b"0,"):
+                raise RuntimeError(f"{address}: unexpected error queue entry")
+        return rate(pair, n)
+    finally:
+        port.close()
+
+
 def bench_transport(kind, emu, addresses, records, extra):
     stage_url = addresses["stage"][kind]
     camera_url = addresses["camera"][kind]
@@ -70,7 +94,7 @@ def bench_transport(kind, emu, addresses, records, extra):
         rig.lamp_on(120.0)
         rig.calibrate_dark((0.001, 0.01, 0.1))
         rig.move_to(30.0, 0.0, -20.0)
-        label = "in-process URL" if kind == "url" else "pty"
+        label = LABELS[kind]
         t_cam = rate(lambda: rig.camera.query("EXP?", float), 300)
         t_stage = rate(lambda: rig.stage.position(1), 300)
         rig.camera.set_exposure(0.001)
@@ -90,7 +114,7 @@ def bench_transport(kind, emu, addresses, records, extra):
         ]:
             records.append({
                 "family": family, "method": method, "seconds_per_evaluation": seconds,
-                "relative_error": 0.0, "reference_method": "in-process URL" if kind == "pty" else "",
+                "relative_error": 0.0, "reference_method": {"url": "", "pty": "in-process URL", "tcp": "pty"}[kind],
                 "notes": notes + " (speed only: relative_error not applicable, 0)",
             })
         extra[kind] = {
@@ -133,16 +157,17 @@ def bench_transport(kind, emu, addresses, records, extra):
 def chart(records, path):
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(8, 4.5))
+    fig = Figure(figsize=(8, 6))
     ax = fig.add_subplot()
     labels = [r["method"] for r in records]
     values = [r["seconds_per_evaluation"] * 1e3 for r in records]
-    colors = ["C0" if "pty" not in r["method"] else "C1" for r in records]
+    colour = {"in-process URL": "C0", "pty": "C1", "TCP": "C2"}
+    colors = [colour[r["method"].rsplit("(", 1)[1].rstrip(")")] for r in records]
     ax.barh(range(len(values)), values, color=colors)
     ax.set_yticks(range(len(values)), labels, fontsize=8)
     ax.set_xscale("log")
     ax.set_xlabel("milliseconds per call (log)")
-    ax.set_title("gonio drivers on the emulated rig (blue: in-process URL, orange: pty)")
+    ax.set_title("gonio drivers on the emulated rig (blue: in-process URL, orange: pty, green: TCP)")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
@@ -150,16 +175,29 @@ def chart(records, path):
 def main():
     records, extra = [], {}
     with EmulatedRig(lambert, seed=7, name="bench", lamp_warm=True) as emu:
-        addresses = emu.start(pty=True)
-        for kind in ("url", "pty"):
+        addresses = emu.start(pty=True, tcp=True)
+        for kind in ("url", "pty", "tcp"):
             bench_transport(kind, emu, addresses, records, extra)
-    for kind in ("url", "pty"):
-        extra[kind]["ratio_note"] = "pty figures divided by in-process figures in 'pty_over_url'"
-    extra["pty_over_url_seconds"] = {
-        key: extra["url"][key] / extra["pty"][key]
-        for key in ("commands_per_second_camera", "commands_per_second_stage", "roi_measurements_per_second",
-                    "rig_measure_per_second")
-    }
+        for kind in ("pty", "tcp"):
+            seconds = plain_client_pair(addresses["camera"][kind])
+            extra[kind]["plain_pyserial_write_then_query_s"] = seconds
+            records.append({
+                "family": "plain pyserial client", "method": f"EXP + SYST:ERR? ({LABELS[kind]})",
+                "seconds_per_evaluation": seconds, "relative_error": 0.0,
+                "reference_method": "pty" if kind == "tcp" else "",
+                "notes": "serial_for_url with no socket option set: the Nagle/delayed-ACK case "
+                         "(speed only: relative_error not applicable, 0)",
+            })
+    keys = ("commands_per_second_camera", "commands_per_second_stage", "roi_measurements_per_second",
+            "rig_measure_per_second")
+    extra["pty_over_url_seconds"] = {key: extra["url"][key] / extra["pty"][key] for key in keys}
+    tcp_over_pty = {key: extra["pty"][key] / extra["tcp"][key] for key in keys}
+    tcp_over_pty["sweep_wall_s"] = extra["tcp"]["sweep_wall_s"] / extra["pty"]["sweep_wall_s"]
+    tcp_over_pty["plain_pyserial_write_then_query_s"] = (extra["tcp"]["plain_pyserial_write_then_query_s"]
+                                                         / extra["pty"]["plain_pyserial_write_then_query_s"])
+    extra["tcp_over_pty_seconds"] = tcp_over_pty
+    extra["ratio_note"] = ("'pty_over_url_seconds' and 'tcp_over_pty_seconds': seconds per call (or sweep wall "
+                           "time) of the first transport divided by the second's, same run; target TCP <= 1.3 x pty")
     result = {
         "benchmark": "rig",
         "command": "python benchmarks/bench_rig.py",

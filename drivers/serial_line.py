@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import collections
 import logging
+import select
+import socket
 import threading
 import time
 from typing import Callable, TypeVar
@@ -33,6 +35,29 @@ T = TypeVar("T")
 
 #: Longest a single blocking read waits before the total deadline is checked again [s].
 _POLL_INTERVAL = 0.05
+
+
+def _tcp_socket(port) -> socket.socket | None:
+    """The TCP socket of a pyserial ``socket://`` port, None for any other port."""
+    sock = getattr(port, "_socket", None)
+    if isinstance(sock, socket.socket) and sock.family in (socket.AF_INET, socket.AF_INET6):
+        return sock
+    return None
+
+
+def _send_without_delay(port) -> None:
+    """Switch Nagle's algorithm off on a TCP port (pyserial ``socket://``): send each line at once.
+
+    Without ``TCP_NODELAY`` a command that gets no reply followed by a query waits for the
+    acknowledgement of the first segment, up to the peer's delayed-ACK time (40 ms on
+    Linux).  Ports that are not TCP sockets are left alone.
+    """
+    sock = _tcp_socket(port)
+    if sock is not None:
+        try:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        except OSError as exc:  # the line still works, only slower
+            _log.debug("cannot set TCP_NODELAY: %s", exc)
 
 
 class SerialLine:
@@ -123,6 +148,9 @@ class SerialLine:
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise TransportError(f"cannot open {self.name}: {exc}") from exc
+        _send_without_delay(self._port)
+        #: The TCP socket of a ``socket://`` port (read directly, see :meth:`_receive`), else None.
+        self._socket = _tcp_socket(self._port)
 
     # -- context management -------------------------------------------------------------
     def __enter__(self) -> "SerialLine":
@@ -210,13 +238,39 @@ class SerialLine:
             self._out_of_step = True
             raise ResponseTimeout(command, self._last_timeout, bytes(self._buffer), self.name)
         try:
-            chunk = self._port.read(max(1, self._port.in_waiting))
+            if self._socket is not None:
+                chunk = self._receive(min(_POLL_INTERVAL, remaining))
+            else:
+                chunk = self._port.read(max(1, self._port.in_waiting))
         except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
             # TypeError/AttributeError: pyserial's posix read on a port closed under it.
             self._out_of_step = True
             raise TransportError(f"{self.name}: read failed: {exc}") from exc
         if chunk:
             self._buffer += chunk
+
+    def _receive(self, wait: float) -> bytes:
+        """Whatever a TCP port has received, waiting at most ``wait`` [s] for the first byte.
+
+        pyserial's ``socket://`` port reports at most one byte waiting and so reads a reply
+        one byte (and two system calls) at a time; the socket itself hands over everything
+        that has arrived in one call.
+
+        Raises
+        ------
+        serial.SerialException
+            If the peer closed the connection.
+        """
+        ready, _, _ = select.select([self._socket], [], [], wait)
+        if not ready:
+            return b""
+        try:
+            chunk = self._socket.recv(65536)
+        except (BlockingIOError, InterruptedError):
+            return b""
+        if not chunk:
+            raise serial.SerialException("the connection was closed by the peer")
+        return chunk
 
     def read_line(self, timeout: float | None = None, command: str = "") -> str:
         """Return the next reply line, without its terminator and surrounding blanks.

@@ -294,8 +294,30 @@ class PtyTransport(_Worker):
                 pass
 
 
+def _quick_ack(conn: socket.socket) -> None:
+    """Acknowledge every received segment at once (Linux ``TCP_QUICKACK``; elsewhere nothing).
+
+    A client that writes a command without a reply and then a query (``EXP 0.01`` then
+    ``SYST:ERR?``) has its second segment held back by Nagle's algorithm until the first is
+    acknowledged; a receiver that delays its ACKs (40 ms on Linux) then stalls every such
+    pair.  ``TCP_NODELAY`` on the client avoids the stall, but a plain pyserial
+    ``socket://`` client does not set it: so the emulator does not delay its ACKs.  Linux
+    clears the option after use, so it is set again before every ``recv``.
+    """
+    option = getattr(socket, "TCP_QUICKACK", None)
+    if option is not None:
+        try:
+            conn.setsockopt(socket.IPPROTO_TCP, option, 1)
+        except OSError:  # not supported for this socket: delayed ACKs remain
+            pass
+
+
 class TcpTransport(_Worker):
     """The instrument on a TCP socket bound to 127.0.0.1 (``socket://127.0.0.1:PORT``).
+
+    Replies are sent at once (``TCP_NODELAY``) and received segments are acknowledged at
+    once (:func:`_quick_ack`), so that a client that sets neither option (pyserial's
+    ``socket://`` handler) sees no Nagle/delayed-ACK stall either.
 
     Parameters
     ----------
@@ -338,6 +360,7 @@ class TcpTransport(_Worker):
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         with conn:
             while not self._stop.is_set():
+                _quick_ack(conn)
                 try:
                     data = conn.recv(65536)
                 except socket.timeout:

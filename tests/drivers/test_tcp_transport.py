@@ -1,0 +1,67 @@
+"""TCP transport: the socket options that keep a command-then-query exchange from stalling.
+
+Speed itself is measured in benchmarks/bench_rig.py (ratios TCP/pty in one run); these
+tests check the mechanism: Nagle's algorithm off on the client (``TCP_NODELAY``), no delayed
+ACKs on the emulator (``TCP_QUICKACK``, Linux), and whole replies read in one call.
+"""
+from __future__ import annotations
+
+import socket
+import sys
+
+import numpy as np
+import pytest
+
+from drivers.emulator.rig import EmulatedRig
+from drivers.emulator.transports import _quick_ack
+from drivers.errors import TransportError
+from drivers.serial_line import SerialLine
+
+
+def lambert(ti, pi, tr, pr):
+    return np.full(np.broadcast(ti, pi, tr, pr).shape, 1.0 / np.pi)
+
+
+@pytest.fixture
+def tcp_rig():
+    with EmulatedRig(lambert, seed=4, name="tcp-options") as rig:
+        yield rig, rig.start(pty=False, tcp=True)
+
+
+def test_serial_line_switches_nagle_off_on_tcp_ports(tcp_rig):
+    _, addresses = tcp_rig
+    with SerialLine(addresses["camera"]["tcp"], baudrate=115200, timeout=1.0) as line:
+        sock = line._port._socket
+        assert sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) != 0
+        line.write("EXP 0.02")  # a command without a reply, then a query: the stalling pair
+        assert line.query("SYST:ERR?") == '0,"No error"'
+        assert line.query("EXP?;GAIN?;SHUT?") == "0.02;1;OPEN"
+
+
+def test_serial_line_leaves_other_ports_alone():
+    with SerialLine("loop://", baudrate=9600, timeout=0.2) as line:
+        assert line._socket is None
+        line.write("hello")
+        assert line.read_line() == "hello"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="TCP_QUICKACK is a Linux socket option")
+def test_quick_ack_is_set_on_the_emulator_side():
+    server = socket.create_server(("127.0.0.1", 0))
+    client = socket.create_connection(server.getsockname())
+    conn, _ = server.accept()
+    with server, client, conn:
+        _quick_ack(conn)
+        assert conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_QUICKACK) != 0
+
+
+def test_a_closed_connection_is_a_transport_error(tcp_rig):
+    rig, addresses = tcp_rig
+    line = SerialLine(addresses["stage"]["tcp"], baudrate=19200, write_termination="\r",
+                      read_termination="\r\n", timeout=1.0)
+    assert line.query("VE?") == "ESP300 Version 3.08 09/09/02"
+    rig.close()  # the emulator goes away: the peer closes the connection
+    with pytest.raises(TransportError, match="closed by the peer|read failed"):
+        for _ in range(3):
+            line.query("VE?", retries=0, timeout=0.5)
+    line.close()
