@@ -178,6 +178,28 @@ class Camera(ScpiInstrument):
         names = tuple(part.strip().upper() for part in reply.split(",") if part.strip())
         return () if names == ("0",) else names
 
+    def simulated_time(self) -> float | None:
+        """The emulator's simulated clock (``SIMulation:TIME?``) [s]; None for a real camera.
+
+        The query is sent as ``SIM:TIME?;*OPC?``, so a camera without it still answers at
+        once (``1``, with -113 queued and drained here) instead of letting the line time out.
+
+        Examples
+        --------
+        >>> camera.simulated_time()     # doctest: +SKIP
+        1311.6
+        """
+        reply = self.query("SIM:TIME?;*OPC?", retries=0)
+        parts = reply.split(";")
+        if len(parts) == 2:
+            return float(parts[0])
+        if parts != ["1"]:
+            raise ProtocolError(f"camera: unexpected reply {reply!r} to 'SIM:TIME?;*OPC?'")
+        for code, message in self.errors():
+            if code != -113:
+                raise self._error(code, message, "SIM:TIME?")
+        return None
+
     def monitor(self) -> float:
         """Lamp monitor reading integrated over the last exposure (``MONitor?``) [V].
 

@@ -207,6 +207,9 @@ class Rig:
         #: Dark characterisation of the lamp monitor (:meth:`measure_monitor_dark`).
         self.monitor_dark: MonitorDark | None = None
         self._last_monitor = math.nan
+        #: The instruments' clock [s] when they offer one (the emulator's simulated clock,
+        #: ``SIM:TIME?``), else None: acquisition then records wall-clock time.
+        self.instrument_clock = None
         #: Identity strings of the instruments (read by :meth:`initialize`).
         self.identities: dict[str, str] = {}
 
@@ -289,6 +292,7 @@ class Rig:
         self._targets = {a: self.stage.desired_position(a) for a in AXES}
         self.info = self.camera.sensor_info()
         self.has_monitor = "MON" in self.camera.options()
+        self.instrument_clock = self.camera.simulated_time if self.camera.simulated_time() is not None else None
         self.identities = dict(identities)
         self.camera.set_gain(self.gain)
         self.camera.open_shutter()

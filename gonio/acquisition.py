@@ -516,7 +516,8 @@ def run_protocol(
         the reference standard and back (a prompt on a real rig, the emulator's sample
         holder otherwise).  Required when the protocol has a ``[reference]`` section.
     clock : callable, optional
-        Instrument clock [s] recorded with each point (default: wall-clock monotonic time).
+        Instrument clock [s] recorded with each point (default: the rig's ``instrument_clock``,
+        the emulator's simulated clock, when it offers one, else wall-clock monotonic time).
     progress : callable, optional
         Called with a :class:`Progress` after every point.
     max_consecutive_errors : int
@@ -543,7 +544,7 @@ def run_protocol(
             f"{protocol.source}: the protocol measures a reference standard ({protocol.reference.label}) "
             "but no way to swap the sample was given (change_sample)"
         )
-    clock = clock or time.monotonic
+    clock = clock or getattr(rig, "instrument_clock", None) or time.monotonic
     _check_apertures(protocol, metadata)
     the_plan = plan(protocol)
     if protocol.checks.every > 0:
