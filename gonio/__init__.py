@@ -11,18 +11,35 @@ Angles are in degrees everywhere in the public interface.
 """
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version as _version
-
 import numpy as np
 
 from . import geometry, models, radiometry
 
-try:
-    __version__ = _version("gonio")
-except PackageNotFoundError:  # running from a source tree that was not installed
-    __version__ = "0.0.0+unknown"
-
 __all__ = ["__version__", "brdf", "models", "geometry", "radiometry"]
+
+
+def _installed_version() -> str:
+    """The installed distribution's version, or ``0.0.0+unknown`` in a bare source tree."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("gonio")
+    except PackageNotFoundError:  # running from a source tree that was not installed
+        return "0.0.0+unknown"
+
+
+def __getattr__(name: str) -> str:
+    """Module attributes resolved on first access (PEP 562).
+
+    ``__version__`` reads the package metadata only when asked for: importing
+    :mod:`importlib.metadata` costs about as much as the rest of ``import gonio``
+    without numpy.
+    """
+    if name == "__version__":
+        value = _installed_version()
+        globals()["__version__"] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def brdf(name: str, theta_i, phi_i, theta_r, phi_r, **params) -> np.ndarray:

@@ -32,7 +32,6 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.special import eval_jacobi
 
 __all__ = [
     "check_zernike_indices",
@@ -121,6 +120,8 @@ def zernike_radial_of_cos(n: int, m: int, cos_theta: ArrayLike) -> np.ndarray:
     >>> float(zernike_radial_of_cos(2, 0, 1.0))   # centre of the disk: R_2^0(0) = -1
     -1.0
     """
+    from scipy.special import eval_jacobi  # scipy loads on first use, not at import gonio
+
     n, m = check_zernike_indices(n, m)
     m = abs(m)
     k = (n - m) // 2

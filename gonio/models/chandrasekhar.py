@@ -30,7 +30,6 @@ from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize import brentq
 
 __all__ = [
     "DEFAULT_ORDER",
@@ -127,6 +126,8 @@ def _bracketed_root(function, left: float, right: float) -> float:
         return left
     if hi is None:
         return right
+    from scipy.optimize import brentq  # scipy loads on first use, not at import gonio
+
     return brentq(function, lo, hi, xtol=1e-300, rtol=1e-15, maxiter=200)
 
 

@@ -25,7 +25,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike
 
 from gonio.zernike import _check_order
@@ -155,6 +154,8 @@ def fit_series(
     if regularization > 0.0:
         rows.append(np.diag(np.sqrt(regularization * penalty_weights(modes))))
         rhs.append(np.zeros(len(modes)))
+    import scipy.linalg  # scipy loads on first use, not at import gonio
+
     amplitudes, *_ = scipy.linalg.lstsq(np.vstack(rows), np.concatenate(rhs))
     coefficients = KvdCoefficients(tuple(modes), amplitudes)
     fitted = matrix @ amplitudes

@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -115,6 +114,8 @@ def build_oren_nayar_table(
     if workers == 1:
         results = map(_sigma_slice, tasks)
     else:
+        from concurrent.futures import ProcessPoolExecutor  # only a table build needs it
+
         pool = ProcessPoolExecutor(max_workers=workers)
         results = pool.map(_sigma_slice, tasks)
     for k, (l1, l2) in enumerate(results):

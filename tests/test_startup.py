@@ -1,0 +1,64 @@
+"""Start-up: what ``import gonio`` and the command line load (behaviour, not wall time).
+
+The heavy libraries (scipy, matplotlib, numba, emcee, arviz and what they pull in) load
+where they are used, so ``import gonio`` costs little more than ``import numpy``; the
+time itself is measured by benchmarks/bench_startup.py, never asserted here. Each check
+runs in a fresh interpreter: this test process has imported most of them already.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+#: Libraries that ``import gonio`` must not load (top-level package names).
+HEAVY = ("scipy", "matplotlib", "numba", "emcee", "arviz", "pandas", "xarray")
+
+
+def _loaded_after(code: str) -> list[str]:
+    """The HEAVY packages present in ``sys.modules`` after running ``code`` in a new interpreter."""
+    probe = (f"{code}\nimport json, sys\n"
+             f"print(json.dumps(sorted({{m.split('.')[0] for m in sys.modules}} & set({list(HEAVY)!r}))))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_probe_sees_a_heavy_import():
+    # The probe itself must be able to fail: importing scipy directly is seen.
+    assert _loaded_after("import gonio, scipy.special") == ["scipy"]
+
+
+def test_import_gonio_loads_no_heavy_library():
+    assert _loaded_after("import gonio") == []
+
+
+def test_public_api_works_without_heavy_libraries():
+    code = ("import gonio\n"
+            "assert gonio.__version__\n"
+            "assert 'oren-nayar' in gonio.models.available()\n"
+            "assert float(gonio.brdf('oren-nayar', 45, 0, 30, 180, rho=0.9, sigma=30)) > 0\n"
+            "from gonio import __version__, geometry, radiometry")
+    assert _loaded_after(code) == []
+
+
+@pytest.mark.parametrize("module", ["gonio.geometry", "gonio.radiometry", "gonio.zernike",
+                                    "gonio.models.chandrasekhar", "gonio.models.kvd", "gonio.protocols"])
+def test_light_modules_load_no_heavy_library(module):
+    assert _loaded_after(f"import {module}") == []
+
+
+def test_command_line_parser_loads_no_heavy_library():
+    # `gonio --help` and the parsing of every sub-command's arguments stay light; the
+    # sub-commands import what they use when they run.
+    assert _loaded_after("from gonio.cli import build_parser\nbuild_parser()") == []
+
+
+def test_lazily_imported_functions_still_work_in_a_fresh_interpreter():
+    # Each function imports its scipy routine on first call (no NameError, right value).
+    code = ("from gonio.zernike import zernike_radial_of_cos\n"
+            "assert float(zernike_radial_of_cos(2, 0, 1.0)) == -1.0\n"
+            "from gonio.models.chandrasekhar import h_function\n"
+            "assert 1.0 < float(h_function(0.5, 0.9)) < 3.0\n")
+    assert _loaded_after(code) == ["scipy"]
