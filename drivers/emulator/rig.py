@@ -400,7 +400,7 @@ class EmulatedRig:
 
     # -- transports -------------------------------------------------------------------
     def start(self, pty: bool = True, tcp: bool = False, tcp_ports: dict[str, int] | None = None,
-              symlinks: dict[str, str] | None = None) -> dict[str, dict[str, str]]:
+              symlinks: dict[str, str] | None = None, check_baudrate: bool = True) -> dict[str, dict[str, str]]:
         """Open the transports and register the rig for ``gonio-sim://`` URLs.
 
         Parameters
@@ -413,6 +413,10 @@ class EmulatedRig:
             Fixed TCP port per device (default: free ports).
         symlinks : dict, optional
             Symlink path per device pointing at its pseudo-terminal.
+        check_baudrate : bool
+            Garble a pseudo-terminal's traffic while the client's baud rate differs from the
+            instrument's, as a real line would (:class:`~drivers.emulator.transports.PtyTransport`);
+            False lets any rate through.
 
         Returns
         -------
@@ -432,7 +436,8 @@ class EmulatedRig:
             for device, channel in self.channels.items():
                 if pty:
                     link = (symlinks or {}).get(device)
-                    self._transports[device].append(("pty", PtyTransport(channel, symlink=link)))
+                    self._transports[device].append(("pty", PtyTransport(channel, symlink=link,
+                                                                         check_baudrate=check_baudrate)))
                 if tcp:
                     port = (tcp_ports or {}).get(device, 0)
                     self._transports[device].append(("tcp", TcpTransport(channel, port=port)))

@@ -15,6 +15,7 @@ import os
 import re
 import select
 import socket
+import termios
 import threading
 import time
 import tty
@@ -26,7 +27,7 @@ import numpy as np
 from .clock import SimClock, transfer_time
 
 __all__ = ["Firmware", "Faults", "LineSplitter", "DeviceChannel", "PtyTransport", "TcpTransport", "MAX_LINE",
-           "reply_to"]
+           "reply_to", "garble_bytes"]
 
 #: Longest accepted command line [bytes]; longer lines are discarded with an error.
 MAX_LINE = 4096
@@ -232,19 +233,65 @@ class _Worker:
                 thread.join(timeout=2.0)
 
 
+def _termios_speed(baudrate: int) -> int | None:
+    """The termios speed constant of ``baudrate`` (``termios.B19200`` ...), None if there is none."""
+    return getattr(termios, f"B{int(baudrate)}", None)
+
+
+def garble_bytes(data: bytes, rng: np.random.Generator) -> bytes:
+    """What a UART at the wrong rate makes of ``data``: every byte but CR and LF becomes noise.
+
+    The noise bytes are >= 0x80 (never a letter, digit, blank or terminator), so garbled
+    input can only make commands invalid; line terminators are kept, so lines still end.
+
+    Examples
+    --------
+    >>> out = garble_bytes(b"1TP\\r", np.random.default_rng(0))
+    >>> len(out), out[-1:], all(b >= 0x80 for b in out[:-1])
+    (4, b'\\r', True)
+    """
+    noise = rng.integers(0x80, 0x100, size=len(data), dtype=np.uint8)
+    raw = np.frombuffer(data, dtype=np.uint8)
+    keep = (raw == 0x0D) | (raw == 0x0A)
+    return np.where(keep, raw, noise).astype(np.uint8).tobytes()
+
+
 class PtyTransport(_Worker):
     """The instrument on a pseudo-terminal in raw mode (``/dev/pts/N``, optional symlink).
 
     The emulator keeps the terminal's slave side open, so a client may open and close the
-    port path as often as it likes.
+    port path as often as it likes.  The terminal starts at the instrument's baud rate.
+
+    Baud rate check (``check_baudrate``, default on): a real serial line whose two ends run
+    at different rates carries garbage.  The master side of a pty sees the termios settings
+    the client gave the slave side, so when the client's output rate differs from the
+    instrument's, the instrument hears :func:`garble_bytes` of what was sent (every command
+    is invalid, an error is queued) and any reply is garbled the same way: the client sees
+    timeouts and noise, as it would in the lab.
+
+    Parameters
+    ----------
+    channel : DeviceChannel
+        The instrument.
+    symlink : str, optional
+        Path of a symlink to create to the terminal.
+    check_baudrate : bool
+        Garble the traffic while the client's rate differs from the instrument's.
     """
 
-    def __init__(self, channel: DeviceChannel, symlink: str | None = None) -> None:
+    def __init__(self, channel: DeviceChannel, symlink: str | None = None, check_baudrate: bool = True) -> None:
         super().__init__()
         self.channel = channel
+        self.check_baudrate = bool(check_baudrate)
+        self._speed = _termios_speed(channel.baudrate)
+        self._noise = np.random.default_rng(channel.baudrate)
         self.master, self._slave = os.openpty()
         tty.setraw(self._slave)
         tty.setraw(self.master)
+        if self._speed is not None:
+            attributes = termios.tcgetattr(self._slave)
+            attributes[4] = attributes[5] = self._speed
+            termios.tcsetattr(self._slave, termios.TCSANOW, attributes)
         self.path = os.ttyname(self._slave)
         self.symlink = symlink
         if symlink:
@@ -267,10 +314,22 @@ class PtyTransport(_Worker):
                 data = os.read(self.master, 65536)
             except OSError:
                 return
+            wrong_rate = self.rate_mismatch()
+            if wrong_rate:
+                data = garble_bytes(data, self._noise)
             for line in splitter.feed(data):
                 reply = reply_to(self.channel, line)
                 if reply:
-                    self._write(reply)
+                    self._write(garble_bytes(reply, self._noise) if wrong_rate else reply)
+
+    def rate_mismatch(self) -> bool:
+        """Whether the check is on and the client's output rate differs from the instrument's."""
+        if not self.check_baudrate or self._speed is None:
+            return False
+        try:
+            return termios.tcgetattr(self.master)[5] != self._speed
+        except termios.error:
+            return False
 
     def _write(self, data: bytes) -> None:
         view = memoryview(data)
