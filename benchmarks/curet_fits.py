@@ -332,7 +332,7 @@ def markdown(studies: list[dict], figures: dict[int, list[Path]], timing: dict) 
         "",
         "## Speed",
         "",
-        f"One likelihood evaluation (205 geometries, fixed-geometry path) costs "
+        "One likelihood evaluation (205 geometries, fixed-geometry path) costs "
         + ", ".join(f"{k} {v * 1e6:.0f} us" for k, v in timing.items())
         + " (medians over the four samples). A full MCMC fit (least squares, then emcee to 50 tau) takes "
         f"{min(f['seconds'] for s in studies for f in s['fits']):.1f}-"

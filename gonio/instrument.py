@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .models import Model, get
+from .models import FixedGeometryModel, LinearForm, Model, get
 
 __all__ = [
     "LAMP_SOLID_ANGLE_SR",
@@ -114,23 +114,12 @@ def aperture_averaged(
     base = get(model) if isinstance(model, str) else model
 
     def prepare(ti, pi_, tr, pr, **options: Any):
-        n, shape = np.size(ti), np.shape(ti)
-        ti_k, pi_k, w_i = cone_quadrature(np.degrees(ti), np.degrees(pi_), lamp_solid_angle_sr)
-        tr_k, pr_k, w_r = cone_quadrature(np.degrees(tr), np.degrees(pr), camera_solid_angle_sr)
-        # all 49 (lamp, camera) pairs per geometry: shape (n, 7, 7)
-        fixed = base.at(ti_k[:, :, None], pi_k[:, :, None], tr_k[:, None, :], pr_k[:, None, :], **options)
-        cos_k = np.clip(np.cos(np.radians(ti_k)), 0.0, None)[:, :, None]
-        weights = w_i[None, :, None] * w_r[None, None, :]
-        cos_axis = np.cos(np.asarray(ti, float)).reshape(n)
-        grazing = cos_axis <= 1e-12
-        normaliser = np.where(grazing, 1.0, cos_axis)
-        weighted_cos = np.where(grazing[:, None, None], 1.0, cos_k) * weights
-
-        def evaluate(**params: float) -> np.ndarray:
-            values = fixed.unchecked(**params)  # params were validated by the outer model
-            return (np.einsum("nij,nij->n", values, weighted_cos) / normaliser).reshape(shape)
-
-        return evaluate
+        shape = np.shape(ti)
+        rays = _SubRays.of(base, ti, pi_, tr, pr, lamp_solid_angle_sr, camera_solid_angle_sr, options)
+        form = getattr(rays.fixed.prepared, "linear_form", None)
+        if form is None:
+            return lambda **params: rays.average(params, shape)
+        return _contracted(rays, form, shape)
 
     return Model(
         name=f"{base.name}@aperture",
@@ -144,4 +133,79 @@ def aperture_averaged(
         reciprocal=False,
         isotropic=base.isotropic,
         linear_in=base.linear_in,
+        broadcasts_params=True,
     )
+
+
+class _SubRays:
+    """The 7 x 7 (lamp, camera) sub-rays of every geometry and their weights."""
+
+    def __init__(self, fixed: FixedGeometryModel, weighted_cos: np.ndarray, normaliser: np.ndarray,
+                 build: Any) -> None:
+        #: The base model on the sub-rays, shape (n, 7, 7).
+        self.fixed = fixed
+        #: Quadrature weight times cos(theta_i') per sub-ray, shape (n, 7, 7).
+        self.weighted_cos = weighted_cos
+        #: cos(theta_i) of each axis (1 at grazing incidence), shape (n,).
+        self.normaliser = normaliser
+        self._build = build
+
+    @classmethod
+    def of(cls, base: Model, ti, pi_, tr, pr, lamp_sr: float, camera_sr: float, options) -> "_SubRays":
+        """Sub-rays of the geometries ``ti, pi_, tr, pr`` [rad] (any shape, flattened)."""
+        n = np.size(ti)
+        ti_k, pi_k, w_i = cone_quadrature(np.degrees(ti), np.degrees(pi_), lamp_sr)
+        tr_k, pr_k, w_r = cone_quadrature(np.degrees(tr), np.degrees(pr), camera_sr)
+
+        def build(index=slice(None)) -> FixedGeometryModel:
+            # all 49 (lamp, camera) pairs per geometry: shape (n, 7, 7)
+            return base.at(ti_k[index, :, None], pi_k[index, :, None], tr_k[index, None, :], pr_k[index, None, :],
+                           **options)
+
+        cos_k = np.clip(np.cos(np.radians(ti_k)), 0.0, None)[:, :, None]
+        weights = w_i[None, :, None] * w_r[None, None, :]
+        cos_axis = np.cos(np.asarray(ti, float)).reshape(n)
+        grazing = cos_axis <= 1e-12
+        normaliser = np.where(grazing, 1.0, cos_axis)
+        weighted_cos = np.where(grazing[:, None, None], 1.0, cos_k) * weights
+        return cls(build(), weighted_cos, normaliser, build)
+
+    def subset(self, index: np.ndarray) -> "_SubRays":
+        """The sub-rays of the geometries ``index`` only."""
+        return _SubRays(self._build(index), self.weighted_cos[index], self.normaliser[index], self._build)
+
+    def average(self, params: dict[str, Any], shape: tuple[int, ...]) -> np.ndarray:
+        """f_eff [1/sr]: the base model at every sub-ray, averaged (module notes)."""
+        # params were validated by the outer model; arrays run along the flat geometry
+        # (last axis, length 1 or n), so two axes for the 7 x 7 sub-rays are appended
+        inner = {k: (np.expand_dims(v, (-2, -1)) if np.ndim(v) else v) for k, v in params.items()}
+        values = self.fixed.unchecked(**inner)
+        averaged = np.einsum("...nij,nij->...n", values, self.weighted_cos) / self.normaliser
+        return averaged.reshape(averaged.shape[:-1] + shape)
+
+
+def _contracted(rays: _SubRays, form: LinearForm, shape: tuple[int, ...]):
+    """f_eff of a model with a :class:`~gonio.models.LinearForm`: its K terms averaged over
+    the sub-rays once, so each call costs K terms per geometry instead of 49 model values.
+    Geometries where the form is not exact at some sub-ray (e.g. where Oren-Nayar's floor
+    at 0 can act) keep the sub-ray average (equal to rounding, tested)."""
+    fixed = rays.fixed
+    terms = np.zeros((form.terms.shape[0],) + fixed.shape)
+    terms[:, fixed._valid] = form.terms
+    terms[:, fixed._nan] = np.nan
+    averaged = np.einsum("knij,nij->kn", terms, rays.weighted_cos) / rays.normaliser
+    exact = np.ones(fixed.shape, bool)
+    if form.exact is not None:
+        exact[fixed._valid] = form.exact
+    rest = np.flatnonzero(~exact.all(axis=(1, 2)))
+    rest_rays = rays.subset(rest) if rest.size else None
+
+    def evaluate(**params: Any) -> np.ndarray:
+        out = form.combine(form.coefficients(**params), averaged)
+        if rest_rays is not None:
+            out = np.array(np.broadcast_to(out, np.broadcast_shapes(out.shape, *(np.shape(v) for v in params.values()))))
+            local = {k: (v[..., rest] if np.shape(v)[-1:] not in ((), (1,)) else v) for k, v in params.items()}
+            out[..., rest] = rest_rays.average(local, (rest.size,))
+        return out.reshape(out.shape[:-1] + shape)
+
+    return evaluate

@@ -59,3 +59,35 @@ def test_fixed_geometry_path_and_shapes():
     assert direct.shape == (2, 2)
     np.testing.assert_allclose(model.at(ti, 0.0, 20.0, 180.0)(rho=0.8, sigma=20.0), direct, rtol=1e-13)
     assert model(30.0, 0.0, 20.0, 180.0, rho=0.8, sigma=20.0).shape == ()
+
+
+@pytest.mark.parametrize("name, params", [
+    ("oren-nayar", {"rho": 0.3, "sigma": 80.0, "ir_weight": 0.2}),  # the floor at 0 acts near forward grazing
+    ("oren-nayar", {"rho": 0.9, "sigma": 30.0, "ir_weight": 1.0}),
+    ("oren-nayar-qualitative", {"rho": 0.7, "sigma": 20.0}),
+    ("lambert", {"rho": 0.5}),
+])
+def test_linear_models_average_their_terms_once_and_equal_the_sub_ray_average(name, params):
+    """Models with a LinearForm average its few geometry terms over the 49 sub-rays once;
+    the result equals averaging the model at every sub-ray, walker arrays included, and
+    where Oren-Nayar's floor at 0 can act the sub-ray average is kept."""
+    from gonio.instrument import _SubRays
+
+    rng = np.random.default_rng(1)
+    n = 1500
+    ti, tr = rng.uniform(0, 90, n), rng.uniform(0, 90, n)
+    pi_, pr = rng.uniform(-180, 180, n), rng.uniform(-180, 180, n)
+    ti[:60], tr[:60] = rng.uniform(84, 90, 60), rng.uniform(84, 90, 60)
+    pr[:60] = pi_[:60] + 180.0  # forward, near grazing
+    model = gonio.models.get(name)
+    assert getattr(model.at(ti, pi_, tr, pr).prepared, "linear_form", None) is not None
+    rays = _SubRays.of(model, *np.radians([ti, pi_, tr, pr]), 0.003, 0.0009, {})
+    checked, _ = model.resolve(params)
+    if params.get("sigma") == 80.0:
+        sub_values = rays.fixed.unchecked(**checked)
+        assert np.any(sub_values[rays.fixed._valid] == 0.0)  # the floor really acts here
+    fixed = aperture_averaged(name).at(ti, pi_, tr, pr)
+    np.testing.assert_allclose(fixed(**params), rays.average(checked, (n,)), rtol=1e-13, atol=0)
+    walkers = np.array([[0.3], [0.6], [0.9]])
+    expected = np.stack([rays.average(dict(checked, rho=float(w)), (n,)) for w in walkers[:, 0]])
+    np.testing.assert_allclose(fixed(**dict(params, rho=walkers)), expected, rtol=1e-13, atol=0)

@@ -148,3 +148,83 @@ def test_unchecked_fixed_geometry_path_equals_checked_path(name):
     np.testing.assert_array_equal(unchecked, fixed(**params))
     # Against the plain path: rounding only, as in the fixed-geometry test above.
     np.testing.assert_allclose(unchecked, model(ti, pi_, tr, pr, **params), rtol=1e-12, atol=0)
+
+
+def _walker_values(model, n_walkers: int) -> dict[str, np.ndarray]:
+    """Distinct in-range values per walker: from the default towards a bound, shape (W, 1)."""
+    out = {}
+    for p in model.params:
+        lo, hi = p.bounds
+        target = 0.5 * (p.default + lo) if math.isfinite(lo) else p.default - 1.0
+        if math.isfinite(hi) and p.default == lo:
+            target = 0.5 * (lo + hi) if hi - lo < 10 else lo + 1.0
+        out[p.name] = np.linspace(p.default, target, n_walkers)[:, None]
+    return out
+
+
+def _walker_geometry(name: str):
+    rng = np.random.default_rng(5)
+    n = 5 if name.endswith(("-exact", "-numerical")) else 40
+    ti, tr = rng.uniform(0, 89, n), rng.uniform(0, 89, n)
+    pi_, pr = rng.uniform(-180, 180, n), rng.uniform(-180, 180, n)
+    tr[:2] = [95.0, np.nan]  # horizon and NaN rules with array parameters too
+    return ti, pi_, tr, pr
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_array_parameters_equal_one_call_per_value(name):
+    """Parameters broadcast like angles: W walkers x N geometries in one call, on the plain
+    path and the fixed-geometry path, equal the W scalar calls."""
+    model = gonio.models.get(name)
+    walkers = _walker_values(model, 3)
+    geometry = _walker_geometry(name)
+    one_by_one = np.stack([model(*geometry, **{k: float(v[w, 0]) for k, v in walkers.items()}) for w in range(3)])
+    assert np.isnan(one_by_one[:, 1]).all() and (one_by_one[:, 0] == 0).all()
+    np.testing.assert_allclose(model(*geometry, **walkers), one_by_one, rtol=1e-12, atol=0)
+    fixed = model.at(*geometry)
+    np.testing.assert_allclose(fixed(**walkers), one_by_one, rtol=1e-12, atol=0)
+    params, _ = model.resolve(walkers)
+    np.testing.assert_allclose(fixed.unchecked(**params), one_by_one, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_array_parameters_along_the_geometry(name):
+    """A parameter that varies point by point (an albedo map) on both paths."""
+    model = gonio.models.get(name)
+    geometry = _walker_geometry(name)
+    n = geometry[0].size
+    first = model.params[0]
+    lo = first.bounds[0] if math.isfinite(first.bounds[0]) else first.default - 1.0
+    values = np.linspace(first.default, 0.5 * (first.default + lo), n)
+    point = np.array([model(*(g[j] for g in geometry), **{first.name: float(values[j])}) for j in range(n)])
+    np.testing.assert_allclose(model(*geometry, **{first.name: values}), point, rtol=1e-12, atol=0, equal_nan=True)
+    np.testing.assert_allclose(model.at(*geometry)(**{first.name: values}), point, rtol=1e-12, atol=0, equal_nan=True)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_array_parameter_out_of_range_names_the_element(name):
+    model = gonio.models.get(name)
+    p = next((q for q in model.params if math.isfinite(q.bounds[1])), None)
+    if p is None:
+        pytest.skip("no parameter with a finite upper bound")
+    values = np.full((2, 3), p.default)
+    values[1, 2] = p.bounds[1] + 1.0
+    with pytest.raises(ValueError, match=rf"{p.name}\[1, 2\] = .* outside its valid range"):
+        model(30.0, 0.0, 20.0, 180.0, **{p.name: values})
+    with pytest.raises(ValueError, match=rf"{p.name}\[1, 2\]"):
+        model.at(30.0, 0.0, 20.0, 180.0)(**{p.name: values})
+    with pytest.raises(ValueError, match="must be a real number"):
+        model(30.0, 0.0, 20.0, 180.0, **{p.name: ["a", "b"]})
+
+
+@pytest.mark.parametrize("name", ["lambert", "oren-nayar", "oren-nayar-qualitative", "oren-nayar-tabulated"])
+def test_array_parameters_through_the_apertures(name):
+    """The aperture average (what rig fits evaluate) broadcasts parameters too."""
+    from gonio.instrument import aperture_averaged
+
+    model = aperture_averaged(name)
+    walkers = _walker_values(model, 3)
+    geometry = _walker_geometry(name)
+    one_by_one = np.stack([model(*geometry, **{k: float(v[w, 0]) for k, v in walkers.items()}) for w in range(3)])
+    np.testing.assert_allclose(model.at(*geometry)(**walkers), one_by_one, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(model(*geometry, **walkers), one_by_one, rtol=1e-12, atol=0)

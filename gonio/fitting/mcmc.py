@@ -39,11 +39,61 @@ from .least_squares import LeastSquaresResult
 from .priors import Prior, default_prior
 from .problem import FitProblem
 
-__all__ = ["ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "start_spread", "LogPosterior"]
+__all__ = ["DEFAULT_WALKERS", "VectorisedStretchMove", "ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "start_spread", "LogPosterior"]
+
+
+#: Default ensemble size, chosen by measurement (benchmarks/bench_fitting.py: effective
+#: samples per second against ensemble size, docs/fitting.md "Performance").
+DEFAULT_WALKERS = 64
+
+#: Growth of the chain between autocorrelation estimates (a fraction of its length): the
+#: stopping rule is met at most this much later than with a check every ``check_every`` steps.
+CHECK_GROWTH = 0.1
 
 
 class ConvergenceWarning(UserWarning):
     """The chain reached its step limit before the autocorrelation criterion was met."""
+
+
+class VectorisedStretchMove(emcee.moves.StretchMove):
+    """emcee's stretch move (Goodman & Weare 2010) with each half-ensemble's proposals
+    evaluated and accepted in one vectorised step.
+
+    Identical in distribution to :class:`emcee.moves.StretchMove`: the same proposal
+    (``get_proposal`` is emcee's), the same acceptance probability
+    min(1, z^(d-1) p(y)/p(x)), the same red-blue split.  Two loops over walkers that cost
+    more than the model once the model itself is vectorised are done by numpy instead:
+    the log posterior of the proposals comes straight from ``log_prob_batch`` (not through
+    emcee's per-walker conversion of the results) and the acceptance test draws all its
+    uniform numbers at once.
+
+    Parameters
+    ----------
+    log_prob_batch : callable
+        ``log_prob_batch(coords) -> ndarray``: log posterior of every row of ``coords``.
+    a : float
+        Stretch scale (emcee's default 2).
+    """
+
+    def __init__(self, log_prob_batch: Callable[[np.ndarray], np.ndarray], a: float = 2.0) -> None:
+        super().__init__(a=a)
+        self.log_prob_batch = log_prob_batch
+
+    def propose(self, model, state):
+        """One update of both halves of the ensemble; returns the new state and acceptances."""
+        nwalkers = state.coords.shape[0]
+        accepted = np.zeros(nwalkers, dtype=bool)
+        halves = np.arange(nwalkers) % self.nsplits
+        if self.randomize_split:
+            model.random.shuffle(halves)
+        for split in range(self.nsplits):
+            moving = halves == split
+            proposal, factors = self.get_proposal(state.coords[moving], [state.coords[~moving]], model.random)
+            log_prob = np.asarray(self.log_prob_batch(proposal), float)
+            gain = factors + log_prob - state.log_prob[moving]
+            accepted[moving] = gain > np.log(model.random.rand(int(moving.sum())))
+            state = self.update(state, emcee.State(proposal, log_prob=log_prob), accepted, moving)
+        return state, accepted
 
 
 def resolve_priors(
@@ -102,6 +152,25 @@ class LogPosterior:
         self.model_seconds += time.perf_counter() - start
         self.calls += 1
         return prior + likelihood
+
+    def batch(self, vectors) -> np.ndarray:
+        """Log posterior of every row of ``vectors`` (shape (W, n_free)) in one model
+        evaluation (emcee's ``vectorize=True``); equal to calling the posterior row by row.
+        Rows outside a physical range or the prior's support get ``-inf`` and are not
+        evaluated."""
+        vectors = np.asarray(vectors, float).reshape(-1, len(self.specs))
+        prior = np.zeros(vectors.shape[0])
+        for k, (p, spec) in enumerate(zip(self.priors, self.specs)):
+            column = vectors[:, k]
+            prior += np.where(spec.contains_array(column), p.logpdf_array(column), -math.inf)
+        out = np.full(vectors.shape[0], -math.inf)
+        inside = np.isfinite(prior)
+        if inside.any():
+            start = time.perf_counter()
+            out[inside] = prior[inside] + self.problem.log_likelihood_batch(vectors[inside])
+            self.model_seconds += time.perf_counter() - start
+            self.calls += int(inside.sum())
+        return out
 
 
 @dataclass
@@ -206,7 +275,7 @@ def sample_posterior(
     problem: FitProblem,
     start: LeastSquaresResult,
     priors: Mapping[str, Prior] | None = None,
-    n_walkers: int = 32,
+    n_walkers: int = DEFAULT_WALKERS,
     max_steps: int = 20000,
     tau_multiple: float = 50.0,
     tau_rtol: float = 0.05,
@@ -262,7 +331,10 @@ def sample_posterior(
         centre[problem.free.index(name)] = min(max(value, lo + spread[-1]), hi - spread[-1]) if math.isfinite(hi - lo) else value
     walkers = _initial_walkers(posterior, centre, np.array(spread), n_walkers, rng)
 
-    sampler = emcee.EnsembleSampler(n_walkers, ndim, posterior)
+    # every walker of a half-ensemble in one model evaluation (numpy broadcasting over
+    # parameter arrays, gonio.models.Model.at)
+    sampler = emcee.EnsembleSampler(n_walkers, ndim, posterior.batch, vectorize=True,
+                                    moves=VectorisedStretchMove(posterior.batch))
     # emcee draws its moves from a legacy RandomState carried by the State object.
     state = emcee.State(walkers, random_state=np.random.RandomState(int(rng.integers(2**31))).get_state())
     posterior.model_seconds = 0.0
@@ -274,10 +346,19 @@ def sample_posterior(
     began = time.perf_counter()
     tau = np.full(ndim, np.nan)
     next_rhat = 0
+    next_check = check_every
+    largest = math.inf
     while steps < max_steps:
         n = min(check_every, max_steps - steps)
         state = sampler.run_mcmc(state, n, progress=False)
         steps += n
+        if steps < next_check and steps < max_steps:
+            if progress is not None:
+                progress(steps, max_steps, largest)
+            continue
+        # tau costs O(steps log steps): estimated again only after the chain grew by
+        # CHECK_GROWTH (at least check_every steps), so the checks stay a small share
+        next_check = steps + max(check_every, int(CHECK_GROWTH * steps) // check_every * check_every)
         tau = np.asarray(sampler.get_autocorr_time(tol=0), float)
         largest = float(np.max(tau)) if np.all(np.isfinite(tau)) else math.inf
         history.append((steps, largest))

@@ -35,6 +35,10 @@ class Prior:
         """Natural log of the density at ``x`` (``-inf`` outside the support)."""
         raise NotImplementedError
 
+    def logpdf_array(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`logpdf` of every element of ``x`` (the ensemble sampler's walkers at once)."""
+        return np.array([self.logpdf(float(v)) for v in np.ravel(x)]).reshape(np.shape(x))
+
     def sample(self, rng: np.random.Generator, size: int) -> np.ndarray:  # pragma: no cover
         """``size`` independent draws."""
         raise NotImplementedError
@@ -74,6 +78,10 @@ class Uniform(Prior):
             return -math.log(self.upper - self.lower)
         return -math.inf
 
+    def logpdf_array(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, float)
+        return np.where((x >= self.lower) & (x <= self.upper), -math.log(self.upper - self.lower), -math.inf)
+
     def sample(self, rng: np.random.Generator, size: int) -> np.ndarray:
         return rng.uniform(self.lower, self.upper, size)
 
@@ -100,6 +108,13 @@ class LogUniform(Prior):
         if self.lower <= x <= self.upper:
             return -math.log(x) - math.log(math.log(self.upper / self.lower))
         return -math.inf
+
+    def logpdf_array(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, float)
+        inside = (x >= self.lower) & (x <= self.upper)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            values = -np.log(x) - math.log(math.log(self.upper / self.lower))
+        return np.where(inside, values, -math.inf)
 
     def sample(self, rng: np.random.Generator, size: int) -> np.ndarray:
         return np.exp(rng.uniform(math.log(self.lower), math.log(self.upper), size))
@@ -140,6 +155,12 @@ class Normal(Prior):
             z = (x - self.mean) / self.sd
             return self._log_norm - 0.5 * z * z  # type: ignore[attr-defined]
         return -math.inf
+
+    def logpdf_array(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, float)
+        z = (x - self.mean) / self.sd
+        inside = (x >= self.lower) & (x <= self.upper)
+        return np.where(inside, self._log_norm - 0.5 * z * z, -math.inf)  # type: ignore[attr-defined]
 
     def sample(self, rng: np.random.Generator, size: int) -> np.ndarray:
         out = rng.normal(self.mean, self.sd, size)

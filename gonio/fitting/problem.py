@@ -230,6 +230,7 @@ class FitProblem:
         self._cos_i = np.cos(np.radians(dataset.theta_i))
         self._cholesky = None if dataset.covariance is None else np.linalg.cholesky(dataset.covariance)
         self._precision: np.ndarray | None = None  # C^-1, computed on first use
+        self._log_sigma_sum = float(np.sum(np.log(dataset.sigma)))
         self._model_names = set(self.model.param_names)
         # Free model parameters, checked on each evaluation from a vector; fixed values were
         # checked above and defaults lie inside their bounds.
@@ -288,7 +289,7 @@ class FitProblem:
         brdf = self._fast.unchecked(**params)
         normal = None
         if self._normal_index is not None:
-            normal = self._fast_normal.unchecked(**params)[self._normal_index]
+            normal = self._fast_normal.unchecked(**params)[..., self._normal_index]
         return combine_prediction(self.dataset.quantity, brdf, normal, self._cos_i, values.get("scale", 1.0))
 
     def _predict_vector(self, vector: Any) -> tuple[dict[str, float], np.ndarray]:
@@ -364,6 +365,63 @@ class FitProblem:
         if not math.isfinite(chi2):
             return -math.inf
         return -0.5 * chi2 - log_det - 0.5 * z.size * math.log(2.0 * math.pi)
+
+    def batch_values(self, vectors: Any) -> dict[str, Any]:
+        """All parameter values for many vectors at once (the rows of ``vectors``).
+
+        Free parameters become columns of shape (W, 1), which broadcast against the N
+        geometries to (W, N) in the model (``Model.at`` takes parameter arrays); fixed and
+        default values stay floats.
+        """
+        vectors = np.asarray(vectors, float).reshape(-1, self.ndim)
+        out: dict[str, Any] = {p.name: self.fixed.get(p.name, p.default) for p in self.specs}
+        out.update({name: vectors[:, [k]] for k, name in enumerate(self.free)})
+        return out
+
+    def log_likelihood_batch(self, vectors: Any) -> np.ndarray:
+        """:meth:`log_likelihood` of every row of ``vectors`` (shape (W, n_free)) in one
+        model evaluation: the ensemble sampler's walkers at once.
+
+        The rows must lie inside the physical bounds (the caller checks them, as
+        :class:`~gonio.fitting.mcmc.LogPosterior` does); the result equals the one-by-one
+        values to rounding.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (W,); ``-inf`` where a prediction is undefined.
+        """
+        values = self.batch_values(vectors)
+        params = {name: values[name] for name in self.model.param_names}
+        predicted = self._predict_checked(values, params)
+        difference = np.asarray(predicted - self.dataset.value, float).reshape(-1, self.dataset.n)
+        walkers = difference.shape[0]
+        self.evaluations += walkers - 1
+        finite = np.all(np.isfinite(difference), axis=1)
+        out = np.full(walkers, -math.inf)
+        if not finite.any():
+            return out
+        normaliser = 0.5 * self.dataset.n * math.log(2.0 * math.pi)
+        extra = self.extra_variance(values, predicted) if self.jitter else 0.0
+        if self._cholesky is None and not self.jitter:
+            z = difference / self.dataset.sigma
+            out[finite] = (-0.5 * np.einsum("wn,wn->w", z, z) - self._log_sigma_sum - normaliser)[finite]
+        elif self._cholesky is None:
+            variance = self.dataset.sigma**2 + np.asarray(extra)
+            chi2 = np.sum(difference**2 / variance, axis=-1)
+            log_det = 0.5 * np.sum(np.broadcast_to(np.log(variance), difference.shape), axis=-1)
+            out[finite] = (-0.5 * chi2 - log_det - normaliser)[finite]
+        elif not self.jitter:
+            from scipy.linalg import solve_triangular
+
+            z = solve_triangular(self._cholesky, difference[finite].T, lower=True, check_finite=False)
+            log_det = float(np.sum(np.log(np.diag(self._cholesky))))
+            out[finite] = -0.5 * np.sum(z * z, axis=0) - log_det - normaliser
+        else:  # a covariance with a free extra noise: one Cholesky factor per walker
+            rows = np.asarray(vectors, float).reshape(walkers, self.ndim)
+            out[finite] = [self.log_likelihood(row) for row in rows[finite]]
+        out[~np.isfinite(out)] = -math.inf
+        return out
 
     def pointwise_log_likelihood(self, vector: Any) -> np.ndarray:
         """Log predictive density of each measurement given the others, at ``vector``.

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import importlib
 
-from ._core import FixedGeometryModel, Model, Option, Param, available, get, register
+from ._core import FixedGeometryModel, LinearForm, Model, Option, Param, available, get, register
 
-__all__ = ["Model", "Param", "Option", "FixedGeometryModel", "available", "get", "register"]
+__all__ = ["Model", "Param", "Option", "FixedGeometryModel", "LinearForm", "available", "get", "register"]
 
 #: Modules that register models, in the order they are imported.
 MODEL_MODULES = (

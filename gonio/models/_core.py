@@ -25,6 +25,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 __all__ = [
+    "LinearForm",
     "Param",
     "Option",
     "Model",
@@ -80,21 +81,103 @@ class Param:
         below = value < hi if self.open_upper else value <= hi
         return bool(above and below)
 
-    def check(self, value: Any, model: str) -> float:
-        """Return ``value`` as float, or raise ``ValueError`` naming what was wrong."""
+    def check(self, value: Any, model: str) -> float | np.ndarray:
+        """Return ``value`` as a float (or a float array), or raise ``ValueError``.
+
+        Parameters
+        ----------
+        value : float or array_like
+            One value, or an array of values (parameters broadcast like angles: a map of
+            albedo over an image, a grid of roughness, walkers x geometries).
+        model : str
+            Model name, for the message.
+
+        Returns
+        -------
+        float or numpy.ndarray
+            A Python float for a scalar, a float array (same shape) otherwise.
+
+        Raises
+        ------
+        ValueError
+            ``value`` is not a real number (or array of them), or some element is NaN or
+            outside the physical range; the message names the first offending element.
+        """
         try:
-            number = float(value)
+            array = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
             raise ValueError(
-                f"model {model!r}: parameter {self.name!r} must be a real number in "
-                f"{self.range_text()} {self.unit}, got {value!r}"
+                f"model {model!r}: parameter {self.name!r} must be a real number (or an array of "
+                f"them) in {self.range_text()} {self.unit}, got {value!r}"
             ) from None
-        if math.isnan(number) or not self.contains(number):
+        if array.ndim == 0:
+            number = float(array)
+            if math.isnan(number) or not self.contains(number):
+                raise ValueError(
+                    f"model {model!r}: parameter {self.name} = {number:g} {self.unit} is outside "
+                    f"its valid range {self.range_text()} {self.unit} ({self.description})"
+                )
+            return number
+        bad = ~self.contains_array(array)
+        if bad.any():
+            index = tuple(int(i) for i in np.argwhere(bad)[0])
             raise ValueError(
-                f"model {model!r}: parameter {self.name} = {number:g} {self.unit} is outside "
-                f"its valid range {self.range_text()} {self.unit} ({self.description})"
+                f"model {model!r}: parameter {self.name}[{', '.join(map(str, index))}] = "
+                f"{float(array[index]):g} {self.unit} is outside its valid range "
+                f"{self.range_text()} {self.unit} ({self.description}); {int(bad.sum())} of "
+                f"{array.size} values are"
             )
-        return number
+        return array
+
+    def contains_array(self, values: np.ndarray) -> np.ndarray:
+        """Elementwise :meth:`contains` of a float array (False for NaN)."""
+        lo, hi = self.bounds
+        with np.errstate(invalid="ignore"):
+            above = values > lo if self.open_lower else values >= lo
+            below = values < hi if self.open_upper else values <= hi
+        return above & below
+
+
+@dataclass(frozen=True)
+class LinearForm:
+    """A prepared model as a linear combination of geometry-only terms.
+
+    ``f(params) = sum_k coefficients(**params)[k] * terms[k]`` at the points where
+    ``exact`` is true, for every parameter value in range.  A model's ``prepare`` may
+    attach one to the function it returns (attribute ``linear_form``); averages over
+    geometry (the instrument's apertures, :func:`gonio.instrument.aperture_averaged`) then
+    average the K terms once instead of the model at every call.
+
+    Parameters
+    ----------
+    terms : numpy.ndarray
+        Shape (K, n): the geometry-only terms on the prepared (flat) geometry [1/sr per
+        unit coefficient].
+    coefficients : callable
+        ``coefficients(**params) -> tuple`` of K values (floats, or arrays broadcasting
+        like the parameters) [-].
+    exact : numpy.ndarray or None
+        Shape (n,), where the combination equals the model for every parameter value (False
+        where, e.g., a floor at 0 can act); None means everywhere.
+    """
+
+    terms: np.ndarray
+    coefficients: Callable[..., tuple]
+    exact: np.ndarray | None = None
+
+    def combine(self, coefficients: tuple, terms: np.ndarray | None = None) -> np.ndarray:
+        """``sum_k coefficients[k] * terms[k]`` (``terms`` defaults to :attr:`terms`)."""
+        terms = self.terms if terms is None else terms
+        out = np.multiply(coefficients[0], terms[0])
+        for c, t in zip(coefficients[1:], terms[1:]):
+            out = out + np.multiply(c, t)
+        return out
+
+
+def with_linear_form(evaluate: Callable[..., np.ndarray], form: LinearForm) -> Callable[..., np.ndarray]:
+    """Attach ``form`` to a prepared model function (see :class:`LinearForm`) and return it."""
+    evaluate.linear_form = form  # type: ignore[attr-defined]
+    return evaluate
 
 
 @dataclass(frozen=True)
@@ -186,6 +269,12 @@ class Model:
         Whether the BRDF depends on the azimuths only through phi_r - phi_i.
     linear_in : tuple of str
         Names of parameters the BRDF is linear in (used by fitting to profile them out).
+    broadcasts_params : bool
+        Whether ``kernel`` (or the function ``prepare`` returns) accepts parameter arrays
+        that broadcast against the geometry arrays (numpy broadcasting, any shapes).  When
+        False, array parameters are evaluated one distinct parameter combination at a
+        time (:func:`_evaluate_by_combination`): the same values, slower.  Every model
+        that sets it is tested against that loop (tests/test_models_contract.py).
     """
 
     name: str
@@ -199,6 +288,7 @@ class Model:
     reciprocal: bool = True
     isotropic: bool = True
     linear_in: tuple[str, ...] = ()
+    broadcasts_params: bool = False
     _by_name: Mapping[str, Param] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -264,6 +354,15 @@ class Model:
             return self.kernel(ti, pi_, tr, pr, **params, **options)
         return self.prepare(ti, pi_, tr, pr, **options)(**params)
 
+    def _flat_call(self, geometry: tuple[np.ndarray, ...], params: dict[str, Any], options) -> np.ndarray:
+        """Kernel values on flat (1-D, equal length) geometry [rad] and parameter arrays."""
+        if self.broadcasts_params:
+            return self._kernel_call(*geometry, params, options)
+        return _evaluate_by_combination(
+            params, lambda index, scalars: self._kernel_call(*(g[index] for g in geometry), scalars, options),
+            geometry[0].size,
+        )
+
     def __call__(self, theta_i, phi_i, theta_r, phi_r, **values: Any) -> np.ndarray:
         """Evaluate the BRDF [1/sr] at angles in degrees.
 
@@ -274,16 +373,19 @@ class Model:
         theta_r, phi_r : array_like
             Polar angle and azimuth of the viewing direction [deg].
         **values
-            Model parameters and options (scalars).
+            Model parameters (scalars or arrays that broadcast with the angles) and
+            options.
 
         Returns
         -------
         numpy.ndarray
-            BRDF [1/sr] with the broadcast shape of the angles; 0 below the horizon,
-            NaN where any angle is NaN.
+            BRDF [1/sr] with the broadcast shape of the angles and parameters; 0 below
+            the horizon, NaN where any angle is NaN.
         """
         params, options = self.resolve(values)
         ti, pi_, tr, pr = _as_angles(theta_i, phi_i, theta_r, phi_r)
+        if _any_array(params):
+            return self._call_broadcast(ti, pi_, tr, pr, params, options)
         valid, nan = _domain(ti, pi_, tr, pr)
         if valid.all():
             out = self._kernel_call(*_radians(ti, pi_, tr, pr), params, options)
@@ -293,6 +395,19 @@ class Model:
         if valid.any():
             geometry = _radians(ti[valid], pi_[valid], tr[valid], pr[valid])
             out[valid] = self._kernel_call(*geometry, params, options)
+        return out
+
+    def _call_broadcast(self, ti, pi_, tr, pr, params, options) -> np.ndarray:
+        """:meth:`__call__` with array parameters: everything broadcast, valid points flat."""
+        shape = np.broadcast_shapes(ti.shape, *(np.shape(v) for v in params.values()))
+        angles = [np.broadcast_to(a, shape) for a in (ti, pi_, tr, pr)]
+        valid, nan = _domain(*angles)
+        out = np.zeros(shape)
+        out[nan] = np.nan
+        if valid.any():
+            geometry = _radians(*(a[valid] for a in angles))
+            flat = {k: (np.broadcast_to(v, shape)[valid] if np.ndim(v) else v) for k, v in params.items()}
+            out[valid] = np.broadcast_to(self._flat_call(geometry, flat, options), geometry[0].shape)
         return out
 
     def at(self, theta_i, phi_i, theta_r, phi_r, **options: Any) -> "FixedGeometryModel":
@@ -331,11 +446,55 @@ def _radians(*angles: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(np.radians(a) for a in angles)
 
 
+def _any_array(params: Mapping[str, Any]) -> bool:
+    """Whether any checked parameter value is an array (checked scalars are floats)."""
+    return any(isinstance(v, np.ndarray) for v in params.values())
+
+
+def _evaluate_by_combination(
+    params: Mapping[str, Any], evaluate: Callable[[np.ndarray, dict[str, float]], np.ndarray], size: int
+) -> np.ndarray:
+    """Values of a scalar-parameter kernel for parameter arrays, one combination at a time.
+
+    Parameters
+    ----------
+    params : mapping
+        Parameter values: floats, or arrays broadcastable to shape ``(..., size)`` whose last
+        axis runs along the (flat) geometry.
+    evaluate : callable
+        ``evaluate(index, scalars)``: the kernel at the geometry points ``index`` (an index
+        array into the flat geometry) for scalar parameter values ``scalars``.
+    size : int
+        Number of flat geometry points.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape: the broadcast shape of the parameters and ``(size,)``.
+    """
+    shape = np.broadcast_shapes((size,), *(np.shape(v) for v in params.values()))
+    names = list(params)
+    table = np.stack([np.broadcast_to(np.asarray(params[n], float), shape).reshape(-1) for n in names], axis=1)
+    combinations, inverse = np.unique(table, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    point = np.broadcast_to(np.arange(size), shape).reshape(-1)
+    out = np.empty(table.shape[0])
+    for k, row in enumerate(combinations):
+        where = np.flatnonzero(inverse == k)
+        values = evaluate(point[where], {n: float(x) for n, x in zip(names, row)})
+        out[where] = np.broadcast_to(np.asarray(values, float), where.shape)
+    return out.reshape(shape)
+
+
 class FixedGeometryModel:
     """A model bound to fixed geometries: ``f(**params)`` or ``f.evaluate(vector)``.
 
     Created by :meth:`Model.at`.  Geometry-only terms are computed once (when the model
     supplies ``prepare``); each call only combines them with the parameters.
+
+    Parameters may be arrays that broadcast against the geometry's shape ``self.shape``
+    (numpy rules): ``rho`` of shape ``(W, 1)`` with geometries of shape ``(N,)`` gives a
+    ``(W, N)`` result, one row per walker of an ensemble sampler.
     """
 
     def __init__(self, model: Model, ti, pi_, tr, pr, options: dict[str, Any]):
@@ -343,29 +502,35 @@ class FixedGeometryModel:
         self.shape = ti.shape
         self._valid, self._nan = _domain(ti, pi_, tr, pr)
         self._all_valid = bool(self._valid.all())
+        self._valid_flat = np.flatnonzero(self._valid)
         self._options = options
-        geometry = _radians(ti[self._valid], pi_[self._valid], tr[self._valid], pr[self._valid])
+        self._geometry = _radians(ti[self._valid], pi_[self._valid], tr[self._valid], pr[self._valid])
         if model.prepare is not None:
-            evaluate = model.prepare(*geometry, **options)
+            evaluate = model.prepare(*self._geometry, **options)
         else:
-            kernel = model.kernel
+            kernel, geometry = model.kernel, self._geometry
 
             def evaluate(**params: float) -> np.ndarray:
                 return kernel(*geometry, **params, **options)
 
         self._evaluate = evaluate
 
+    @property
+    def prepared(self) -> Callable[..., np.ndarray]:
+        """The model's function of the parameters on the valid geometries (flat, [1/sr])."""
+        return self._evaluate
+
     def __call__(self, **values: Any) -> np.ndarray:
         """BRDF [1/sr] at the frozen geometries for these parameter values.
 
         The values are validated (:meth:`Model.resolve`: unknown names, non-numbers and
         values outside the physical bounds raise ``ValueError``); missing ones take their
-        defaults.
+        defaults.  Array values broadcast against ``self.shape``.
         """
         params, _ = self.model.resolve({**values, **self._options})
         return self.unchecked(**params)
 
-    def unchecked(self, **params: float) -> np.ndarray:
+    def unchecked(self, **params: Any) -> np.ndarray:
         """BRDF [1/sr] for parameter values that are already validated (no checks).
 
         The inner loop of a fit evaluates the model many times with values that it keeps
@@ -373,8 +538,9 @@ class FixedGeometryModel:
 
         Parameters
         ----------
-        **params : float
-            Every model parameter, as a float inside its physical range (as returned by
+        **params : float or numpy.ndarray
+            Every model parameter, as a float (or float array broadcasting against
+            ``self.shape``) inside its physical range (as returned by
             :meth:`Model.resolve` or :meth:`Param.check`).  Nothing is checked, neither
             names nor ranges nor missing values: the result of anything else is undefined.
             Use ``self(**values)`` for values that come from users.
@@ -384,7 +550,59 @@ class FixedGeometryModel:
         numpy.ndarray
             The same values as ``self(**params)`` [1/sr].
         """
-        return self._scatter(self._evaluate(**params))
+        if not _any_array(params):
+            return self._scatter(self._evaluate(**params))
+        lead, flat = self._flat_params(params)
+        if self.model.broadcasts_params:
+            values = self._evaluate(**flat)
+        elif all(np.shape(v)[-1:] in ((), (1,)) for v in flat.values()):
+            values = self._by_leading_combination(flat, lead)
+        else:
+            values = self.model._flat_call(self._geometry_for(lead), _broadcast_flat(flat, lead, self._valid_flat.size),
+                                           self._options).reshape(lead + (-1,))
+        return self._scatter(values, lead)
+
+    def _flat_params(self, params: Mapping[str, Any]) -> tuple[tuple[int, ...], dict[str, Any]]:
+        """The leading (batch) shape and the parameters reshaped to ``(..., 1)`` (constant
+        over the geometry) or ``(..., n_valid)`` (varying along it)."""
+        columns = [v for v in params.values() if np.ndim(v)]
+        if len(self.shape) == 1 and all(np.ndim(v) == 2 and np.shape(v)[1] == 1 for v in columns):
+            # the sampler's case: (W, 1) columns against N flat geometries, nothing to reshape
+            return np.broadcast_shapes(*(np.shape(v)[:1] for v in columns)), dict(params)
+        geometry_ndim = len(self.shape)
+        shape = np.broadcast_shapes(self.shape, *(np.shape(v) for v in params.values()))
+        lead = shape[: len(shape) - geometry_ndim]
+        flat: dict[str, Any] = {}
+        for name, value in params.items():
+            if np.ndim(value) == 0:
+                flat[name] = value
+                continue
+            padded = np.reshape(value, (1,) * (len(shape) - np.ndim(value)) + np.shape(value))
+            batch = padded.shape[: len(lead)]
+            if all(n == 1 for n in padded.shape[len(lead):]):
+                flat[name] = padded.reshape(batch + (1,))
+            else:
+                along = np.broadcast_to(padded, batch + self.shape).reshape(batch + (-1,))
+                flat[name] = along[..., self._valid_flat]
+        return lead, flat
+
+    def _by_leading_combination(self, flat: Mapping[str, Any], lead: tuple[int, ...]) -> np.ndarray:
+        """Values for parameters constant over the geometry, one combination at a time."""
+        n = self._valid_flat.size
+        rows = {k: (np.broadcast_to(v, lead + (1,)).reshape(-1) if np.ndim(v) else v) for k, v in flat.items()}
+        size = int(np.prod(lead, dtype=int))
+        names = list(rows)
+        columns = np.stack([np.broadcast_to(np.asarray(rows[k], float), (size,)) for k in names], axis=1)
+        combinations, inverse = np.unique(columns, axis=0, return_inverse=True)
+        out = np.empty((size, n))
+        for k, row in enumerate(combinations):
+            values = self._evaluate(**{name: float(x) for name, x in zip(names, row)})
+            out[inverse.reshape(-1) == k] = np.broadcast_to(np.asarray(values, float), (n,))
+        return out.reshape(lead + (n,))
+
+    def _geometry_for(self, lead: tuple[int, ...]) -> tuple[np.ndarray, ...]:
+        """The valid geometry [rad] repeated over the leading shape, flat."""
+        return tuple(np.broadcast_to(g, lead + g.shape).reshape(-1) for g in self._geometry)
 
     def evaluate(self, vector, names: tuple[str, ...] | None = None, **fixed: float) -> np.ndarray:
         """Evaluate from a parameter vector (fitting's inner loop).
@@ -401,16 +619,21 @@ class FixedGeometryModel:
         names = self.model.param_names if names is None else names
         return self(**dict(zip(names, vector)), **fixed)
 
-    def _scatter(self, values: np.ndarray) -> np.ndarray:
+    def _scatter(self, values: np.ndarray, lead: tuple[int, ...] = ()) -> np.ndarray:
+        """Flat values on the valid geometries -> shape ``lead + self.shape`` (0 below the
+        horizon, NaN where an angle is NaN)."""
+        values = np.broadcast_to(np.asarray(values, dtype=float), lead + (self._valid_flat.size,))
         if self._all_valid:  # the kernel saw the geometry flattened to 1-D
-            values = np.asarray(values, dtype=float)
-            if values.shape != (self._valid.size,):  # e.g. a constant BRDF as a scalar
-                values = np.broadcast_to(values, (self._valid.size,))
-            return values.reshape(self.shape).copy()
-        out = np.zeros(self.shape)
-        out[self._nan] = np.nan
-        out[self._valid] = values
+            return values.reshape(lead + self.shape).copy()
+        out = np.zeros(lead + self.shape)
+        out[..., self._nan] = np.nan
+        out[..., self._valid] = values
         return out
+
+
+def _broadcast_flat(flat: Mapping[str, Any], lead: tuple[int, ...], n: int) -> dict[str, Any]:
+    """Parameters of shape ``(..., 1)`` or ``(..., n)`` broadcast to ``lead + (n,)`` and flattened."""
+    return {k: (np.broadcast_to(v, lead + (n,)).reshape(-1) if np.ndim(v) else v) for k, v in flat.items()}
 
 
 # ---------------------------------------------------------------------- registry

@@ -42,7 +42,8 @@ def minnaert_brdf(theta_i, phi_i, theta_r, phi_r, k: float, rho: float) -> np.nd
     product = np.cos(theta_i) * np.cos(theta_r)
     product = np.maximum(product, 0.0)
     with np.errstate(divide="ignore"):
-        powered = np.power(product, k - 1.0) if k != 1.0 else np.ones_like(product)
+        # k = 1 is Lambertian everywhere, the horizon included (0^0 = 1 in numpy too)
+        powered = np.power(product, np.subtract(k, 1.0))
     return rho * (k + 1.0) / (2.0 * np.pi) * powered
 
 
@@ -58,5 +59,6 @@ MINNAERT = register(
         kernel=lambda ti, pi_, tr, pr, rho, k: minnaert_brdf(ti, pi_, tr, pr, k=k, rho=rho),
         energy_conserving=False,
         linear_in=("rho",),
+        broadcasts_params=True,
     )
 )

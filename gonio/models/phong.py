@@ -65,6 +65,7 @@ PHONG = register(
         description="energy-normalised Phong specular lobe",
         kernel=phong_brdf,
         linear_in=("rho_s",),
+        broadcasts_params=True,
     )
 )
 
@@ -88,5 +89,6 @@ LAMBERT_PHONG = register(
         description="Lambertian diffuse plus Phong specular lobe",
         kernel=lambert_phong_brdf,
         linear_in=("rho", "rho_s"),
+        broadcasts_params=True,
     )
 )

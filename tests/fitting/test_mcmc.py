@@ -157,3 +157,37 @@ def test_oren_nayar_roughness_of_a_lambertian_sample_is_an_upper_limit():
     assert any(flag.startswith("sigma: the posterior piles up at the lower bound 0 deg") for flag in result.flags)
     assert result.posterior["p97_5"]["sigma"] < 5.0  # 0.2 % noise excludes visible roughness
     assert result.posterior["p2_5"]["rho"] < 0.8 < result.posterior["p97_5"]["rho"]
+
+
+def test_the_clis_state_the_default_ensemble_size():
+    """The CLI help quotes the default number of walkers without importing the sampler."""
+    import inspect
+
+    import gonio.cli.curet
+    import gonio.cli.fit
+    from gonio.fitting.mcmc import DEFAULT_WALKERS
+
+    for module in (gonio.cli.fit, gonio.cli.curet):
+        assert f"default {DEFAULT_WALKERS}," in inspect.getsource(module)
+
+
+def test_vectorised_stretch_move_is_emcees_stretch_move():
+    """Same proposals, same acceptance rule, same random stream: the chain equals emcee's
+    own StretchMove to the last bit (only the loops over walkers are vectorised)."""
+    import emcee
+
+    from gonio.fitting.mcmc import VectorisedStretchMove
+
+    precision = np.array([[2.0, 0.6], [0.6, 1.0]])
+
+    def log_prob(x):
+        x = np.atleast_2d(x)
+        return -0.5 * np.einsum("wi,ij,wj->w", x, precision, x)
+
+    start = np.random.default_rng(4).normal(size=(16, 2))
+    chains = []
+    for move in (emcee.moves.StretchMove(), VectorisedStretchMove(log_prob)):
+        sampler = emcee.EnsembleSampler(16, 2, log_prob, vectorize=True, moves=move)
+        sampler.run_mcmc(emcee.State(start, random_state=np.random.RandomState(9).get_state()), 300, progress=False)
+        chains.append(sampler.get_chain())
+    np.testing.assert_array_equal(chains[0], chains[1])

@@ -106,3 +106,59 @@ def test_covariance_is_checked_and_survives_a_subset_and_json():
     np.testing.assert_array_equal(part.covariance, data.covariance[::2, ::2])
     again = Dataset.from_dict(data.to_dict())
     np.testing.assert_array_equal(again.covariance, data.covariance)
+
+
+def _batch_cases():
+    from .synthetic import synthetic_dataset
+
+    geometry = in_plane_angles(np.repeat([30.0, 60.0], 9), np.tile(np.linspace(-80, 80, 9), 2))
+    brdf = synthetic_dataset("oren-nayar", {"rho": 0.9, "sigma": 30.0}, 0.01, geometry=geometry)
+    normalised = synthetic_dataset("oren-nayar", {"rho": 0.9, "sigma": 30.0}, 0.01, geometry=geometry,
+                                   quantity="normalised_radiance", relative=True)
+    radiance = synthetic_dataset("oren-nayar", {"rho": 0.9, "sigma": 30.0, "scale": 2.0}, 0.01, geometry=geometry,
+                                 quantity="radiance")
+    n = radiance.n
+    common = 0.3 * 0.01**2 * np.ones((n, n))
+    covariance = np.diag(radiance.sigma**2 - np.diag(common)) + common
+    correlated = Dataset(*radiance.geometry, radiance.value, radiance.sigma, quantity="radiance", covariance=covariance)
+    apertures = Dataset(*brdf.geometry, brdf.value, brdf.sigma, metadata={"aperture_sr": [0.003, 0.0009]})
+    return [
+        ("oren-nayar", brdf, {"ir_weight": 1.0}, False),
+        ("oren-nayar", brdf, {}, "absolute"),
+        ("oren-nayar-qualitative", normalised, {}, "relative"),
+        ("oren-nayar", radiance, {"ir_weight": 1.0}, False),
+        ("oren-nayar", correlated, {"ir_weight": 1.0}, False),
+        ("lambert", correlated, {}, "absolute"),
+        ("oren-nayar-tabulated", apertures, {}, False),
+        ("oren-nayar", apertures, {"ir_weight": 1.0}, "relative"),
+    ]
+
+
+@pytest.mark.parametrize("case", range(8))
+def test_batch_likelihood_equals_one_walker_at_a_time(case):
+    """The ensemble's walkers in one evaluation (emcee vectorize=True) give the same
+    log-likelihood as one call per walker: every quantity, extra-noise form, covariance
+    and the aperture average."""
+    model, data, fixed, jitter = _batch_cases()[case]
+    problem = FitProblem(model, data, fixed, jitter=jitter)
+    rng = np.random.default_rng(case)
+    starts = {"rho": (0.5, 0.95), "sigma": (5.0, 45.0), "ir_weight": (0.2, 1.0), "scale": (1.5, 2.5),
+              "jitter": (0.0, 0.02), "rel_jitter": (0.0, 0.05)}
+    vectors = np.column_stack([rng.uniform(*starts[name], 7) for name in problem.free])
+    one_by_one = np.array([problem.log_likelihood(v) for v in vectors])
+    np.testing.assert_allclose(problem.log_likelihood_batch(vectors), one_by_one, rtol=1e-11, atol=1e-9)
+
+
+def test_batch_posterior_rejects_walkers_outside_the_support_without_evaluating_them():
+    from gonio.fitting.mcmc import LogPosterior, resolve_priors
+
+    from .synthetic import synthetic_dataset
+
+    data = synthetic_dataset("oren-nayar", {"rho": 0.9, "sigma": 30.0}, 0.01)
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0})
+    posterior = LogPosterior(problem, resolve_priors(problem, {}))
+    vectors = np.array([[0.9, 30.0], [1.2, 30.0], [0.9, -1.0], [0.8, 20.0]])
+    batch = posterior.batch(vectors)
+    assert np.isneginf(batch[1]) and np.isneginf(batch[2])
+    np.testing.assert_allclose(batch[[0, 3]], [posterior(v) for v in vectors[[0, 3]]], rtol=1e-12)
+    assert posterior.calls == 2 + 2

@@ -23,7 +23,7 @@ from typing import Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from gonio.models._core import Model, Param
+from gonio.models._core import LinearForm, Model, Param, with_linear_form
 from gonio.zernike import _check_order
 
 from .basis import Mode, check_isotropic_index, design_matrix, isotropic_indices
@@ -205,10 +205,19 @@ def _prepare_for(modes: Sequence[Mode]):
         ti, pi_, tr, pr = (np.broadcast_to(np.asarray(a, float), shape).ravel() for a in (theta_i, phi_i, theta_r, phi_r))
         matrix = design_matrix(modes, np.cos(ti), np.cos(tr), pr - pi_)
 
-        def evaluate(**params: float) -> np.ndarray:
-            amplitudes = np.array([params[name] for name in names])
-            return (matrix @ amplitudes).reshape(shape)
+        def evaluate(**params: float | np.ndarray) -> np.ndarray:
+            amplitudes = [params[name] for name in names]
+            if not any(np.ndim(a) for a in amplitudes):
+                return (matrix @ np.array(amplitudes)).reshape(shape)
+            # amplitude arrays run along the flat geometry (last axis, length 1 or n)
+            out = sum(np.multiply(a, matrix[:, j]) for j, a in enumerate(amplitudes))
+            return out.reshape(out.shape[:-1] + shape)
 
+        def amplitudes_of(**params: float | np.ndarray) -> tuple:
+            return tuple(params[name] for name in names)
+
+        if shape == (matrix.shape[0],):  # flat geometry (the fixed-geometry path): linear in the amplitudes
+            return with_linear_form(evaluate, LinearForm(matrix.T.copy(), amplitudes_of))
         return evaluate
 
     return prepare
@@ -287,4 +296,5 @@ def series_model(coefficients: KvdCoefficients, name: str = "kvd-series", descri
         reciprocal=True,
         isotropic=True,
         linear_in=tuple(p.name for p in params),
+        broadcasts_params=True,
     )

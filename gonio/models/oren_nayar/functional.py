@@ -37,7 +37,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._core import Model, Option, Param, register
+from .._core import LinearForm, Model, Option, Param, register, with_linear_form
 
 __all__ = [
     "c1",
@@ -348,11 +348,30 @@ def interreflection_coefficient(sigma: ArrayLike, rho: ArrayLike) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- the models
+def _oren_nayar_coefficients(rho, sigma, ir_weight) -> tuple:
+    """The scalars a, b, c of  a + b direct_shape + c ir_shape  (eq 33-34; see below)."""
+    sigma_sq = np.radians(sigma) ** 2
+    diffuse = np.divide(rho, math.pi)
+    interreflection = ir_weight * _ir_amplitude_rad(rho, sigma_sq) / math.pi
+    return (diffuse * _c1_rad(sigma_sq) + interreflection,
+            diffuse * _saturation(sigma_sq, C23_SATURATION),
+            -interreflection)
+
+
+#: sigma^2 [rad^2] of the roughest surface in range (sigma = 90 deg).
+_ROUGHEST_SQ = (math.pi / 2.0) ** 2
+#: Where direct_shape >= -this, eq 33-35 is >= 0 for every rho, sigma, ir_weight in range,
+#: so the floor at 0 cannot act: a + c ir_shape >= rho/pi C1 (ir_shape <= 1, c <= 0) and
+#: C1 + sat(sigma) direct_shape is smallest at sigma = 90 deg (C1 falls and sat rises
+#: with sigma), where it is 0 at direct_shape = -C1/sat = -0.579.
+_FLOOR_FREE_SHAPE = _c1_rad(_ROUGHEST_SQ) / _saturation(_ROUGHEST_SQ, C23_SATURATION)
+
+
 def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
     """Geometry-only terms of eq 33-34 (angles [rad]); returns f(rho, sigma, ir_weight).
 
     The BRDF is written as  a + b * direct_shape + c * ir_shape  with scalars a, b, c that
-    depend on the parameters only:
+    depend on the parameters only (:func:`_oren_nayar_coefficients`):
 
     * direct_shape = 0.45 cos(dphi) C2'(alpha, beta) tan(beta)
       + 0.125 (1 - |cos dphi|) C3'(alpha, beta) tan((alpha + beta)/2)
@@ -360,7 +379,9 @@ def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
     * ir_shape = cos(dphi) (2 beta / pi)^2;
     * a = rho/pi C1 + w A_ir / pi,  b = rho/pi sigma^2/(sigma^2 + 0.09),  c = -w A_ir / pi.
 
-    The result is floored at 0 (see :func:`oren_nayar_brdf`, Notes).
+    The result is floored at 0 (see :func:`oren_nayar_brdf`, Notes).  The function carries
+    this form as its ``linear_form`` (:class:`gonio.models.LinearForm`), exact wherever
+    the floor cannot act (direct_shape >= -0.579 for every parameter in range).
     """
     cos_dphi = np.cos(phi_r - phi_i)
     alpha = np.maximum(theta_i, theta_r)
@@ -372,15 +393,16 @@ def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
     ir_shape = cos_dphi * (_TWO_OVER_PI * beta) ** 2
 
     def evaluate(rho: float, sigma: float, ir_weight: float) -> np.ndarray:
-        sigma_sq = math.radians(sigma) ** 2
-        diffuse = rho / math.pi
-        interreflection = ir_weight * _ir_amplitude_rad(rho, sigma_sq) / math.pi
-        out = direct_shape * (diffuse * _saturation(sigma_sq, C23_SATURATION))
-        out -= interreflection * ir_shape
-        out += diffuse * _c1_rad(sigma_sq) + interreflection
+        a, b, c = _oren_nayar_coefficients(rho, sigma, ir_weight)
+        # (parameters may be arrays broadcasting with the geometry: the first line makes
+        # the full shape, the in-place addition then only adds the parameter term)
+        out = direct_shape * b + c * ir_shape
+        out += a
         return np.maximum(out, 0.0)  # eq 33 dips below 0 near forward grazing (see notes)
 
-    return evaluate
+    form = LinearForm(np.stack(np.broadcast_arrays(np.ones_like(direct_shape), direct_shape, ir_shape)),
+                      _oren_nayar_coefficients, exact=direct_shape >= -_FLOOR_FREE_SHAPE)
+    return with_linear_form(evaluate, form)
 
 
 def oren_nayar_brdf(theta_i, phi_i, theta_r, phi_r, rho: float, sigma: float, ir_weight: float = 1.0) -> np.ndarray:
@@ -447,19 +469,28 @@ def oren_nayar_brdf(theta_i, phi_i, theta_r, phi_r, rho: float, sigma: float, ir
 
 
 def _prepare_qualitative(theta_i, phi_i, theta_r, phi_r, variant: str = "eq36"):
-    """Geometry-only term of eq 36 (angles [rad]); returns f(rho, sigma)."""
+    """Geometry-only term of eq 36 (angles [rad]); returns f(rho, sigma).
+
+    f = a + b shape with a = rho/pi A, b = rho/pi B and shape = max(0, cos dphi)
+    sin(alpha) tan(beta) >= 0, carried as its exact ``linear_form``.
+    """
     half = C1_SATURATION_FOOTNOTE11 if variant == "footnote11" else C1_SATURATION
     shape = np.maximum(np.cos(phi_r - phi_i), 0.0) * np.sin(np.maximum(theta_i, theta_r))
     shape *= np.tan(np.minimum(theta_i, theta_r))
 
+    def coefficients(rho, sigma) -> tuple:
+        sigma_sq = np.radians(sigma) ** 2
+        diffuse = np.divide(rho, math.pi)
+        return diffuse * _c1_rad(sigma_sq, half), diffuse * (C2_AMPLITUDE * _saturation(sigma_sq, C23_SATURATION))
+
     def evaluate(rho: float, sigma: float) -> np.ndarray:
-        sigma_sq = math.radians(sigma) ** 2
-        diffuse = rho / math.pi
-        out = shape * (diffuse * C2_AMPLITUDE * _saturation(sigma_sq, C23_SATURATION))
-        out += diffuse * _c1_rad(sigma_sq, half)
+        a, b = coefficients(rho, sigma)
+        out = shape * b
+        out += a
         return out
 
-    return evaluate
+    form = LinearForm(np.stack(np.broadcast_arrays(np.ones_like(shape), shape)), coefficients)
+    return with_linear_form(evaluate, form)
 
 
 def oren_nayar_qualitative_brdf(
@@ -511,6 +542,7 @@ OREN_NAYAR = register(
         description="rough diffuse surface: Oren-Nayar functional approximation with interreflection",
         prepare=_prepare_oren_nayar,
         energy_conserving=False,
+        broadcasts_params=True,
     )
 )
 
@@ -524,5 +556,6 @@ OREN_NAYAR_QUALITATIVE = register(
         options=(VARIANT,),
         energy_conserving=False,
         linear_in=("rho",),
+        broadcasts_params=True,
     )
 )
