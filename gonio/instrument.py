@@ -116,10 +116,10 @@ def aperture_averaged(
     def prepare(ti, pi_, tr, pr, **options: Any):
         shape = np.shape(ti)
         rays = _SubRays.of(base, ti, pi_, tr, pr, lamp_solid_angle_sr, camera_solid_angle_sr, options)
-        form = getattr(rays.fixed.prepared, "linear_form", None)
-        if form is None:
+        build_form = getattr(rays.fixed.prepared, "linear_form", None)
+        if build_form is None:
             return lambda **params: rays.average(params, shape)
-        return _contracted(rays, form, shape)
+        return _contracted(rays, build_form(), shape)
 
     return Model(
         name=f"{base.name}@aperture",

@@ -144,7 +144,9 @@ class LinearForm:
 
     ``f(params) = sum_k coefficients(**params)[k] * terms[k]`` at the points where
     ``exact`` is true, for every parameter value in range.  A model's ``prepare`` may
-    attach one to the function it returns (attribute ``linear_form``); averages over
+    attach a function building one to the function it returns (attribute ``linear_form``,
+    :func:`with_linear_form`; built only when asked for, so the plain call pays nothing for
+    it); averages over
     geometry (the instrument's apertures, :func:`gonio.instrument.aperture_averaged`) then
     average the K terms once instead of the model at every call.
 
@@ -174,9 +176,10 @@ class LinearForm:
         return out
 
 
-def with_linear_form(evaluate: Callable[..., np.ndarray], form: LinearForm) -> Callable[..., np.ndarray]:
-    """Attach ``form`` to a prepared model function (see :class:`LinearForm`) and return it."""
-    evaluate.linear_form = form  # type: ignore[attr-defined]
+def with_linear_form(evaluate: Callable[..., np.ndarray], build: Callable[[], LinearForm]) -> Callable[..., np.ndarray]:
+    """Attach ``build`` (a function returning the :class:`LinearForm` of ``evaluate``) to
+    a prepared model function as its attribute ``linear_form``, and return the function."""
+    evaluate.linear_form = build  # type: ignore[attr-defined]
     return evaluate
 
 
@@ -218,6 +221,9 @@ def _fmt(x: float) -> str:
 
 
 _RIGHT_ANGLE = 90.0
+#: Geometries evaluated at a time by the plain call on large inputs: the arrays of one
+#: chunk (64 KiB each) stay in the cache and below the allocator's mmap threshold.
+CHUNK = 8192
 
 
 def _as_angles(
@@ -228,9 +234,9 @@ def _as_angles(
         *(np.asarray(a, dtype=float) for a in (theta_i, phi_i, theta_r, phi_r))
     )
     for label, theta in (("theta_i", arrays[0]), ("theta_r", arrays[2])):
-        negative = theta < 0
-        if np.any(negative):
-            bad = float(theta[negative].flat[0])
+        # one pass, no temporary: the smallest non-NaN angle (fmin ignores NaN)
+        if theta.size and np.fmin.reduce(theta, axis=None) < 0:
+            bad = float(theta[theta < 0].flat[0])
             raise ValueError(
                 f"{label} = {bad:g} deg is negative; polar angles are measured from the "
                 "surface normal and lie in [0, 90] deg (use "
@@ -386,6 +392,12 @@ class Model:
         ti, pi_, tr, pr = _as_angles(theta_i, phi_i, theta_r, phi_r)
         if _any_array(params):
             return self._call_broadcast(ti, pi_, tr, pr, params, options)
+        if ti.size >= 2 * CHUNK:
+            return self._call_in_chunks(ti, pi_, tr, pr, params, options)
+        return self._call_scalar_params(ti, pi_, tr, pr, params, options)
+
+    def _call_scalar_params(self, ti, pi_, tr, pr, params, options) -> np.ndarray:
+        """The BRDF of checked scalar parameters at angles [deg] of one shape."""
         valid, nan = _domain(ti, pi_, tr, pr)
         if valid.all():
             out = self._kernel_call(*_radians(ti, pi_, tr, pr), params, options)
@@ -396,6 +408,18 @@ class Model:
             geometry = _radians(ti[valid], pi_[valid], tr[valid], pr[valid])
             out[valid] = self._kernel_call(*geometry, params, options)
         return out
+
+    def _call_in_chunks(self, ti, pi_, tr, pr, params, options) -> np.ndarray:
+        """:meth:`_call_scalar_params` on :data:`CHUNK` geometries at a time: the model's
+        temporaries then stay in the processor's cache instead of streaming through
+        memory (2 to 3 times faster for the closed forms on 1e6 geometries,
+        benchmarks/closed_form_speed.py)."""
+        flat = [np.ravel(a) for a in (ti, pi_, tr, pr)]
+        out = np.empty(ti.size)
+        for start in range(0, ti.size, CHUNK):
+            part = slice(start, start + CHUNK)
+            out[part] = self._call_scalar_params(*(a[part] for a in flat), params, options)
+        return out.reshape(ti.shape)
 
     def _call_broadcast(self, ti, pi_, tr, pr, params, options) -> np.ndarray:
         """:meth:`__call__` with array parameters: everything broadcast, valid points flat."""
@@ -442,8 +466,12 @@ def _domain(ti, pi_, tr, pr) -> tuple[np.ndarray, np.ndarray]:
     return above & ~nan, nan
 
 
+_DEGREE = math.pi / 180.0
+
+
 def _radians(*angles: np.ndarray) -> tuple[np.ndarray, ...]:
-    return tuple(np.radians(a) for a in angles)
+    # a multiplication by pi/180: the same values as np.radians, at a quarter of its cost
+    return tuple(a * _DEGREE for a in angles)
 
 
 def _any_array(params: Mapping[str, Any]) -> bool:

@@ -45,7 +45,7 @@ def _prepare_lambert(theta_i, phi_i, theta_r, phi_r):
     def evaluate(rho: float) -> np.ndarray:
         return lambert_brdf(theta_i, phi_i, theta_r, phi_r, rho)
 
-    return with_linear_form(evaluate, LinearForm(ones[None], lambda rho: (np.divide(rho, np.pi),)))
+    return with_linear_form(evaluate, lambda: LinearForm(ones[None], lambda rho: (np.divide(rho, np.pi),)))
 
 
 LAMBERT = register(

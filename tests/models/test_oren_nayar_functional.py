@@ -82,9 +82,13 @@ def test_negative_region_of_eq_33_is_floored_at_zero():
     crossing = brentq(lambda s: float(literal_eq33_35(*grazing, rho=1.0, sigma=s, ir_weight=0.0)), 20.0, 60.0)
     assert crossing == pytest.approx(38.07, abs=0.01)
     assert literal_eq33_35(*grazing, rho=1.0, sigma=90.0, ir_weight=1.0) > 0.0
-    # within the physical region nothing is altered: the limit value at sigma = 90 deg
+    # within the physical region nothing is altered: the limit value at sigma = 90 deg.
+    # It is the difference of terms ~5e6 times larger (tan(89.9999 deg) = 5.7e5), so a
+    # one-ulp difference of sin(alpha) between two correct evaluations (np.sin here, the
+    # half-angle tangent in gonio) shows as ~5e-10 relative: the tolerance is that
+    # condition number times the rounding of a sine, not a looser formula.
     value = float(gonio.brdf("oren-nayar", *grazing, rho=1.0, sigma=90.0))
-    assert value == pytest.approx(float(literal_eq33_35(*grazing, rho=1.0, sigma=90.0)), rel=1e-12)
+    assert value == pytest.approx(float(literal_eq33_35(*grazing, rho=1.0, sigma=90.0)), rel=2e-9)
 
 
 @settings(max_examples=60, deadline=None)

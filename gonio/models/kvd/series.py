@@ -217,7 +217,7 @@ def _prepare_for(modes: Sequence[Mode]):
             return tuple(params[name] for name in names)
 
         if shape == (matrix.shape[0],):  # flat geometry (the fixed-geometry path): linear in the amplitudes
-            return with_linear_form(evaluate, LinearForm(matrix.T.copy(), amplitudes_of))
+            return with_linear_form(evaluate, lambda: LinearForm(matrix.T.copy(), amplitudes_of))
         return evaluate
 
     return prepare

@@ -105,6 +105,24 @@ def _c2_angular(alpha, beta, cos_dphi):
     return np.sin(alpha) - np.where(cos_dphi < 0.0, (_TWO_OVER_PI * beta) ** 3, 0.0)
 
 
+def _cos_from_half_tangent(x):
+    """cos(x) = (1 - t^2)/(1 + t^2) with t = tan(x/2) (x [rad]).
+
+    The same value as ``np.cos`` to a few units in the last place (absolute), at a
+    quarter of its cost: numpy's tangent is vectorised, its sine and cosine are not
+    (benchmarks/closed_form_speed.py).  At x = pi, t^2 ~ 3e32 and the ratio is -1.
+    """
+    t = np.tan(0.5 * x)
+    t *= t
+    return (1.0 - t) / (1.0 + t)
+
+
+def _sin_from_half_tangent(x):
+    """sin(x) = 2 t/(1 + t^2) with t = tan(x/2), for x in [0, pi/2] [rad] (as above)."""
+    t = np.tan(0.5 * x)
+    return 2.0 * t / (1.0 + t * t)
+
+
 def _c3_angular(alpha, beta):
     """The angular factor of C3 (eq 33): (4 alpha beta / pi^2)^2."""
     return (_FOUR_OVER_PI_SQ * alpha * beta) ** 2
@@ -383,14 +401,16 @@ def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
     this form as its ``linear_form`` (:class:`gonio.models.LinearForm`), exact wherever
     the floor cannot act (direct_shape >= -0.579 for every parameter in range).
     """
-    cos_dphi = np.cos(phi_r - phi_i)
+    cos_dphi = _cos_from_half_tangent(phi_r - phi_i)
     alpha = np.maximum(theta_i, theta_r)
     beta = np.minimum(theta_i, theta_r)
-    direct_shape = C2_AMPLITUDE * cos_dphi * _c2_angular(alpha, beta, cos_dphi) * np.tan(beta)
+    two_beta_over_pi = _TWO_OVER_PI * beta
+    angular_c2 = _sin_from_half_tangent(alpha) - np.where(cos_dphi < 0.0, two_beta_over_pi**2 * two_beta_over_pi, 0.0)
+    direct_shape = C2_AMPLITUDE * cos_dphi * angular_c2 * np.tan(beta)
     direct_shape += (
         C3_AMPLITUDE * (1.0 - np.abs(cos_dphi)) * _c3_angular(alpha, beta) * np.tan(0.5 * (alpha + beta))
     )
-    ir_shape = cos_dphi * (_TWO_OVER_PI * beta) ** 2
+    ir_shape = cos_dphi * two_beta_over_pi**2
 
     def evaluate(rho: float, sigma: float, ir_weight: float) -> np.ndarray:
         a, b, c = _oren_nayar_coefficients(rho, sigma, ir_weight)
@@ -400,9 +420,9 @@ def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
         out += a
         return np.maximum(out, 0.0)  # eq 33 dips below 0 near forward grazing (see notes)
 
-    form = LinearForm(np.stack(np.broadcast_arrays(np.ones_like(direct_shape), direct_shape, ir_shape)),
-                      _oren_nayar_coefficients, exact=direct_shape >= -_FLOOR_FREE_SHAPE)
-    return with_linear_form(evaluate, form)
+    return with_linear_form(evaluate, lambda: LinearForm(
+        np.stack(np.broadcast_arrays(np.ones_like(direct_shape), direct_shape, ir_shape)),
+        _oren_nayar_coefficients, exact=direct_shape >= -_FLOOR_FREE_SHAPE))
 
 
 def oren_nayar_brdf(theta_i, phi_i, theta_r, phi_r, rho: float, sigma: float, ir_weight: float = 1.0) -> np.ndarray:
@@ -475,7 +495,7 @@ def _prepare_qualitative(theta_i, phi_i, theta_r, phi_r, variant: str = "eq36"):
     sin(alpha) tan(beta) >= 0, carried as its exact ``linear_form``.
     """
     half = C1_SATURATION_FOOTNOTE11 if variant == "footnote11" else C1_SATURATION
-    shape = np.maximum(np.cos(phi_r - phi_i), 0.0) * np.sin(np.maximum(theta_i, theta_r))
+    shape = np.maximum(_cos_from_half_tangent(phi_r - phi_i), 0.0) * _sin_from_half_tangent(np.maximum(theta_i, theta_r))
     shape *= np.tan(np.minimum(theta_i, theta_r))
 
     def coefficients(rho, sigma) -> tuple:
@@ -489,8 +509,8 @@ def _prepare_qualitative(theta_i, phi_i, theta_r, phi_r, variant: str = "eq36"):
         out += a
         return out
 
-    form = LinearForm(np.stack(np.broadcast_arrays(np.ones_like(shape), shape)), coefficients)
-    return with_linear_form(evaluate, form)
+    return with_linear_form(evaluate, lambda: LinearForm(np.stack(np.broadcast_arrays(np.ones_like(shape), shape)),
+                                                         coefficients))
 
 
 def oren_nayar_qualitative_brdf(
