@@ -19,8 +19,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import matplotlib
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import Normalize, to_rgba_array
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
@@ -32,7 +36,7 @@ from gonio.geometry import azimuth_difference, in_plane_angles
 
 __all__ = [
     "geometry_figure", "data_figure", "residual_figure", "corner_figure", "trace_figure",
-    "MAX_INCIDENCE_PANELS", "MAX_AZIMUTH_SERIES",
+    "MAX_INCIDENCE_PANELS", "MAX_AZIMUTH_SERIES", "MAX_LEGEND_INCIDENCES", "DENSE_POINTS",
 ]
 
 #: At most this many incidences are drawn in the data figure (evenly chosen).
@@ -40,9 +44,24 @@ MAX_INCIDENCE_PANELS = 12
 #: At most this many azimuth differences get a series of their own in an off-plane panel
 #: (those with the most measurements); the legend says how many were left out.
 MAX_AZIMUTH_SERIES = 6
+#: With more incidences than this, the geometry and residual figures colour the points by
+#: the source's polar angle (one colour bar) instead of one colour and legend entry each.
+MAX_LEGEND_INCIDENCES = 10
+#: Scatter plots with more points than this draw smaller markers without edges.
+DENSE_POINTS = 1000
+#: Steps drawn per walker in the trace figure at most (more than the axes have pixel
+#: columns; longer chains are drawn every k-th step).
+MAX_TRACE_POINTS = 1000
 _BAND_POINTS = 121
+_THETA_CMAP = matplotlib.colormaps["viridis"]
 # Width and height of one panel of the data figure [in].
 _PANEL_SIZE_IN = (4.4, 3.2)
+# Margins of the data figure's panel grid [in]: left (tick labels and axis label), right,
+# top (panel title), bottom (tick labels, axis label and the figure legend).
+_GRID_MARGINS_IN = (0.85, 0.15, 0.35, 1.0)
+# Gaps between panels [in]: across columns sharing the vertical axis, across columns with
+# their own tick labels, and between rows (tick labels, axis label and the next title).
+_GRID_GAPS_IN = (0.2, 0.65, 0.95)
 # The data figure's panels share one vertical axis when the data of every panel span at
 # least this fraction of the common range (no panel is flattened to a line).
 _SHARED_Y_MIN_FRACTION = 0.25
@@ -61,28 +80,86 @@ def _incidence_groups(result: FitResult) -> tuple[np.ndarray, np.ndarray, list[i
     return sources, index, shown
 
 
+def _marker_area(n_points: int, area: float) -> float:
+    """Marker area [pt^2] for a scatter of ``n_points``: ``area`` up to
+    DENSE_POINTS, then shrinking like 1/n (so the ink stays about constant), at least 2."""
+    if n_points <= DENSE_POINTS:
+        return area
+    return max(area * DENSE_POINTS / n_points, 2.0)
+
+
+def _by_incidence(sources: np.ndarray) -> bool:
+    """Whether each incidence gets a colour and a legend entry of its own."""
+    return len(sources) <= MAX_LEGEND_INCIDENCES
+
+
+def _incidence_colours(sources: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """RGBA colour of each measurement (shape (n, 4)): its incidence's colour of the cycle
+    (C0, C1, ...) with few incidences, else the source's polar angle on :data:`_THETA_CMAP`
+    (0 to 90 deg; :func:`_theta_colourbar` explains it)."""
+    if _by_incidence(sources):
+        palette = to_rgba_array([f"C{k % 10}" for k in range(len(sources))])
+        return palette[index]
+    return _THETA_CMAP(sources[index, 0] / 90.0)
+
+
+def _theta_colourbar(fig: Figure, ax: Axes) -> None:
+    """Colour bar of :func:`_incidence_colours` with many incidences."""
+    mappable = ScalarMappable(norm=Normalize(0.0, 90.0), cmap=_THETA_CMAP)
+    bar = fig.colorbar(mappable, ax=ax, shrink=0.7, pad=0.02)
+    bar.set_label("source polar angle theta_i [deg]", fontsize=8)
+    bar.ax.tick_params(labelsize=8)
+
+
+def _view_sizes(data: Dataset, index: np.ndarray, n_sources: int) -> np.ndarray:
+    """Marker area [pt^2] of each view of the geometry figure: decreasing with the
+    incidence's rank when few incidences are shown (coincident views of several incidences
+    stay visible), else one size for all."""
+    if n_sources > MAX_LEGEND_INCIDENCES:
+        return np.full(data.n, _marker_area(data.n, 30.0))
+    return np.maximum(70.0 - 50.0 * index / max(n_sources - 1, 1), 12.0)
+
+
 def geometry_figure(result: FitResult) -> Figure:
-    """Polar plot of the measured viewing directions, coloured by incidence, with the sources."""
+    """Polar plot of the measured viewing directions, coloured by incidence, with the sources.
+
+    Two scatter collections (views, sources), whatever the number of incidences: with at
+    most MAX_LEGEND_INCIDENCES each incidence has its colour and legend entry, beyond that
+    views and sources are coloured by the source's polar angle (colour bar).
+    """
     data = result.dataset
     sources, index = data.incidences()
     fig = Figure(figsize=(6.0, 6.6), layout="constrained")
     ax = fig.add_subplot(projection="polar")
-    for k, (theta_i, phi_i) in enumerate(sources):
-        mask = index == k
-        colour = f"C{k % 10}"
-        # Decreasing sizes keep coincident views of several incidences visible.
-        size = max(70.0 - 50.0 * k / max(len(sources) - 1, 1), 12.0)
-        ax.scatter(np.radians(data.phi_r[mask]), data.theta_r[mask], s=size, color=colour, edgecolor="white", linewidth=0.5,
-                   label=f"views, theta_i = {theta_i:g} deg, phi_i = {phi_i:g} deg" if len(sources) <= 10 else None)
-        ax.scatter(np.radians(phi_i), theta_i, marker="*", s=220, color=colour, edgecolor="k", linewidth=0.7, zorder=5)
-    ax.scatter([], [], marker="*", s=120, color="0.6", edgecolor="k", label="source directions")
+    colours = _incidence_colours(sources, index)
+    sizes = _view_sizes(data, index, len(sources))
+    # Drawn by incidence (stable): later incidences, with smaller markers, on top.
+    order = np.argsort(index, kind="stable")
+    ax.scatter(np.radians(data.phi_r[order]), data.theta_r[order], s=sizes[order], c=colours[order],
+               edgecolors="white", linewidths=0.5 if data.n <= DENSE_POINTS else 0.0)
+    source_colours = _incidence_colours(sources, np.arange(len(sources)))
+    star = 220.0 if _by_incidence(sources) else max(_marker_area(len(sources), 120.0), 8.0)
+    ax.scatter(np.radians(sources[:, 1]), sources[:, 0], marker="*", s=star, c=source_colours, edgecolors="k",
+               linewidths=0.7 if len(sources) <= DENSE_POINTS else 0.3, zorder=5)
+    handles = []
+    if _by_incidence(sources):
+        handles = [Line2D([], [], ls="none", marker="o", ms=math.sqrt(size), color=colour, mec="white", mew=0.5,
+                          label=f"views, theta_i = {theta_i:g} deg, phi_i = {phi_i:g} deg")
+                   for (theta_i, phi_i), colour, size in zip(sources, source_colours, _view_sizes(
+                       data, np.arange(len(sources)), len(sources)))]
+    else:
+        _theta_colourbar(fig, ax)
+        handles.append(Line2D([], [], ls="none", marker="o", ms=5, color="0.6", mec="white", mew=0.5,
+                              label="views (colour: their source's theta_i)"))
+    handles.append(Line2D([], [], ls="none", marker="*", ms=math.sqrt(120.0), color="0.6", mec="k", mew=0.7,
+                          label="source directions"))
     ax.set_ylim(0, 90)
     ax.set_yticks([30, 60, 90])
     ax.set_yticklabels(["30 deg", "60 deg", "90 deg"])
     ax.set_rlabel_position(112)
     fig.suptitle(f"Measurement geometry: {data.n} measurements, {len(sources)} incidences\n"
                  "radius: polar angle theta [deg], angle: azimuth phi [deg]", fontsize=10)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.06), fontsize=8, frameon=False, ncol=2)
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.06), fontsize=8, frameon=False, ncol=2)
     return fig
 
 
@@ -226,14 +303,44 @@ def _shared_ylim(data: Dataset, panels: list[_Panel]) -> tuple[float, float] | N
     return _data_range(data.value[selection], data.sigma[selection])
 
 
-def _draw_in_plane_panel(ax: Axes, result: FitResult, panel: _Panel, n_draws: int) -> None:
+@dataclass(frozen=True, eq=False)
+class _Series:
+    """One model band of a data panel and the measurements drawn with it.
+
+    Attributes
+    ----------
+    x : numpy.ndarray
+        Abscissa of the band [deg] (signed viewing angle in plane, theta_r off plane).
+    geometry : tuple of numpy.ndarray
+        (theta_i, phi_i, theta_r, phi_r) [deg] of the band's points, each shaped like ``x``.
+    picked : numpy.ndarray of int
+        Indices of the dataset's measurements drawn with the band.
+    colour : str
+        Colour of the band and of the measurements' markers.
+    label : str or None
+        Legend entry (off-plane series), None in plane.
+    """
+
+    x: np.ndarray
+    geometry: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    picked: np.ndarray
+    colour: str
+    label: str | None
+
+
+def _in_plane_series(data: Dataset, panel: _Panel) -> list[_Series]:
+    """The band of an in-plane panel: against the signed viewing angle (+ source side)."""
+    picked = np.flatnonzero(panel.selection)
+    x = np.linspace(*_span(data.signed_view[picked], -89.0, 89.0), _BAND_POINTS)
+    geometry = tuple(np.broadcast_arrays(*in_plane_angles(panel.theta_i, x, panel.phi_i)))
+    return [_Series(x, geometry, picked, "C0", None)]
+
+
+def _draw_in_plane_panel(ax: Axes, data: Dataset, panel: _Panel, series: _Series, band: np.ndarray) -> None:
     """In-plane data and model band against the signed viewing angle (+ source side)."""
-    data = result.dataset
-    view = data.signed_view[panel.selection]
-    x = np.linspace(*_span(view, -89.0, 89.0), _BAND_POINTS)
-    band = result.posterior_predictive(*in_plane_angles(panel.theta_i, x, panel.phi_i), n_draws=n_draws)
-    _band_axes(ax, x, band, "C0")
-    ax.errorbar(view, data.value[panel.selection], data.sigma[panel.selection], fmt="o", ms=4, color="k",
+    _band_axes(ax, series.x, band, series.colour)
+    pick = series.picked
+    ax.errorbar(data.signed_view[pick], data.value[pick], data.sigma[pick], fmt="o", ms=4, color="k",
                 capsize=2, lw=1)
     ax.axvline(panel.theta_i, color="0.6", ls=":", lw=1)
     ax.set_xlim(-90, 90)
@@ -269,23 +376,43 @@ def _azimuth_series(data: Dataset, selection: np.ndarray) -> tuple[list[float], 
     return offsets, series, len(distinct)
 
 
-def _draw_off_plane_panel(ax: Axes, result: FitResult, panel: _Panel, n_draws: int) -> None:
-    """Off-plane data and model bands against theta_r, one colour per azimuth difference."""
-    data = result.dataset
+def _off_plane_series(data: Dataset, panel: _Panel) -> tuple[list[_Series], int]:
+    """The bands of an off-plane panel, one per azimuth difference (:func:`_azimuth_series`),
+    and the number of distinct azimuth differences measured."""
     offsets, series, n_offsets = _azimuth_series(data, panel.selection)
     picked = np.flatnonzero(panel.selection)
+    out = []
     for j, offset in enumerate(offsets):
-        colour = f"C{(j + 1) % 10}"
         pick = picked[series == j]
         x = np.linspace(*_span(data.theta_r[pick], 0.0, 89.0), _BAND_POINTS)
-        ti, pi_, tr, pr = np.broadcast_arrays(panel.theta_i, panel.phi_i, x, panel.phi_i + offset)
-        _band_axes(ax, x, result.posterior_predictive(ti, pi_, tr, pr, n_draws=n_draws), colour)
-        ax.errorbar(data.theta_r[pick], data.value[pick], data.sigma[pick], fmt="o", ms=4, color=colour,
-                    mec="k", mew=0.5, capsize=2, lw=1, label=f"phi_r - phi_i = {offset:g} deg")
+        geometry = tuple(np.broadcast_arrays(panel.theta_i, panel.phi_i, x, panel.phi_i + offset))
+        out.append(_Series(x, geometry, pick, f"C{(j + 1) % 10}", f"phi_r - phi_i = {offset:g} deg"))
+    return out, n_offsets
+
+
+def _draw_off_plane_panel(ax: Axes, data: Dataset, series: list[_Series], bands: list[np.ndarray],
+                          n_offsets: int) -> None:
+    """Off-plane data and model bands against theta_r, one colour per azimuth difference."""
+    for one, band in zip(series, bands):
+        _band_axes(ax, one.x, band, one.colour)
+        pick = one.picked
+        ax.errorbar(data.theta_r[pick], data.value[pick], data.sigma[pick], fmt="o", ms=4, color=one.colour,
+                    mec="k", mew=0.5, capsize=2, lw=1, label=one.label)
     ax.set_xlim(0, 90)
     ax.set_xlabel("viewing angle theta_r [deg]")
-    omitted = f"{len(offsets)} of {n_offsets} azimuths" if n_offsets > len(offsets) else None
+    omitted = f"{len(series)} of {n_offsets} azimuths" if n_offsets > len(series) else None
     ax.legend(fontsize=7.5, title=omitted, title_fontsize=7.5)
+
+
+def _series_bands(result: FitResult, series: list[_Series], n_draws: int) -> list[np.ndarray]:
+    """The posterior predictive band of every series, from one evaluation of the model per
+    posterior draw on all their points together (the draws are the same for every band)."""
+    if not series:
+        return []
+    geometry = [np.concatenate([one.geometry[k] for one in series]) for k in range(4)]
+    bands = result.posterior_predictive(*geometry, n_draws=n_draws)
+    ends = np.cumsum([one.x.size for one in series])[:-1]
+    return np.split(bands, ends, axis=1)
 
 
 def _band_legend(fig: Figure, band_name: str, with_source: bool, columns: int) -> None:
@@ -298,8 +425,38 @@ def _band_legend(fig: Figure, band_name: str, with_source: bool, columns: int) -
     ]
     if with_source:
         handles.append(Line2D([], [], color="0.6", ls=":", lw=1, label="source direction (in plane)"))
-    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles) if columns > 1 else 3, fontsize=8,
-               title=band_name, title_fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 0.0), ncol=len(handles) if columns > 1 else 3,
+               fontsize=8, title=band_name, title_fontsize=8, frameon=False)
+
+
+def _panel_grid(rows: int, columns: int, shared_y: bool, with_suptitle: bool):
+    """The data figure and its grid of panels, with margins fixed in inches.
+
+    A fixed layout costs nothing to compute, where a constrained layout measures every
+    tick label of every panel in an extra drawing pass (about a third of the figure's
+    time with twelve panels). The margins hold one line of tick labels and an axis label
+    on each side, a one-line panel title, the figure legend below and the optional
+    suptitle above; inner columns keep room for tick labels unless the panels share the
+    vertical axis.
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+    grid : matplotlib.gridspec.GridSpec
+    """
+    width, height = _PANEL_SIZE_IN
+    left, right, top, bottom = _GRID_MARGINS_IN
+    top += 0.2 if with_suptitle else 0.0
+    gap_x = _GRID_GAPS_IN[0] if shared_y else _GRID_GAPS_IN[1]
+    gap_y = _GRID_GAPS_IN[2]
+    fig_width, fig_height = width * columns, height * rows + 0.9
+    axes_width = (fig_width - left - right - (columns - 1) * gap_x) / columns
+    axes_height = (fig_height - top - bottom - (rows - 1) * gap_y) / rows
+    fig = Figure(figsize=(fig_width, fig_height))
+    grid = fig.add_gridspec(rows, columns, left=left / fig_width, right=1.0 - right / fig_width,
+                            bottom=bottom / fig_height, top=1.0 - top / fig_height,
+                            wspace=gap_x / axes_width, hspace=gap_y / axes_height)
+    return fig, grid
 
 
 def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
@@ -327,19 +484,23 @@ def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
     columns = _grid_columns(len(panels))
     positions = _grid_positions([len(group) for group in groups], columns)
     rows = positions[-1][0] + 1
-    width, height = _PANEL_SIZE_IN
-    fig = Figure(figsize=(width * columns, height * rows + 0.9), layout="constrained")
-    grid = fig.add_gridspec(rows, columns)
     shared_ylim = _shared_ylim(data, panels)
+    n_incidences = len(data.incidences()[0])
+    shown_all = len(groups) == n_incidences
+    fig, grid = _panel_grid(rows, columns, shared_ylim is not None, with_suptitle=not shown_all)
+    series = [(_in_plane_series(data, panel), 0) if panel.in_plane else _off_plane_series(data, panel)
+              for panel in panels]
+    bands = iter(_series_bands(result, [one for group, _ in series for one in group], n_draws))
     first = None
-    for panel, (row, column) in zip(panels, positions):
+    for panel, (row, column), (panel_series, n_offsets) in zip(panels, positions, series):
         ax = fig.add_subplot(grid[row, column], sharey=first if shared_ylim else None)
         if first is None:
             first = ax
+        panel_bands = [next(bands) for _ in panel_series]
         if panel.in_plane:
-            _draw_in_plane_panel(ax, result, panel, n_draws)
+            _draw_in_plane_panel(ax, data, panel, panel_series[0], panel_bands[0])
         else:
-            _draw_off_plane_panel(ax, result, panel, n_draws)
+            _draw_off_plane_panel(ax, data, panel_series, panel_bands, n_offsets)
         ax.set_ylim(shared_ylim or _data_range(data.value[panel.selection], data.sigma[panel.selection]))
         ax.set_title(panel.title, fontsize=10)
         ax.grid(alpha=0.3)
@@ -349,9 +510,9 @@ def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
             ax.tick_params(labelleft=False)
     band_name = "posterior predictive" if result.mcmc is not None else "least-squares model"
     _band_legend(fig, band_name, any(panel.in_plane for panel in panels), columns)
-    n_incidences = len(data.incidences()[0])
-    if len(groups) < n_incidences:
-        fig.suptitle(f"{len(groups)} of {n_incidences} incidences shown", fontsize=9)
+    if not shown_all:
+        fig.suptitle(f"{len(groups)} of {n_incidences} incidences shown", fontsize=9, y=1.0 - 0.05 / fig.get_figheight(),
+                     va="top")
     return fig
 
 
@@ -363,7 +524,6 @@ def residual_figure(result: FitResult) -> Figure:
     title's chi-square is the fit's own, with the data's covariance where they have one.
     """
     data = result.dataset
-    sources, index = data.incidences()
     problem = result.problem()
     values = result.best_values()
     model = problem.predict(values)
@@ -379,16 +539,7 @@ def residual_figure(result: FitResult) -> Figure:
     ax.axhspan(-2, -1, color="0.93", lw=0)
     ax.axhspan(1, 2, color="0.93", lw=0)
     ax.axhline(0, color="0.4", lw=1)
-    for k, (theta_i, _) in enumerate(sources):
-        mask = index == k
-        marker_in = mask & data.in_plane
-        marker_out = mask & ~data.in_plane
-        label = f"theta_i = {theta_i:g} deg" if len(sources) <= 10 else None
-        ax.plot(x[marker_in], z[marker_in], "o", ms=4, color=f"C{k % 10}", label=label)
-        if marker_out.any():
-            ax.plot(x[marker_out], z[marker_out], "^", ms=4, color=f"C{k % 10}")
-    if np.any(~data.in_plane):
-        ax.plot([], [], "^", color="0.5", label="out of plane (x = theta_r)")
+    _residual_points(fig, ax, data, x, z)
     ax.set_xlim(-90, 90)
     limit = max(3.5, float(np.nanmax(np.abs(z))) * 1.1) if z.size else 3.5
     ax.set_ylim(-limit, limit)
@@ -398,9 +549,30 @@ def residual_figure(result: FitResult) -> Figure:
     correlated = " (with the data's covariance)" if data.covariance is not None else ""
     ax.set_title(f"Normalised residuals at the posterior median: chi2{correlated} = {chi2:.1f} for {data.n} points",
                  fontsize=10)
-    ax.legend(fontsize=8, ncol=2, loc="upper left")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8, ncol=2, loc="upper left")
     ax.grid(alpha=0.3)
     return fig
+
+
+def _residual_points(fig: Figure, ax: Axes, data: Dataset, x: np.ndarray, z: np.ndarray) -> None:
+    """The normalised residuals as one scatter per plane (circles in plane, triangles out of
+    plane), coloured by incidence (:func:`_incidence_colours`), with their legend entries."""
+    sources, index = data.incidences()
+    colours = _incidence_colours(sources, index)
+    size = _marker_area(data.n, 16.0)
+    for plane, marker in ((data.in_plane, "o"), (~data.in_plane, "^")):
+        if plane.any():
+            dense = data.n > DENSE_POINTS
+            ax.scatter(x[plane], z[plane], s=size, c=colours[plane], marker=marker, edgecolors="face",
+                       linewidths=0.0 if dense else 1.0, alpha=0.6 if dense else 1.0)
+    if _by_incidence(sources):
+        for k, (theta_i, _) in enumerate(sources):
+            ax.plot([], [], "o", ms=4, color=f"C{k % 10}", label=f"theta_i = {theta_i:g} deg")
+    else:
+        _theta_colourbar(fig, ax)
+    if np.any(~data.in_plane):
+        ax.plot([], [], "^", color="0.5", label="out of plane (x = theta_r)")
 
 
 def _credible_levels(hist: np.ndarray, masses=(0.95, 0.68)) -> list[float]:
@@ -475,6 +647,20 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
     return fig
 
 
+def _walker_lines(ax: Axes, steps: np.ndarray, values: np.ndarray, colour: str) -> None:
+    """Every walker's trace (``values`` of shape (steps, walkers)) as one line collection.
+
+    Non-finite values (a walker at a zero-posterior point) break its line there, as a
+    plain line plot does. The data limits are set from the finite values.
+    """
+    segments = np.stack(np.broadcast_arrays(steps[None, :], values.T), axis=-1)
+    ax.add_collection(LineCollection(segments, colors=colour, alpha=0.15, linewidths=0.5), autolim=False)
+    finite = values[np.isfinite(values)]
+    if finite.size:
+        ax.update_datalim([(float(steps[0]), float(finite.min())), (float(steps[-1]), float(finite.max()))])
+        ax.autoscale_view()
+
+
 def trace_figure(result: FitResult) -> Figure:
     """Walker traces of every free parameter and the log posterior; burn-in shaded."""
     names = list(result.free)
@@ -487,13 +673,13 @@ def trace_figure(result: FitResult) -> Figure:
     m = result.mcmc
     axes = fig.subplots(len(names) + 1, 1, sharex=True, squeeze=False)[:, 0]
     steps = np.arange(m.n_steps)
-    stride = max(1, m.n_steps // 2000)
+    stride = max(1, math.ceil(m.n_steps / MAX_TRACE_POINTS))
     for ax, j in zip(axes, range(len(names))):
-        ax.plot(steps[::stride], m.chain[::stride, :, j], color="k", alpha=0.15, lw=0.5)
+        _walker_lines(ax, steps[::stride], m.chain[::stride, :, j], "k")
         ax.set_ylabel(_param_label(result, names[j]), fontsize=9)
     log_prob = m.log_prob[::stride]
     finite = log_prob[np.isfinite(log_prob)]
-    axes[-1].plot(steps[::stride], log_prob, color="C3", alpha=0.15, lw=0.5)
+    _walker_lines(axes[-1], steps[::stride], log_prob, "C3")
     if finite.size:
         top = float(finite.max())
         axes[-1].set_ylim(max(float(np.percentile(finite, 1)), top - 50.0) - 1.0, top + 1.0)

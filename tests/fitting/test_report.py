@@ -1,14 +1,17 @@
 """The fit report and the gonio fit / gonio report commands."""
 from __future__ import annotations
 
+import io
 import re
+import warnings
 
 import numpy as np
 import pytest
+from matplotlib.colors import to_rgba_array
 
 from gonio.cli import main
-from gonio.fitting import Dataset, FitResult, fit
-from gonio.report.fit_figures import data_figure
+from gonio.fitting import ConvergenceWarning, Dataset, FitResult, fit
+from gonio.report.fit_figures import MAX_TRACE_POINTS, data_figure, geometry_figure, residual_figure, trace_figure
 from gonio.report.fit_report import FIGURES, write_report
 
 from .synthetic import in_plane_geometry, synthetic_dataset
@@ -142,3 +145,88 @@ def test_cli_fit_reads_a_recording_folder(tmp_path, capsys, monkeypatch):
     result = FitResult.load(tmp_path / "recording.fit-minnaert")
     assert result.dataset.quantity == "normalised_radiance" and result.dataset.label == "recorded"
     assert result.least_squares.values["k"] == pytest.approx(0.7, abs=0.02)
+
+
+# ------------------------------------------------ figure cost independent of the incidences
+def _random_incidences(n: int, seed: int = 3) -> Dataset:
+    """``n`` Minnaert measurements, each at an incidence of its own (the worst case for
+    drawing per incidence: image-based data such as CUReT)."""
+    rng = np.random.default_rng(seed)
+    geometry = (rng.uniform(0, 80, n), rng.uniform(-180, 180, n), rng.uniform(0, 80, n), rng.uniform(-180, 180, n))
+    return synthetic_dataset("minnaert", {"rho": 0.6, "k": 0.7}, 0.005, geometry=geometry)
+
+
+@pytest.fixture(scope="module")
+def sampled_fits():
+    """MCMC fits of 12 and 60 measurements at as many incidences (short chains)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)  # a short chain is enough to draw
+        return {n: fit(_random_incidences(n), "minnaert", n_walkers=8, max_steps=300, tau_multiple=5.0,
+                       rhat_limit=1.2) for n in (12, 60)}
+
+
+def _artists(fig) -> int:
+    return sum(len(ax.lines) + len(ax.collections) + len(ax.patches) for ax in fig.axes)
+
+
+def test_geometry_and_residual_figures_draw_a_fixed_number_of_artists(sampled_fits):
+    # One scatter of views and one of sources, one or two of residuals, whatever the
+    # number of incidences (one artist per incidence made a 10,000-point report take minutes).
+    for make in (geometry_figure, residual_figure):
+        assert _artists(make(sampled_fits[12])) == _artists(make(sampled_fits[60]))
+    views, stars = geometry_figure(sampled_fits[60]).axes[0].collections
+    assert len(views.get_offsets()) == 60 and len(stars.get_offsets()) == 60
+
+
+def test_few_incidences_get_a_colour_and_legend_entry_each_many_a_colour_bar():
+    few = fit(_demo_like_dataset(), "lambert", mcmc=False)
+    fig = geometry_figure(few)
+    labels = fig.axes[0].get_legend_handles_labels()[1] + [t.get_text() for t in fig.axes[0].get_legend().texts]
+    assert sum(label.startswith("views, theta_i = ") for label in set(labels)) == 5
+    views = fig.axes[0].collections[0]
+    # each view in its incidence's colour of the cycle (C0..C4), ordered by incidence
+    _, index = few.dataset.incidences()
+    order = np.argsort(index, kind="stable")
+    np.testing.assert_allclose(views.get_facecolors(), to_rgba_array([f"C{k}" for k in index[order]]))
+    assert len(fig.axes) == 1 and len(residual_figure(few).axes) == 1  # no colour bar
+    many = fit(_random_incidences(40), "minnaert", mcmc=False)
+    for make in (geometry_figure, residual_figure):
+        fig = make(many)
+        assert len(fig.axes) == 2 and "theta_i" in fig.axes[1].get_ylabel()  # the colour bar
+
+
+def test_data_figure_bands_come_from_one_draw_set_equal_to_per_series_bands(sampled_fits, monkeypatch):
+    from gonio.report import fit_figures
+
+    result = sampled_fits[12]
+    calls = []
+    original = FitResult.posterior_predictive
+
+    def counting(self, *args, **kwargs):
+        calls.append(np.broadcast(*args[:4]).shape)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(FitResult, "posterior_predictive", counting)
+    fig = data_figure(result, n_draws=50)
+    assert len(calls) == 1  # every band of every panel from one set of posterior draws
+    # The reference path: each series' band on its own, with the same draws (same seed).
+    panels = [panel for group in fit_figures._data_panels(result) for panel in group]
+    series = [one for panel in panels for one in fit_figures._off_plane_series(result.dataset, panel)[0]]
+    assert len(series) == len(fig.axes) == 12
+    for ax, one in zip(fig.axes, series):
+        alone = original(result, *one.geometry, n_draws=50)
+        np.testing.assert_allclose(ax.lines[0].get_ydata(), alone[2], rtol=1e-12, atol=0)  # the median line
+        np.testing.assert_allclose(ax.lines[0].get_xdata(), one.x, rtol=0, atol=0)
+
+
+def test_trace_figure_draws_one_collection_per_panel_and_survives_minus_infinity(sampled_fits):
+    result = sampled_fits[12]
+    m = result.mcmc
+    m.log_prob[5, 0] = -np.inf  # a walker proposed outside the support at one step
+    fig = trace_figure(result)
+    for ax in fig.axes:
+        (lines,) = ax.collections
+        assert len(lines.get_segments()) == m.n_walkers
+        assert max(len(s) for s in lines.get_segments()) <= MAX_TRACE_POINTS
+        assert np.all(np.isfinite(ax.get_ylim()))
+    fig.savefig(io.BytesIO(), format="png")
