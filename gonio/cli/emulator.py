@@ -1,15 +1,12 @@
-"""``gonio emulator``: run the emulated goniometer with a registered reflectance model as sample."""
+"""``gonio emulator``: run the emulated goniometer with a registered reflectance model or a CUReT material as sample."""
 from __future__ import annotations
 
 import argparse
-import functools
 import signal
 import threading
 
-import gonio
-
 from . import CLIError
-from .models import parse_model_spec
+from .samples import SPEC_SYNTAX, parse_sample_spec
 
 DEVICES = ("stage", "camera", "lamp")
 
@@ -33,10 +30,9 @@ def build_rig(args: argparse.Namespace):
     """The :class:`drivers.emulator.rig.EmulatedRig` described by the parsed arguments."""
     from drivers.emulator.rig import EmulatedRig
 
-    name, values = parse_model_spec(args.sample)
-    brdf = functools.partial(gonio.brdf, name, **values)
+    sample = parse_sample_spec(args.sample)
     return EmulatedRig(
-        brdf,
+        sample.brdf,
         seed=args.seed,
         realtime=args.realtime,
         min_separation_deg=args.min_separation,
@@ -92,14 +88,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "emulator",
         help="run the emulated goniometer (stage, camera, lamp) on pseudo-terminals / TCP",
         description=(
-            "Run the emulated rig with a registered reflectance model as the sample. Each "
+            "Run the emulated rig with a registered reflectance model or a measured CUReT material "
+            "(curet:NUMBER|NAME, docs/curet-samples.md) as the sample. Each "
             "instrument (stage: ESP300 dialect, camera and lamp: SCPI; see docs/protocol.md) "
             "gets a raw pseudo-terminal and/or a TCP port on 127.0.0.1. Serves until "
             "interrupted."
         ),
     )
-    parser.add_argument("--sample", default="lambert", metavar="MODEL[:key=value,...]",
-                        help="sample BRDF, e.g. oren-nayar:sigma=30,rho=0.9 (default lambert)")
+    parser.add_argument("--sample", default="lambert", metavar=SPEC_SYNTAX.replace(" or ", "|"),
+                        help="sample BRDF, e.g. oren-nayar:sigma=30,rho=0.9 or curet:plaster_a (default lambert)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random process (default 0)")
     parser.add_argument("--realtime", action="store_true",
                         help="answer with hardware timing (default: fast mode, simulated clock jumps)")

@@ -11,7 +11,7 @@ import gonio
 from gonio import acquisition, protocols
 
 from . import CLIError
-from .models import parse_model_spec
+from .samples import parse_sample_spec
 from .paths import check_output_folder
 from .progress import ProgressLine
 
@@ -33,8 +33,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("protocol", help="protocol TOML file (docs/protocols.md)")
     parser.add_argument("--out", required=True, help="recording folder (created; never overwritten)")
     parser.add_argument("--resume", action="store_true", help="continue an interrupted recording in --out")
-    parser.add_argument("--sample", default=DEFAULT_SAMPLE, metavar="MODEL[:k=v,...]",
-                        help=f"emulated sample (default {DEFAULT_SAMPLE})")
+    parser.add_argument("--sample", default=DEFAULT_SAMPLE, metavar="MODEL[:k=v,...]|curet:NUMBER|NAME",
+                        help=f"emulated sample: a model or a CUReT material, e.g. curet:plaster_a (default {DEFAULT_SAMPLE})")
     parser.add_argument("--seed", type=int, default=0, help="emulator seed (default 0)")
     parser.add_argument("--stage", help="stage port or URL of a real rig (e.g. /dev/ttyUSB0)")
     parser.add_argument("--camera", help="camera port or URL of a real rig")
@@ -49,7 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 @contextmanager
 def emulated_rig(sample: str, seed: int, name: str = "gonio-run", **emulator_options) -> Iterator[tuple]:
-    """An in-process emulated rig with a registry model as sample, opened through the drivers.
+    """An in-process emulated rig with a sample spec as sample, opened through the drivers.
 
     Yields ``(rig, emulator, change_sample, metadata)``: the driver-level Rig, the emulator
     (for its clock), a function swapping the sample for a Lambertian reference standard
@@ -60,8 +60,8 @@ def emulated_rig(sample: str, seed: int, name: str = "gonio-run", **emulator_opt
     from drivers.emulator.rig import EmulatedRig
     from drivers.rig import Rig
 
-    model_name, values = parse_model_spec(sample)
-    brdf = functools.partial(gonio.brdf, model_name, **values)
+    parsed = parse_sample_spec(sample)
+    brdf = parsed.brdf
     emulator = EmulatedRig(brdf, seed=seed, name=name, **{"lamp_warm": False, **emulator_options})
     emulator.start(pty=False)
     try:
@@ -73,8 +73,8 @@ def emulated_rig(sample: str, seed: int, name: str = "gonio-run", **emulator_opt
                 else:
                     emulator.control.mount_sample(functools.partial(gonio.brdf, "lambert", rho=reflectance))
 
-            metadata = {"rig": {"kind": "emulator", "sample": sample, "model": model_name,
-                                "parameters": values, "seed": seed,
+            metadata = {"rig": {"kind": "emulator", "sample": sample, "model": parsed.model,
+                                "parameters": parsed.parameters, "seed": seed,
                                 "min_separation_deg": emulator.min_separation_deg,
                                 "lamp_monitor": emulator.monitor is not None,
                                 "options": {k: (v if isinstance(v, (bool, int, float, str)) else repr(v))

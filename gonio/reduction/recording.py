@@ -104,6 +104,9 @@ def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
         consistency["repeats_reduced_chi2"] = sum(r["chi2"] for r in repeat_stats) / dof
     excluded = _excluded(points)
     ti, pi_, view = geometry[:, 0], geometry[:, 1], geometry[:, 2]
+    # A lamp read back a hair past the normal (encoder noise at theta_i = 0) is the same
+    # direction at |theta_i| and phi_i + 180 deg.
+    ti, pi_ = np.abs(ti), np.where(ti < 0.0, (pi_ + 360.0) % 360.0 - 180.0, pi_)
     label = meta.get("sample", {}).get("label", folder.name)
     return Reduced(
         theta_i=ti, phi_i=pi_, theta_r=np.abs(view), phi_r=np.where(view >= 0, 0.0, 180.0), view=view,

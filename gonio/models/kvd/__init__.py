@@ -9,6 +9,7 @@ concept per module:
 * :mod:`.series` -- coefficient sets, truncation, damping, and a series as a gonio model;
 * :mod:`.projection` -- coefficients of any isotropic model by quadrature (eq 29);
 * :mod:`.least_squares` -- coefficients from scattered measurements (regularised);
+* :mod:`.cross_validation` -- the series order by leave-one-out cross-validation;
 * :mod:`.examples` -- Lambert, ideal mirror and retroreflector series (eq 32-39);
 * :mod:`.model` -- the registered ``kvd`` model (order 2) and the registry design.
 
@@ -33,6 +34,7 @@ from .basis import (
     isotropic_normalisation,
     reciprocal_product,
 )
+from .cross_validation import SELECTION_RULES, OrderSelection, leave_one_out_residuals, select_order
 from .examples import lambert_coefficients, mirror_coefficients, retroreflector_coefficients
 from .least_squares import SeriesFit, fit_series, penalty_weights
 from .model import KVD, REGISTERED_ORDER
@@ -49,6 +51,10 @@ __all__ = [
     "lambert_coefficients",
     "mirror_coefficients",
     "retroreflector_coefficients",
+    "SELECTION_RULES",
+    "OrderSelection",
+    "leave_one_out_residuals",
+    "select_order",
     "SeriesFit",
     "fit_series",
     "penalty_weights",
