@@ -80,3 +80,30 @@ def test_model_selection_uses_no_more_model_than_the_data_need():
     comparison = compare_models(limb, ["lambert", "minnaert"])
     assert comparison.chosen == "minnaert"
     assert "chosen: minnaert" in comparison.summary()
+
+
+@pytest.mark.parametrize("quantity", ["brdf", "radiance", "normalised_radiance"])
+def test_predictive_band_equals_the_draws_predicted_one_by_one(quantity):
+    # The band evaluates every draw in a few broadcast model calls through the frozen
+    # geometry (apertures included); the reference path predicts each draw on its own.
+    import warnings
+
+    from gonio.fitting import ConvergenceWarning, Dataset
+
+    truth = dict(rho=0.6, k=0.7, scale=40.0) if quantity == "radiance" else dict(rho=0.6, k=0.7)
+    data = synthetic_dataset("minnaert", truth, 0.01, seed=4, quantity=quantity, relative=True)
+    data = Dataset(*(getattr(data, n) for n in ("theta_i", "phi_i", "theta_r", "phi_r", "value", "sigma")),
+                   quantity=quantity, metadata={"aperture_sr": [0.003, 0.0009]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        result = fit(data, "minnaert", n_walkers=8, max_steps=200, tau_multiple=5.0, rhat_limit=1.5)
+    theta_r = np.array([[0.0, 20.0, 50.0], [70.0, 85.0, 89.0]])  # a 2-D geometry keeps its shape
+    band = result.posterior_predictive(45.0, 0.0, theta_r, 180.0, n_draws=60, seed=7)
+    samples = result.samples()
+    rows = np.random.default_rng(7).choice(samples.shape[0], size=60, replace=False)
+    one_by_one = [result.predict(45.0, 0.0, theta_r, 180.0, dict(result.least_squares.values, **dict(zip(result.free, row))))
+                  for row in samples[rows]]
+    reference = np.nanpercentile(np.array(one_by_one), (2.5, 16, 50, 84, 97.5), axis=0)
+    assert band.shape == (5, 2, 3)
+    # the same formula evaluated once for all draws: rounding only
+    np.testing.assert_allclose(band, reference, rtol=1e-12, atol=0)
