@@ -37,6 +37,7 @@ from gonio.geometry import azimuth_difference, in_plane_angles
 __all__ = [
     "geometry_figure", "data_figure", "residual_figure", "corner_figure", "trace_figure",
     "MAX_INCIDENCE_PANELS", "MAX_AZIMUTH_SERIES", "MAX_LEGEND_INCIDENCES", "DENSE_POINTS",
+    "MAX_TRACE_POINTS", "MAX_TRACE_WALKERS",
 ]
 
 #: At most this many incidences are drawn in the data figure (evenly chosen).
@@ -52,6 +53,9 @@ DENSE_POINTS = 1000
 #: Steps drawn per walker in the trace figure at most (more than the axes have pixel
 #: columns; longer chains are drawn every k-th step).
 MAX_TRACE_POINTS = 1000
+#: Walkers drawn in the trace figure at most (:func:`_shown_walkers` picks them).
+MAX_TRACE_WALKERS = 32
+_LOWEST_WALKERS = 4
 _BAND_POINTS = 121
 _THETA_CMAP = matplotlib.colormaps["viridis"]
 # Width and height of one panel of the data figure [in].
@@ -655,10 +659,44 @@ def _walker_lines(ax: Axes, steps: np.ndarray, values: np.ndarray, colour: str) 
     """
     segments = np.stack(np.broadcast_arrays(steps[None, :], values.T), axis=-1)
     ax.add_collection(LineCollection(segments, colors=colour, alpha=0.15, linewidths=0.5), autolim=False)
-    finite = values[np.isfinite(values)]
-    if finite.size:
-        ax.update_datalim([(float(steps[0]), float(finite.min())), (float(steps[-1]), float(finite.max()))])
-        ax.autoscale_view()
+
+
+def _trace_limits(values: np.ndarray, kept: np.ndarray) -> tuple[float, float] | None:
+    """Vertical range of a trace panel, or None when no value is finite.
+
+    The 0.5 and 99.5 percentiles of the finite values after burn-in (rows ``kept``), with
+    a 10 % margin: walkers starting far out, or a brief excursion of a few, do not flatten
+    the chain that is used, while a walker stuck apart for the whole chain (1/32 of the
+    values or more) stays inside.
+    """
+    after = values[kept]
+    finite = after[np.isfinite(after)]
+    if not finite.size:
+        finite = values[np.isfinite(values)]
+    if not finite.size:
+        return None
+    low, high = (float(q) for q in np.percentile(finite, [0.5, 99.5]))
+    margin = 0.1 * (high - low) if high > low else 0.5 * max(abs(high), 1e-12)
+    return low - margin, high + margin
+
+
+def _shown_walkers(log_prob: np.ndarray, burn_in: int) -> np.ndarray:
+    """Indices of the walkers the trace figure draws (all up to MAX_TRACE_WALKERS).
+
+    A larger ensemble is represented by the :data:`_LOWEST_WALKERS` walkers of lowest
+    median log posterior after burn-in (a stuck walker is what a trace plot is looked at
+    for) and walkers evenly spaced through the rest.
+    """
+    n_walkers = log_prob.shape[1]
+    if n_walkers <= MAX_TRACE_WALKERS:
+        return np.arange(n_walkers)
+    after = log_prob[min(burn_in, log_prob.shape[0] - 1):]
+    with np.errstate(invalid="ignore"):
+        median = np.nanmedian(np.where(np.isfinite(after), after, -np.inf), axis=0)
+    lowest = np.argsort(median, kind="stable")[:_LOWEST_WALKERS]
+    rest = np.setdiff1d(np.arange(n_walkers), lowest)
+    spaced = rest[np.linspace(0, rest.size - 1, MAX_TRACE_WALKERS - _LOWEST_WALKERS).round().astype(int)]
+    return np.union1d(lowest, spaced)
 
 
 def trace_figure(result: FitResult) -> Figure:
@@ -674,10 +712,16 @@ def trace_figure(result: FitResult) -> Figure:
     axes = fig.subplots(len(names) + 1, 1, sharex=True, squeeze=False)[:, 0]
     steps = np.arange(m.n_steps)
     stride = max(1, math.ceil(m.n_steps / MAX_TRACE_POINTS))
+    shown = _shown_walkers(m.log_prob, m.burn_in)
+    kept = steps[::stride] >= m.burn_in
     for ax, j in zip(axes, range(len(names))):
-        _walker_lines(ax, steps[::stride], m.chain[::stride, :, j], "k")
+        values = m.chain[::stride, shown, j]
+        _walker_lines(ax, steps[::stride], values, "k")
+        limits = _trace_limits(values, kept)
+        if limits is not None:
+            ax.set_ylim(*limits)
         ax.set_ylabel(_param_label(result, names[j]), fontsize=9)
-    log_prob = m.log_prob[::stride]
+    log_prob = m.log_prob[::stride, shown]
     finite = log_prob[np.isfinite(log_prob)]
     _walker_lines(axes[-1], steps[::stride], log_prob, "C3")
     if finite.size:
@@ -691,6 +735,9 @@ def trace_figure(result: FitResult) -> Figure:
         ax.set_xlim(0, m.n_steps)
     status = "converged" if m.converged else "NOT CONVERGED (step limit reached)"
     tau = float(np.nanmax(m.tau)) if np.any(np.isfinite(m.tau)) else math.nan
-    fig.suptitle(f"Traces of {m.n_walkers} walkers; shaded: burn-in ({m.burn_in} steps); "
+    which = f"{m.n_walkers} walkers" if len(shown) == m.n_walkers else (
+        f"{len(shown)} of {m.n_walkers} walkers (the {_LOWEST_WALKERS} of lowest posterior and "
+        f"{len(shown) - _LOWEST_WALKERS} evenly chosen)")
+    fig.suptitle(f"Traces of {which}; shaded: burn-in ({m.burn_in} steps)\n"
                  f"max tau = {tau:.1f} steps; {status}", fontsize=10, color="black" if m.converged else "#c9302c")
     return fig

@@ -11,7 +11,7 @@ from matplotlib.colors import to_rgba_array
 
 from gonio.cli import main
 from gonio.fitting import ConvergenceWarning, Dataset, FitResult, fit
-from gonio.report.fit_figures import MAX_TRACE_POINTS, data_figure, geometry_figure, residual_figure, trace_figure
+from gonio.report.fit_figures import MAX_TRACE_POINTS, MAX_TRACE_WALKERS, data_figure, geometry_figure, residual_figure, trace_figure
 from gonio.report.fit_report import FIGURES, write_report
 
 from .synthetic import in_plane_geometry, synthetic_dataset
@@ -226,7 +226,28 @@ def test_trace_figure_draws_one_collection_per_panel_and_survives_minus_infinity
     fig = trace_figure(result)
     for ax in fig.axes:
         (lines,) = ax.collections
-        assert len(lines.get_segments()) == m.n_walkers
+        assert len(lines.get_segments()) == min(m.n_walkers, MAX_TRACE_WALKERS)
         assert max(len(s) for s in lines.get_segments()) <= MAX_TRACE_POINTS
         assert np.all(np.isfinite(ax.get_ylim()))
     fig.savefig(io.BytesIO(), format="png")
+
+
+def test_a_large_ensemble_is_traced_by_a_subset_that_keeps_a_stuck_walker():
+    from gonio.report.fit_figures import _shown_walkers, _trace_limits
+
+    rng = np.random.default_rng(0)
+    log_prob = rng.normal(-10.0, 1.0, size=(500, 256))
+    log_prob[:, 201] -= 40.0  # one walker stuck in a poor region for the whole chain
+    shown = _shown_walkers(log_prob, burn_in=50)
+    assert len(shown) == MAX_TRACE_WALKERS and 201 in shown
+    assert shown[0] == 0 and shown[-1] == 255 and np.all(np.diff(shown) > 0)
+    assert np.array_equal(_shown_walkers(log_prob[:, :20], burn_in=50), np.arange(20))
+    # The vertical range follows the chain after burn-in, not a far start ...
+    values = rng.normal(0.9, 1e-3, size=(500, 32))
+    values[:10] = 0.1  # walkers start far out during burn-in
+    low, high = _trace_limits(values, np.arange(500) >= 50)
+    assert 0.89 < low < 0.9 < high < 0.91
+    # ... but keeps a walker that stays apart for the whole chain in view.
+    values[:, 7] = 0.8
+    low, _ = _trace_limits(values, np.arange(500) >= 50)
+    assert low < 0.8
