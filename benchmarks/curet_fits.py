@@ -14,7 +14,7 @@ oren-nayar+torrance-sparrow, eq 38, kd = 1, unity Fresnel):
 * the model comparison under the fits' likelihood, the noise model plus a fitted jitter
   (chi-square, reduced chi-square, goodness of fit, AIC, BIC, Laplace evidence;
   gonio.fitting.compare_models);
-* MCMC (emcee, 32 walkers, run to 50 autocorrelation times) with a fitted jitter, giving
+* MCMC (emcee, gonio's default walkers, run to 50 autocorrelation times) with a fitted jitter, giving
   posterior medians and 95 % intervals;
 * how well each model fits: relative rms of data/model - 1, and where the misfit sits
   (by the angle between lamp and camera);

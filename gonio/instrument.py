@@ -208,4 +208,10 @@ def _contracted(rays: _SubRays, form: LinearForm, shape: tuple[int, ...]):
             out[..., rest] = rest_rays.average(local, (rest.size,))
         return out.reshape(out.shape[:-1] + shape)
 
+    def averaged_form() -> LinearForm:
+        exact_points = np.ones(averaged.shape[1], bool)
+        exact_points[rest] = False
+        return LinearForm(averaged, form.coefficients, exact_points)
+
+    evaluate.linear_form = averaged_form  # type: ignore[attr-defined]
     return evaluate

@@ -459,7 +459,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     fitting.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=True,
                          help="fit an extra noise term, in every fit and in the comparison (default: yes)")
     fitting.add_argument("--walkers", type=int, default=None,
-                         help="emcee walkers (default 64, gonio.fitting.mcmc.DEFAULT_WALKERS)")
+                         help="emcee walkers (default 256 where all walkers are evaluated at once, else 32)")
     fitting.add_argument("--max-steps", type=int, default=20000, help="step limit of each chain (default 20000)")
     fitting.add_argument("--tau-multiple", type=float, default=50.0,
                          help="chain length required, in autocorrelation times (default 50)")
@@ -583,7 +583,6 @@ def check_fit_folder(out: Path, overwrite: bool, folders: Sequence[str]) -> bool
 
 def _run_fit(args: argparse.Namespace) -> int:
     from gonio.fitting import ConvergenceWarning, compare_models, fit
-    from gonio.fitting.mcmc import DEFAULT_WALKERS
 
     from .fit import remove_stale_results, written_names
 
@@ -607,7 +606,7 @@ def _run_fit(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)  # reported below
             result = fit(dataset, name, fixed=fixed, options=options, mcmc=args.mcmc, jitter=args.jitter,
-                         n_walkers=args.walkers or DEFAULT_WALKERS, max_steps=args.max_steps, tau_multiple=args.tau_multiple,
+                         n_walkers=args.walkers, max_steps=args.max_steps, tau_multiple=args.tau_multiple,
                          rhat_limit=args.rhat_limit,
                          seed=args.seed)
         result.save(folder)

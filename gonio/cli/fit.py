@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "(the default when given alone; parameter jitter, in data units) or 'relative' "
                              "(rel_jitter, a fraction of the prediction)")
     parser.add_argument("--walkers", type=int, default=None,
-                        help="number of emcee walkers (default 64, gonio.fitting.mcmc.DEFAULT_WALKERS, chosen by measurement)")
+                        help="number of emcee walkers (default 256 where all walkers are evaluated at once, else 32: gonio.fitting.mcmc.default_walkers, chosen by measurement)")
     parser.add_argument("--max-steps", type=int, default=20000, help="step limit of the chain (default 20000)")
     parser.add_argument("--rhat-limit", type=float, default=1.01,
                         help="largest rank-normalised split R-hat accepted for convergence (default 1.01)")
@@ -220,7 +220,6 @@ def _load(path: Path, quantity: str | None):
 def _run(args: argparse.Namespace) -> int:
     from gonio import models
     from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
-    from gonio.fitting.mcmc import DEFAULT_WALKERS
     from gonio.fitting.results import EXIT_INADEQUATE
 
     data_path = Path(args.data)
@@ -250,7 +249,7 @@ def _run(args: argparse.Namespace) -> int:
         warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
         result = fit(
             dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=args.jitter or False, options=options,
-            n_walkers=args.walkers or DEFAULT_WALKERS, max_steps=args.max_steps, rhat_limit=args.rhat_limit, seed=args.seed,
+            n_walkers=args.walkers, max_steps=args.max_steps, rhat_limit=args.rhat_limit, seed=args.seed,
             progress=_Progress(args.quiet),
         )
     path = result.save(out)

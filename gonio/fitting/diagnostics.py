@@ -68,7 +68,10 @@ def convergence_diagnostics(chain: np.ndarray, names: Sequence[str], ess: bool =
     if chain.shape[0] < 4:
         return {n: {"r_hat": math.nan, "ess_bulk": math.nan, "ess_tail": math.nan} for n in names}
     az = arviz()
-    data = az.convert_to_dataset({n: chain[:, :, k].T for k, n in enumerate(names)})
+    with warnings.catch_warnings():
+        # an ensemble has more walkers (chains) than thinned draws; ArviZ suspects a transpose
+        warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
+        data = az.convert_to_dataset({n: chain[:, :, k].T for k, n in enumerate(names)})
     with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)  # a constant parameter gives NaN
         r_hat = az.rhat(data, method="rank")
@@ -104,7 +107,9 @@ def inference_data(chain: np.ndarray, log_prob: np.ndarray, names: Sequence[str]
         groups["log_likelihood"] = {"y": np.transpose(log_likelihood, (1, 0, 2))}
     if observed is not None:
         groups["observed_data"] = {"y": np.asarray(observed, float)}
-    data = az.from_dict(**groups)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
+        data = az.from_dict(**groups)
     for key, value in dict(attributes or {}).items():
         data.posterior.attrs[key] = value
     return data

@@ -39,12 +39,23 @@ from .least_squares import LeastSquaresResult
 from .priors import Prior, default_prior
 from .problem import FitProblem
 
-__all__ = ["DEFAULT_WALKERS", "VectorisedStretchMove", "ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "start_spread", "LogPosterior"]
+__all__ = ["DEFAULT_WALKERS", "SERIAL_WALKERS", "default_walkers", "VectorisedStretchMove", "ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "start_spread", "LogPosterior"]
 
 
-#: Default ensemble size, chosen by measurement (benchmarks/bench_fitting.py: effective
-#: samples per second against ensemble size, docs/fitting.md "Performance").
-DEFAULT_WALKERS = 64
+#: Default ensemble size where the likelihood evaluates every walker at once (models that
+#: broadcast their parameters or are linear in their coefficients), chosen by measurement:
+#: effective samples per second grow with the ensemble while a step costs little more
+#: (benchmarks/bench_fitting.py, docs/fitting.md "Performance").
+DEFAULT_WALKERS = 256
+#: Default ensemble size where the model is evaluated one walker at a time (a step costs
+#: in proportion to the walkers, so more of them only lengthen the run).
+SERIAL_WALKERS = 32
+
+
+def default_walkers(problem: FitProblem) -> int:
+    """:data:`DEFAULT_WALKERS` when ``problem`` evaluates all walkers at once, else
+    :data:`SERIAL_WALKERS`."""
+    return DEFAULT_WALKERS if problem.vectorised else SERIAL_WALKERS
 
 #: Growth of the chain between autocorrelation estimates (a fraction of its length): the
 #: stopping rule is met at most this much later than with a check every ``check_every`` steps.
@@ -250,6 +261,47 @@ class McmcResult:
         return self.log_prob[self.burn_in :: self.thin].reshape(-1)
 
 
+#: At most this many walkers (evenly spaced) enter the autocorrelation estimate.
+TAU_WALKERS = 64
+
+
+def integrated_time(chain: np.ndarray, c: float = 5.0, max_walkers: int = TAU_WALKERS) -> np.ndarray:
+    """Integrated autocorrelation time of each parameter of an ensemble chain [steps].
+
+    emcee's estimator (``emcee.autocorr.integrated_time`` with ``tol=0``: the normalised
+    autocorrelation function averaged over walkers, summed up to Sokal's automatic window
+    ``M >= c tau``), computed with one FFT over all walkers and parameters instead of one
+    per walker.  Equal to emcee's to rounding for up to ``max_walkers`` walkers
+    (tests/fitting/test_mcmc.py); a larger ensemble is estimated from ``max_walkers``
+    evenly spaced walkers (a decision: the walker-averaged autocorrelation function of 64
+    walkers is already an average of 64 estimates, and the estimate of every 100 steps
+    would otherwise cost as much as the steps themselves with a few hundred walkers).
+
+    Parameters
+    ----------
+    chain : numpy.ndarray, shape (steps, walkers, parameters)
+    c : float
+        Window constant.
+    max_walkers : int
+        Largest number of walkers used.
+    """
+    x = np.asarray(chain, float)
+    if x.shape[1] > max_walkers:
+        x = x[:, np.linspace(0, x.shape[1] - 1, max_walkers).round().astype(int)]
+    n = x.shape[0]
+    size = 1 << int(math.ceil(math.log2(max(n, 1))))
+    centred = x - x.mean(axis=0)
+    spectrum = np.fft.rfft(centred, n=2 * size, axis=0)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum), n=2 * size, axis=0)[:n]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        acf /= acf[0]
+    mean_acf = acf.mean(axis=1)  # (steps, parameters)
+    taus = 2.0 * np.cumsum(mean_acf, axis=0) - 1.0
+    inside = np.arange(n)[:, None] < c * taus
+    window = np.where(inside.all(axis=0), n - 1, np.argmin(inside, axis=0))
+    return taus[window, np.arange(x.shape[2])]
+
+
 def _initial_walkers(
     posterior: LogPosterior, centre: np.ndarray, spread: np.ndarray, n_walkers: int, rng: np.random.Generator
 ) -> np.ndarray:
@@ -275,7 +327,7 @@ def sample_posterior(
     problem: FitProblem,
     start: LeastSquaresResult,
     priors: Mapping[str, Prior] | None = None,
-    n_walkers: int = DEFAULT_WALKERS,
+    n_walkers: int | None = None,
     max_steps: int = 20000,
     tau_multiple: float = 50.0,
     tau_rtol: float = 0.05,
@@ -294,8 +346,9 @@ def sample_posterior(
         The walkers start in a small Gaussian ball around its optimum (:func:`start_spread`).
     priors : mapping, optional
         Overrides of the default priors (module :mod:`gonio.fitting.priors`).
-    n_walkers : int
-        Ensemble size (at least twice the number of free parameters; emcee requirement).
+    n_walkers : int, optional
+        Ensemble size (at least twice the number of free parameters; emcee requirement);
+        default :func:`default_walkers`.
     max_steps : int
         Step limit; reaching it marks the result not converged (loud warning).
     tau_multiple, tau_rtol : float
@@ -315,6 +368,7 @@ def sample_posterior(
         The chain with diagnostics, and the priors used.
     """
     ndim = problem.ndim
+    n_walkers = default_walkers(problem) if n_walkers is None else int(n_walkers)
     if n_walkers < 2 * ndim:
         raise ValueError(f"n_walkers = {n_walkers} must be at least 2 x {ndim} free parameters")
     if max_steps < check_every:
@@ -359,9 +413,12 @@ def sample_posterior(
         # tau costs O(steps log steps): estimated again only after the chain grew by
         # CHECK_GROWTH (at least check_every steps), so the checks stay a small share
         next_check = steps + max(check_every, int(CHECK_GROWTH * steps) // check_every * check_every)
-        tau = np.asarray(sampler.get_autocorr_time(tol=0), float)
+        tau = integrated_time(sampler.get_chain())
         largest = float(np.max(tau)) if np.all(np.isfinite(tau)) else math.inf
         history.append((steps, largest))
+        if math.isfinite(largest):  # no check before the chain can be tau_multiple tau long
+            hopeless = int(math.ceil(0.9 * tau_multiple * largest / check_every)) * check_every
+            next_check = max(next_check, min(hopeless, max_steps))
         if progress is not None:
             progress(steps, max_steps, largest)
         stable = bool(np.all(np.abs(previous - tau) < tau_rtol * tau))

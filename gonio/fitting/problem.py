@@ -147,6 +147,50 @@ def evaluated_model(model: str | Model, dataset: Dataset) -> Model:
     return aperture_averaged(base, *aperture)
 
 
+class QuadraticChiSquare:
+    """chi^2 of predictions linear in K coefficients, from K x K sufficient statistics.
+
+    When the prediction is ``T^T c`` (K geometry terms ``T``, shape (K, N), and a
+    coefficient vector ``c`` that depends on the parameters only: a model with a
+    :class:`~gonio.models.LinearForm`, times ``scale cos(theta_i)`` for radiance), the
+    whitened residual is ``W^T c - w`` with ``W`` the whitened terms and ``w`` the
+    whitened data, and
+
+        chi^2(c) = chi^2(c0) + 2 d^T W r0 + d^T (W W^T) d,   d = c - c0,  r0 = W^T c0 - w,
+
+    exactly. Each walker then costs K^2 operations instead of N model evaluations. The
+    expansion point ``c0`` (the ensemble's mean coefficients on first use) keeps the
+    terms of the sum small, so no precision is lost to cancellation.
+
+    Parameters
+    ----------
+    whitened_terms : numpy.ndarray, shape (K, N)
+        ``L^-1`` applied to every term (``L`` the Cholesky factor of the covariance, or
+        diag(sigma)).
+    whitened_value : numpy.ndarray, shape (N,)
+        ``L^-1`` applied to the data.
+    """
+
+    def __init__(self, whitened_terms: np.ndarray, whitened_value: np.ndarray) -> None:
+        self.terms = np.asarray(whitened_terms, float)
+        self.value = np.asarray(whitened_value, float)
+        self.gram = self.terms @ self.terms.T
+        self._centre: tuple[np.ndarray, float, np.ndarray] | None = None
+
+    def centre(self, c0: np.ndarray) -> None:
+        """Expand about ``c0`` (shape (K,))."""
+        residual = self.terms.T @ c0 - self.value
+        self._centre = (np.asarray(c0, float), float(residual @ residual), self.terms @ residual)
+
+    def __call__(self, coefficients: np.ndarray) -> np.ndarray:
+        """chi^2 of every row of ``coefficients`` (shape (W, K)); shape (W,)."""
+        if self._centre is None:
+            self.centre(coefficients.mean(axis=0))
+        c0, chi0, gradient = self._centre
+        d = coefficients - c0
+        return chi0 + 2.0 * (d @ gradient) + np.einsum("wk,kl,wl->w", d, self.gram, d)
+
+
 class FitProblem:
     """A model, a dataset, fixed parameters: prediction, residuals, log-likelihood.
 
@@ -231,12 +275,34 @@ class FitProblem:
         self._cholesky = None if dataset.covariance is None else np.linalg.cholesky(dataset.covariance)
         self._precision: np.ndarray | None = None  # C^-1, computed on first use
         self._log_sigma_sum = float(np.sum(np.log(dataset.sigma)))
+        self._linear = self._quadratic_chi_square()
         self._model_names = set(self.model.param_names)
         # Free model parameters, checked on each evaluation from a vector; fixed values were
         # checked above and defaults lie inside their bounds.
         self._free_model_specs = tuple(self._spec[n] for n in self.free if n in self._model_names)
         #: Number of model evaluations so far (for benchmarks).
         self.evaluations = 0
+
+    def _quadratic_chi_square(self) -> tuple[Any, QuadraticChiSquare] | None:
+        """(linear form, :class:`QuadraticChiSquare`) when the prediction is linear in the
+        form's coefficients at every measurement for every parameter value (BRDF or
+        radiance data, no free extra noise, a model with an exact LinearForm there), else
+        None."""
+        if self.jitter or self.dataset.quantity not in ("brdf", "radiance"):
+            return None
+        form = self._fast.linear_form()
+        if form is None or not np.all(form.exact) or not np.all(np.isfinite(form.terms)):
+            return None
+        terms = form.terms * self._cos_i if self.dataset.quantity == "radiance" else form.terms
+        whitened = np.stack([self.whiten(t)[0] for t in terms])
+        return form, QuadraticChiSquare(whitened, self.whiten(np.asarray(self.dataset.value, float))[0])
+
+    @property
+    def vectorised(self) -> bool:
+        """Whether :meth:`log_likelihood_batch` evaluates all walkers in one model call
+        (a linear model's sufficient statistics, or a model that broadcasts its
+        parameters) rather than one combination at a time."""
+        return self._linear is not None or self.base_model.broadcasts_params
 
     @property
     def n_informative(self) -> int:
@@ -393,6 +459,8 @@ class FitProblem:
         """
         values = self.batch_values(vectors)
         params = {name: values[name] for name in self.model.param_names}
+        if self._linear is not None:
+            return self._linear_log_likelihood(values, params)
         predicted = self._predict_checked(values, params)
         difference = np.asarray(predicted - self.dataset.value, float).reshape(-1, self.dataset.n)
         walkers = difference.shape[0]
@@ -423,6 +491,21 @@ class FitProblem:
         out[~np.isfinite(out)] = -math.inf
         return out
 
+    def _linear_log_likelihood(self, values: Mapping[str, Any], params: Mapping[str, Any]) -> np.ndarray:
+        """:meth:`log_likelihood_batch` through the sufficient statistics of a linear model."""
+        form, chi_square = self._linear
+        walkers = next((np.shape(v)[0] for v in values.values() if np.ndim(v)), 1)
+        columns = [np.broadcast_to(np.reshape(np.asarray(c, float), -1), (walkers,))
+                   for c in form.coefficients(**params)]
+        coefficients = np.stack(columns, axis=1)
+        if self.dataset.quantity == "radiance":
+            coefficients = coefficients * np.reshape(values.get("scale", 1.0), (-1, 1))
+        self.evaluations += walkers
+        log_det = self._log_sigma_sum if self._cholesky is None else float(np.sum(np.log(np.diag(self._cholesky))))
+        out = -0.5 * chi_square(coefficients) - log_det - 0.5 * self.dataset.n * math.log(2.0 * math.pi)
+        out[~np.isfinite(out)] = -math.inf
+        return out
+
     def pointwise_log_likelihood(self, vector: Any) -> np.ndarray:
         """Log predictive density of each measurement given the others, at ``vector``.
 
@@ -447,6 +530,19 @@ class FitProblem:
         g = precision @ difference
         q = np.diag(precision)
         return -0.5 * np.log(2.0 * math.pi / q) - 0.5 * g**2 / q
+
+    def pointwise_log_likelihood_batch(self, vectors: Any) -> np.ndarray:
+        """:meth:`pointwise_log_likelihood` of every row of ``vectors``, shape (W, N): one
+        model evaluation for all rows when the errors are independent."""
+        vectors = np.asarray(vectors, float).reshape(-1, self.ndim)
+        if self._cholesky is not None:
+            return np.array([self.pointwise_log_likelihood(v) for v in vectors]).reshape(-1, self.dataset.n)
+        values = self.batch_values(vectors)
+        params = {name: values[name] for name in self.model.param_names}
+        predicted = np.asarray(self._predict_checked(values, params), float).reshape(-1, self.dataset.n)
+        variance = self.dataset.sigma**2 + (np.asarray(self.extra_variance(values, predicted)) if self.jitter else 0.0)
+        difference = predicted - self.dataset.value
+        return -0.5 * difference**2 / variance - 0.5 * np.log(variance) - 0.5 * math.log(2.0 * math.pi)
 
     def chi_square(self, values: Mapping[str, float]) -> float:
         """Sum of squared whitened residuals with the measurement uncertainties only."""

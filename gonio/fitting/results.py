@@ -43,6 +43,8 @@ __all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE", "SUMMARY_FILE", "INFERENCE_
 
 RESULT_FILE = "result.json"
 CHAIN_FILE = "chain.npz"
+#: Largest number of posterior draws (walkers x steps) in an InferenceData / posterior.nc.
+INFERENCE_DRAWS = 8000
 SUMMARY_FILE = "summary.txt"
 #: Draws x geometries evaluated at once by FitResult.posterior_predictive.
 _PREDICTIVE_ELEMENTS = 2**16
@@ -370,16 +372,23 @@ class FitResult:
 
     def inference_data(self):
         """The posterior as an ArviZ ``InferenceData`` (walkers as chains, after burn-in and
-        thinning), with the pointwise log-likelihood for PSIS-LOO and the observed values."""
+        thinning), with the pointwise log-likelihood for PSIS-LOO and the observed values.
+
+        At most :data:`INFERENCE_DRAWS` draws in all: a large ensemble is thinned further
+        (every k-th step), so that ``posterior.nc`` stays a few megabytes.
+        """
         from .diagnostics import inference_data
 
         if self.mcmc is None:
             raise ValueError("no posterior: the fit ran without MCMC")
         m = self.mcmc
-        chain = m.chain[m.burn_in :: m.thin]
+        kept = max(1, (m.n_steps - m.burn_in + m.thin - 1) // m.thin)
+        thin = m.thin * max(1, math.ceil(kept * m.n_walkers / INFERENCE_DRAWS))
+        chain = m.chain[m.burn_in :: thin]
         problem = self.problem()
-        pointwise = np.array([[problem.pointwise_log_likelihood(v) for v in step] for step in chain])
-        return inference_data(chain, m.log_prob[m.burn_in :: m.thin], self.free, pointwise, self.dataset.value,
+        pointwise = problem.pointwise_log_likelihood_batch(chain.reshape(-1, len(self.free))).reshape(
+            chain.shape[:2] + (self.dataset.n,))
+        return inference_data(chain, m.log_prob[m.burn_in :: thin], self.free, pointwise, self.dataset.value,
                               {"model": self.model, "quantity": self.dataset.quantity, "gonio_version": self.gonio_version})
 
     def _write_inference_data(self, path: Path) -> None:

@@ -7,7 +7,7 @@ from gonio.models import Model
 
 from .dataset import Dataset
 from .least_squares import fit_least_squares
-from .mcmc import DEFAULT_WALKERS, resolve_priors, sample_posterior
+from .mcmc import resolve_priors, sample_posterior
 from .priors import Prior
 from .problem import FitProblem
 from .results import FitResult
@@ -24,7 +24,7 @@ def fit(
     jitter: bool | str = False,
     options: Mapping[str, Any] | None = None,
     start: Mapping[str, float] | None = None,
-    n_walkers: int = DEFAULT_WALKERS,
+    n_walkers: int | None = None,
     max_steps: int = 20000,
     tau_multiple: float = 50.0,
     rhat_limit: float = 1.01,

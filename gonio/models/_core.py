@@ -548,6 +548,24 @@ class FixedGeometryModel:
         """The model's function of the parameters on the valid geometries (flat, [1/sr])."""
         return self._evaluate
 
+    def linear_form(self) -> LinearForm | None:
+        """The model's :class:`LinearForm` on all ``self.shape`` geometries (flattened), or
+        None when the model has none or a geometry is NaN.
+
+        Geometries below the horizon get zero terms (the BRDF is 0 there for every
+        parameter value) and count as exact.
+        """
+        build = getattr(self._evaluate, "linear_form", None)
+        if build is None or self._nan.any():
+            return None
+        form = build()
+        terms = np.zeros((len(form.terms), self._valid.size))
+        terms[:, self._valid_flat] = np.asarray(form.terms, float).reshape(len(form.terms), -1)
+        exact = np.ones(self._valid.size, bool)
+        if form.exact is not None:
+            exact[self._valid_flat] = np.reshape(form.exact, -1)
+        return LinearForm(terms, form.coefficients, exact)
+
     def __call__(self, **values: Any) -> np.ndarray:
         """BRDF [1/sr] at the frozen geometries for these parameter values.
 

@@ -160,15 +160,27 @@ def test_oren_nayar_roughness_of_a_lambertian_sample_is_an_upper_limit():
 
 
 def test_the_clis_state_the_default_ensemble_size():
-    """The CLI help quotes the default number of walkers without importing the sampler."""
+    """The CLI help quotes the default numbers of walkers without importing the sampler."""
     import inspect
 
     import gonio.cli.curet
     import gonio.cli.fit
-    from gonio.fitting.mcmc import DEFAULT_WALKERS
+    from gonio.fitting.mcmc import DEFAULT_WALKERS, SERIAL_WALKERS
 
     for module in (gonio.cli.fit, gonio.cli.curet):
-        assert f"default {DEFAULT_WALKERS}," in inspect.getsource(module)
+        assert f"default {DEFAULT_WALKERS} where all walkers are evaluated at once, else {SERIAL_WALKERS}" \
+            in inspect.getsource(module)
+
+
+def test_default_ensemble_size_follows_the_likelihood():
+    from gonio.fitting import FitProblem
+    from gonio.fitting.mcmc import DEFAULT_WALKERS, SERIAL_WALKERS, default_walkers
+
+    from .synthetic import synthetic_dataset
+
+    data = synthetic_dataset("oren-nayar", {"rho": 0.9, "sigma": 30.0}, 0.01)
+    assert default_walkers(FitProblem("oren-nayar", data, {"ir_weight": 1.0})) == DEFAULT_WALKERS
+    assert default_walkers(FitProblem("oren-nayar-tabulated", data)) == SERIAL_WALKERS
 
 
 def test_vectorised_stretch_move_is_emcees_stretch_move():
@@ -191,3 +203,20 @@ def test_vectorised_stretch_move_is_emcees_stretch_move():
         sampler.run_mcmc(emcee.State(start, random_state=np.random.RandomState(9).get_state()), 300, progress=False)
         chains.append(sampler.get_chain())
     np.testing.assert_array_equal(chains[0], chains[1])
+
+
+def test_integrated_time_is_emcees_estimator():
+    """One FFT over all walkers gives emcee's integrated autocorrelation time."""
+    import emcee
+
+    from gonio.fitting.mcmc import integrated_time
+
+    rng = np.random.default_rng(8)
+    noise = rng.standard_normal((3000, 24, 2))
+    chain = np.empty_like(noise)
+    chain[0] = noise[0]
+    for t in range(1, chain.shape[0]):  # AR(1) chains with known correlation
+        chain[t] = np.array([0.9, 0.6]) * chain[t - 1] + noise[t]
+    np.testing.assert_allclose(integrated_time(chain), emcee.autocorr.integrated_time(chain, tol=0), rtol=1e-9)
+    np.testing.assert_allclose(integrated_time(chain[:257]), emcee.autocorr.integrated_time(chain[:257], tol=0),
+                               rtol=1e-9)

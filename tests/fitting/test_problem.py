@@ -162,3 +162,54 @@ def test_batch_posterior_rejects_walkers_outside_the_support_without_evaluating_
     assert np.isneginf(batch[1]) and np.isneginf(batch[2])
     np.testing.assert_allclose(batch[[0, 3]], [posterior(v) for v in vectors[[0, 3]]], rtol=1e-12)
     assert posterior.calls == 2 + 2
+
+
+@pytest.mark.parametrize("case", [0, 3, 4, 5])
+def test_linear_models_use_sufficient_statistics_with_the_same_likelihood(case):
+    """Models linear in their coefficients (Oren-Nayar, Lambert; aperture-averaged or not;
+    BRDF or radiance; with a covariance) evaluate the ensemble's likelihood from K x K
+    statistics, equal to the one-by-one likelihood; not where the prediction is not linear
+    (normalised radiance, an extra-noise term, the interpolated table)."""
+    model, data, fixed, jitter = _batch_cases()[case]
+    problem = FitProblem(model, data, fixed, jitter=False)
+    assert problem._linear is not None
+    rng = np.random.default_rng(case)
+    starts = {"rho": (0.3, 1.0), "sigma": (0.0, 60.0), "ir_weight": (0.0, 1.0), "scale": (1.0, 3.0)}
+    vectors = np.column_stack([rng.uniform(*starts[name], 9) for name in problem.free])
+    one_by_one = np.array([problem.log_likelihood(v) for v in vectors])
+    np.testing.assert_allclose(problem.log_likelihood_batch(vectors), one_by_one, rtol=1e-10, atol=1e-8)
+    # a second ensemble far from the first one's expansion point: still equal
+    far = vectors.copy()
+    far[:, 0] = 0.05
+    np.testing.assert_allclose(problem.log_likelihood_batch(far), [problem.log_likelihood(v) for v in far],
+                               rtol=1e-10, atol=1e-8)
+
+
+def test_aperture_averaged_linear_models_keep_the_linear_path():
+    from .synthetic import synthetic_dataset
+
+    geometry = in_plane_angles(np.repeat([30.0, 60.0], 9), np.tile(np.linspace(-80, 80, 9), 2))
+    brdf = synthetic_dataset("oren-nayar", {"rho": 0.9, "sigma": 30.0}, 0.01, geometry=geometry)
+    rig = Dataset(*brdf.geometry, brdf.value * 2.0, brdf.sigma * 2.0, quantity="radiance",
+                  metadata={"aperture_sr": [0.003, 0.0009]})
+    for model, fixed in (("oren-nayar", {"ir_weight": 1.0}), ("oren-nayar-qualitative", {}), ("lambert", {})):
+        problem = FitProblem(model, rig, fixed)
+        assert problem._linear is not None
+        vectors = np.column_stack([np.linspace(lo, hi, 5) for lo, hi in
+                                   [{"rho": (0.5, 0.95), "sigma": (5, 45), "scale": (1.5, 2.5)}[n] for n in problem.free]])
+        np.testing.assert_allclose(problem.log_likelihood_batch(vectors),
+                                   [problem.log_likelihood(v) for v in vectors], rtol=1e-10, atol=1e-8)
+    for model, kwargs in (("oren-nayar-tabulated", {}), ("oren-nayar", {"jitter": "relative"})):
+        assert FitProblem(model, rig, **kwargs)._linear is None
+
+
+@pytest.mark.parametrize("case", [0, 1, 2, 4, 7])
+def test_batch_pointwise_likelihood_equals_one_walker_at_a_time(case):
+    model, data, fixed, jitter = _batch_cases()[case]
+    problem = FitProblem(model, data, fixed, jitter=jitter)
+    rng = np.random.default_rng(case)
+    starts = {"rho": (0.5, 0.95), "sigma": (5.0, 45.0), "ir_weight": (0.2, 1.0), "scale": (1.5, 2.5),
+              "jitter": (0.0, 0.02), "rel_jitter": (0.0, 0.05)}
+    vectors = np.column_stack([rng.uniform(*starts[name], 4) for name in problem.free])
+    np.testing.assert_allclose(problem.pointwise_log_likelihood_batch(vectors),
+                               [problem.pointwise_log_likelihood(v) for v in vectors], rtol=1e-11, atol=1e-10)
