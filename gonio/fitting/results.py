@@ -242,7 +242,10 @@ class FitResult:
         rows = rng.choice(samples.shape[0], size=min(n_draws, samples.shape[0]), replace=False)
         geometry = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))
         draws = self._predict_draws(samples[rows], [a.reshape(-1) for a in geometry])
-        return np.nanpercentile(draws, percentiles, axis=0).reshape((len(percentiles),) + geometry[0].shape)
+        # numpy's nanpercentile sorts column by column; without NaN percentile gives the
+        # same numbers in one vectorised sort
+        quantiles = np.nanpercentile if np.isnan(draws).any() else np.percentile
+        return quantiles(draws, percentiles, axis=0).reshape((len(percentiles),) + geometry[0].shape)
 
     def _predict_draws(self, draws: np.ndarray, geometry: list[np.ndarray]) -> np.ndarray:
         """The fitted quantity for every row of ``draws`` (free parameters, shape (D, k)) at
