@@ -6,6 +6,9 @@ long reference chain (emcee, 256 walkers x 20000 steps, gonio's likelihood and p
 
     error = max over parameters and both endpoints |endpoint - reference| / reference sd
 
+(infinite, drawn as an open marker at the top, where a method gives no interval for some
+parameter: a least-squares standard error that is undetermined).
+
 Methods:
 
 * **least squares**: the optimum +- 1.96 standard errors of its covariance (the Gauss-Newton
@@ -105,7 +108,11 @@ def _gaussian_intervals(problem: FitProblem, ls, priors, truncated: bool) -> np.
 
 
 def _error(intervals: np.ndarray, reference: np.ndarray, sd: np.ndarray) -> float:
-    return float(np.nanmax(np.abs(intervals - reference) / sd[:, None]))
+    """The largest endpoint error in reference sd; infinite when a parameter has no interval
+    (a least-squares standard error that is undetermined, e.g. sigma stationary at 0)."""
+    if not np.all(np.isfinite(intervals)):
+        return math.inf
+    return float(np.max(np.abs(intervals - reference) / sd[:, None]))
 
 
 def study(name: str, problem: FitProblem) -> dict:
@@ -143,8 +150,14 @@ def chart(payload: dict, path: Path) -> None:
         ax.plot([r["seconds"] for r in mcmc], [r["error"] for r in mcmc], "o-", color="C0", label="MCMC, fixed length")
         for r in mcmc:
             ax.annotate(str(r["steps"]), (r["seconds"], r["error"]), textcoords="offset points", xytext=(3, 3), fontsize=7)
+        top = max(r["error"] for r in s["records"] if math.isfinite(r["error"])) * 2
         for r, marker, colour in zip(s["records"][:2], ("s", "D"), ("C1", "C2")):
-            ax.plot([r["seconds"]], [max(r["error"], 1e-3)], marker, color=colour, label=r["method"])
+            finite = math.isfinite(r["error"])
+            ax.plot([r["seconds"]], [max(r["error"], 1e-3) if finite else top], marker, color=colour,
+                    label=r["method"], fillstyle="full" if finite else "none")
+            if not finite:
+                ax.annotate("no interval for every parameter", (r["seconds"], top), textcoords="offset points",
+                            xytext=(4, -10), fontsize=7, color=colour)
         ax.axhline(0.1, color="C7", ls=":", lw=1)
         ax.set(xscale="log", yscale="log", xlabel="wall time [s]", title=f"{s['problem']}: {s['model']} ({', '.join(s['free'])})")
         ax.grid(alpha=0.3)
