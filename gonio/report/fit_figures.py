@@ -57,6 +57,9 @@ MAX_TRACE_POINTS = 1000
 MAX_TRACE_WALKERS = 32
 _LOWEST_WALKERS = 4
 _BAND_POINTS = 121
+# Gap between a panel and its title [pt]: titles are placed at a fixed height (matplotlib's
+# automatic placement measures every tick label of the panel once more).
+_TITLE_PAD_PT = 6.0
 _THETA_CMAP = matplotlib.colormaps["viridis"]
 # Width and height of one panel of the data figure [in].
 _PANEL_SIZE_IN = (4.4, 3.2)
@@ -506,7 +509,8 @@ def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
         else:
             _draw_off_plane_panel(ax, data, panel_series, panel_bands, n_offsets)
         ax.set_ylim(shared_ylim or _data_range(data.value[panel.selection], data.sigma[panel.selection]))
-        ax.set_title(panel.title, fontsize=10)
+        # y given: no automatic title placement, which measures every tick label again
+        ax.set_title(panel.title, fontsize=10, y=1.0, pad=_TITLE_PAD_PT)
         ax.grid(alpha=0.3)
         if column == 0:
             ax.set_ylabel(QUANTITY_LABELS[data.quantity])
@@ -620,7 +624,8 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
                 for value, style in zip(q, (":", "-", ":")):
                     ax.axvline(value, color="k", ls=style, lw=1)
                 ax.set_yticks([])
-                ax.set_title(f"{names[j]} = {q[1]:.4g} -{q[1] - q[0]:.2g} +{q[2] - q[1]:.2g}", fontsize=9)
+                ax.set_title(f"{names[j]} = {q[1]:.4g} -{q[1] - q[0]:.2g} +{q[2] - q[1]:.2g}", fontsize=9, y=1.0,
+                             pad=_TITLE_PAD_PT)
             else:
                 hist, xe, ye = np.histogram2d(samples[:, j], samples[:, i], bins=bins, range=[ranges[j], ranges[i]])
                 # One-bin Gaussian smoothing removes the histogram's shot noise from the contours.
