@@ -36,7 +36,6 @@ import serial
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from drivers.camera import Roi  # noqa: E402
 from drivers.emulator.rig import EmulatedRig  # noqa: E402
 from drivers.rig import Rig  # noqa: E402
 

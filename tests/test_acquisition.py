@@ -1,8 +1,6 @@
 """Acquisition on the emulated rig: recording, refusals, reference standard, crash and resume."""
 from __future__ import annotations
 
-import json
-import os
 import signal
 import subprocess
 import sys

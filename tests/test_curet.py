@@ -2,7 +2,6 @@
 least-squares fit to a measured sample (Koenderink & van Doorn 1998, eq 26-31)."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np

@@ -8,7 +8,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import gonio
 from gonio.models.pitted.interreflection import diffuse_brdf, pit_albedo
 from gonio.models.pitted.model import PITTED, aperture_mixture_brdf, pitted_terms
 from gonio.models.pitted.shallow import monte_carlo_brdf
