@@ -324,3 +324,13 @@ def test_every_coefficient_set_is_exactly_reciprocal_and_isotropic(values, ti, p
     forward = float(model(ti, pi_, tr, pr))
     assert float(model(tr, pr, ti, pi_)) == pytest.approx(forward, abs=1e-12 * scale)
     assert float(model(ti, pi_ + 40.0, tr, pr + 40.0)) == pytest.approx(forward, abs=1e-12 * scale)
+
+
+def test_cosines_of_multiples_by_recurrence_equal_numpys():
+    """The design matrix's azimuthal factors cos(l dphi) by Chebyshev recurrence."""
+    from gonio.models.kvd.basis import _cosines_of_multiples
+
+    x = np.random.default_rng(6).uniform(-2 * np.pi, 2 * np.pi, 5000)
+    table = _cosines_of_multiples(x, 12)
+    for l, values in table.items():
+        np.testing.assert_allclose(values, np.cos(l * x), rtol=0, atol=2e-14)

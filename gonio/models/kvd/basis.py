@@ -247,6 +247,19 @@ def radial_table(orders: Iterable[tuple[int, int]], cos_theta: np.ndarray) -> di
     return {key: table[key] for key in orders}
 
 
+def _cosines_of_multiples(x: np.ndarray, largest: int) -> dict[int, np.ndarray]:
+    """cos(l x) for l = 0 .. ``largest`` by the Chebyshev recurrence
+    cos(l x) = 2 cos(x) cos((l-1) x) - cos((l-2) x): one cosine instead of one per l (the
+    recurrence is stable for |cos x| <= 1; its rounding grows like l ulp)."""
+    x = np.asarray(x, float)
+    out = {0: np.ones_like(x)}
+    if largest >= 1:
+        out[1] = np.cos(x)
+    for l in range(2, largest + 1):
+        out[l] = 2.0 * out[1] * out[l - 1] - out[l - 2]
+    return out
+
+
 def design_matrix(
     modes: Sequence[Mode], cos_i: np.ndarray, cos_r: np.ndarray, dphi_rad: np.ndarray
 ) -> np.ndarray:
@@ -271,7 +284,7 @@ def design_matrix(
     needed = [(n, l) for n, _, l in modes] + [(m, l) for _, m, l in modes]
     r_i = radial_table(needed, cos_i)
     r_r = radial_table(needed, cos_r)
-    azimuthal = {l: np.cos(l * dphi_rad) for l in {mode[2] for mode in modes}}
+    azimuthal = _cosines_of_multiples(dphi_rad, max(mode[2] for mode in modes))
     out = np.empty((np.size(cos_i), len(modes)))
     for j, (n, m, l) in enumerate(modes):
         bracket = r_i[(n, l)] * r_r[(m, l)] + r_i[(m, l)] * r_r[(n, l)]
