@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._core import Model, Option, Param, register
+from ._trig import cos_from_half_tangent
 from .chandrasekhar import DEFAULT_ORDER, _check_omega, h_function
 from .oren_nayar.functional import OREN_NAYAR, SIGMA, c1
 from .fresnel import (
@@ -419,7 +420,7 @@ def wolff_brdf(
 
 def _prepare(ti, pi_, tr, pr, scale: str = "albedo", fresnel: str = "exact") -> Callable[..., np.ndarray]:
     """Fixed-geometry evaluator of the ``wolff`` model (angles [rad])."""
-    cos_i, cos_r = np.cos(ti), np.cos(tr)
+    cos_i, cos_r = cos_from_half_tangent(ti), cos_from_half_tangent(tr)
     theta_i, theta_r = np.asarray(ti, float), np.asarray(tr, float)
 
     def evaluate(rho: float, n: float, omega: float) -> np.ndarray:
@@ -461,7 +462,7 @@ RHO_ROUGH = Param(
 
 def _prepare_combined(ti, pi_, tr, pr, fresnel: str = "exact") -> Callable[..., np.ndarray]:
     """Fixed-geometry evaluator of ``wolff-oren-nayar`` (angles [rad])."""
-    cos_i, cos_r = np.cos(ti), np.cos(tr)
+    cos_i, cos_r = cos_from_half_tangent(ti), cos_from_half_tangent(tr)
     theta_i, theta_r = np.asarray(ti, float), np.asarray(tr, float)
     oren_nayar = OREN_NAYAR.prepare(ti, pi_, tr, pr)
 

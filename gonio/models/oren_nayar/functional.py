@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._core import LinearForm, Model, Option, Param, register, with_linear_form
+from .._trig import cos_from_half_tangent, sin_from_half_tangent
 
 __all__ = [
     "c1",
@@ -103,24 +104,6 @@ def _c1_rad(sigma_sq, half: float = C1_SATURATION):
 def _c2_angular(alpha, beta, cos_dphi):
     """The angular factor of C2 (eq 33): sin(alpha), minus (2 beta/pi)^3 when cos(dphi) < 0."""
     return np.sin(alpha) - np.where(cos_dphi < 0.0, (_TWO_OVER_PI * beta) ** 3, 0.0)
-
-
-def _cos_from_half_tangent(x):
-    """cos(x) = (1 - t^2)/(1 + t^2) with t = tan(x/2) (x [rad]).
-
-    The same value as ``np.cos`` to a few units in the last place (absolute), at a
-    quarter of its cost: numpy's tangent is vectorised, its sine and cosine are not
-    (benchmarks/closed_form_speed.py).  At x = pi, t^2 ~ 3e32 and the ratio is -1.
-    """
-    t = np.tan(0.5 * x)
-    t *= t
-    return (1.0 - t) / (1.0 + t)
-
-
-def _sin_from_half_tangent(x):
-    """sin(x) = 2 t/(1 + t^2) with t = tan(x/2), for x in [0, pi/2] [rad] (as above)."""
-    t = np.tan(0.5 * x)
-    return 2.0 * t / (1.0 + t * t)
 
 
 def _c3_angular(alpha, beta):
@@ -401,11 +384,11 @@ def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
     this form as its ``linear_form`` (:class:`gonio.models.LinearForm`), exact wherever
     the floor cannot act (direct_shape >= -0.579 for every parameter in range).
     """
-    cos_dphi = _cos_from_half_tangent(phi_r - phi_i)
+    cos_dphi = cos_from_half_tangent(phi_r - phi_i)
     alpha = np.maximum(theta_i, theta_r)
     beta = np.minimum(theta_i, theta_r)
     two_beta_over_pi = _TWO_OVER_PI * beta
-    angular_c2 = _sin_from_half_tangent(alpha) - np.where(cos_dphi < 0.0, two_beta_over_pi**2 * two_beta_over_pi, 0.0)
+    angular_c2 = sin_from_half_tangent(alpha) - np.where(cos_dphi < 0.0, two_beta_over_pi**2 * two_beta_over_pi, 0.0)
     direct_shape = C2_AMPLITUDE * cos_dphi * angular_c2 * np.tan(beta)
     direct_shape += (
         C3_AMPLITUDE * (1.0 - np.abs(cos_dphi)) * _c3_angular(alpha, beta) * np.tan(0.5 * (alpha + beta))
@@ -495,7 +478,7 @@ def _prepare_qualitative(theta_i, phi_i, theta_r, phi_r, variant: str = "eq36"):
     sin(alpha) tan(beta) >= 0, carried as its exact ``linear_form``.
     """
     half = C1_SATURATION_FOOTNOTE11 if variant == "footnote11" else C1_SATURATION
-    shape = np.maximum(_cos_from_half_tangent(phi_r - phi_i), 0.0) * _sin_from_half_tangent(np.maximum(theta_i, theta_r))
+    shape = np.maximum(cos_from_half_tangent(phi_r - phi_i), 0.0) * sin_from_half_tangent(np.maximum(theta_i, theta_r))
     shape *= np.tan(np.minimum(theta_i, theta_r))
 
     def coefficients(rho, sigma) -> tuple:
