@@ -40,6 +40,31 @@ __all__ = [
     "MAX_TRACE_POINTS", "MAX_TRACE_WALKERS",
 ]
 
+@dataclass(frozen=True)
+class _Margins:
+    """Fixed margins and gaps of a figure's grid of axes [in].
+
+    A fixed layout costs nothing to compute, where matplotlib's constrained layout draws
+    the whole figure once more, without rendering, to measure every tick label (a third to
+    a half of a report figure's time).
+
+    Attributes
+    ----------
+    left, right, top, bottom : float
+        Space between the grid and the figure's edges [in]: tick labels and an axis
+        label, titles, legends and colour bars placed outside the grid.
+    gap_x, gap_y : float
+        Space between neighbouring axes across columns and across rows [in].
+    """
+
+    left: float
+    right: float
+    top: float
+    bottom: float
+    gap_x: float = 0.0
+    gap_y: float = 0.0
+
+
 #: At most this many incidences are drawn in the data figure (evenly chosen).
 MAX_INCIDENCE_PANELS = 12
 #: At most this many azimuth differences get a series of their own in an off-plane panel
@@ -69,6 +94,14 @@ _GRID_MARGINS_IN = (0.85, 0.15, 0.35, 1.0)
 # Gaps between panels [in]: across columns sharing the vertical axis, across columns with
 # their own tick labels, and between rows (tick labels, axis label and the next title).
 _GRID_GAPS_IN = (0.2, 0.65, 0.95)
+# Fixed margins of the other figures [in] (_Margins): the geometry figure's two-line title
+# above and legend below the polar plot; the residual figure's axis labels and title;
+# the corner plot's rotated tick labels, axis labels, suptitle and the titles of its
+# diagonal panels; the traces' axis labels and two-line suptitle.
+_GEOMETRY_MARGINS = _Margins(left=0.55, right=0.55, top=0.8, bottom=1.15)
+_RESIDUAL_MARGINS = _Margins(left=0.8, right=0.2, top=0.4, bottom=0.6)
+_CORNER_MARGINS = _Margins(left=0.95, right=0.15, top=0.6, bottom=1.0, gap_x=0.12, gap_y=0.3)
+_TRACE_MARGINS = _Margins(left=1.05, right=0.2, top=0.65, bottom=0.55, gap_y=0.15)
 # The data figure's panels share one vertical axis when the data of every panel span at
 # least this fraction of the common range (no panel is flattened to a line).
 _SHARED_Y_MIN_FRACTION = 0.25
@@ -136,8 +169,8 @@ def geometry_figure(result: FitResult) -> Figure:
     """
     data = result.dataset
     sources, index = data.incidences()
-    fig = Figure(figsize=(6.0, 6.6), layout="constrained")
-    ax = fig.add_subplot(projection="polar")
+    fig, grid = _fixed_grid(6.0, 6.6, 1, 1, _GEOMETRY_MARGINS)
+    ax = fig.add_subplot(grid[0, 0], projection="polar")
     colours = _incidence_colours(sources, index)
     sizes = _view_sizes(data, index, len(sources))
     # Drawn by incidence (stable): later incidences, with smaller markers, on top.
@@ -436,34 +469,35 @@ def _band_legend(fig: Figure, band_name: str, with_source: bool, columns: int) -
                fontsize=8, title=band_name, title_fontsize=8, frameon=False)
 
 
-def _panel_grid(rows: int, columns: int, shared_y: bool, with_suptitle: bool):
-    """The data figure and its grid of panels, with margins fixed in inches.
-
-    A fixed layout costs nothing to compute, where a constrained layout measures every
-    tick label of every panel in an extra drawing pass (about a third of the figure's
-    time with twelve panels). The margins hold one line of tick labels and an axis label
-    on each side, a one-line panel title, the figure legend below and the optional
-    suptitle above; inner columns keep room for tick labels unless the panels share the
-    vertical axis.
+def _fixed_grid(width: float, height: float, rows: int, columns: int, margins: _Margins, **grid_kw):
+    """A figure of ``width`` x ``height`` [in] and its grid of axes with fixed ``margins``.
 
     Returns
     -------
     fig : matplotlib.figure.Figure
     grid : matplotlib.gridspec.GridSpec
     """
+    axes_width = (width - margins.left - margins.right - (columns - 1) * margins.gap_x) / columns
+    axes_height = (height - margins.top - margins.bottom - (rows - 1) * margins.gap_y) / rows
+    fig = Figure(figsize=(width, height))
+    grid = fig.add_gridspec(rows, columns, left=margins.left / width, right=1.0 - margins.right / width,
+                            bottom=margins.bottom / height, top=1.0 - margins.top / height,
+                            wspace=margins.gap_x / axes_width, hspace=margins.gap_y / axes_height, **grid_kw)
+    return fig, grid
+
+
+def _panel_grid(rows: int, columns: int, shared_y: bool, with_suptitle: bool):
+    """The data figure and its grid of panels (:func:`_fixed_grid`).
+
+    The margins hold one line of tick labels and an axis label on each side, a one-line
+    panel title, the figure legend below and the optional suptitle above; inner columns
+    keep room for tick labels unless the panels share the vertical axis.
+    """
     width, height = _PANEL_SIZE_IN
     left, right, top, bottom = _GRID_MARGINS_IN
-    top += 0.2 if with_suptitle else 0.0
     gap_x = _GRID_GAPS_IN[0] if shared_y else _GRID_GAPS_IN[1]
-    gap_y = _GRID_GAPS_IN[2]
-    fig_width, fig_height = width * columns, height * rows + 0.9
-    axes_width = (fig_width - left - right - (columns - 1) * gap_x) / columns
-    axes_height = (fig_height - top - bottom - (rows - 1) * gap_y) / rows
-    fig = Figure(figsize=(fig_width, fig_height))
-    grid = fig.add_gridspec(rows, columns, left=left / fig_width, right=1.0 - right / fig_width,
-                            bottom=bottom / fig_height, top=1.0 - top / fig_height,
-                            wspace=gap_x / axes_width, hspace=gap_y / axes_height)
-    return fig, grid
+    margins = _Margins(left, right, top + (0.2 if with_suptitle else 0.0), bottom, gap_x, _GRID_GAPS_IN[2])
+    return _fixed_grid(width * columns, height * rows + 0.9, rows, columns, margins)
 
 
 def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
@@ -541,8 +575,8 @@ def residual_figure(result: FitResult) -> Figure:
     noise_label = {None: "sigma", "absolute": "hypot(sigma, jitter)",
                    "relative": "hypot(sigma, rel_jitter x model)"}[problem.jitter]
     x = np.where(data.in_plane, data.signed_view, data.theta_r)
-    fig = Figure(figsize=(7.5, 3.8), layout="constrained")
-    ax = fig.add_subplot()
+    fig, grid = _fixed_grid(7.5, 3.8, 1, 1, _RESIDUAL_MARGINS)
+    ax = fig.add_subplot(grid[0, 0])
     ax.axhspan(-1, 1, color="0.85", lw=0)
     ax.axhspan(-2, -1, color="0.93", lw=0)
     ax.axhspan(1, 2, color="0.93", lw=0)
@@ -555,8 +589,9 @@ def residual_figure(result: FitResult) -> Figure:
     ax.set_ylabel(f"(data - model) / {noise_label} [-]")
     chi2 = float(np.dot(whitened, whitened))
     correlated = " (with the data's covariance)" if data.covariance is not None else ""
-    ax.set_title(f"Normalised residuals at the posterior median: chi2{correlated} = {chi2:.1f} for {data.n} points",
-                 fontsize=10)
+    # centred on the figure (the axes sit right of the vertical label): room for the long line
+    fig.suptitle(f"Normalised residuals at the posterior median: chi2{correlated} = {chi2:.1f} for {data.n} points",
+                 fontsize=10, y=1.0 - 0.08 / fig.get_figheight(), va="top")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=8, ncol=2, loc="upper left")
     ax.grid(alpha=0.3)
@@ -599,13 +634,13 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
     names = list(result.free)
     n = len(names)
     size = max(2.4 * n, 5.5)
-    fig = Figure(figsize=(size, size), layout="constrained")
+    fig, grid = _fixed_grid(size, size, n, n, _CORNER_MARGINS)
     if samples.shape[0] == 0:
-        ax = fig.add_subplot()
+        ax = fig.add_subplot(grid[:, :])
         ax.text(0.5, 0.5, "no posterior samples (fit run without MCMC)", ha="center", va="center")
         ax.set_axis_off()
         return fig
-    axes = fig.subplots(n, n, squeeze=False)
+    axes = grid.subplots(squeeze=False)
     ranges = []
     for j in range(n):
         lo, hi = np.percentile(samples[:, j], [0.2, 99.8])
@@ -707,14 +742,14 @@ def _shown_walkers(log_prob: np.ndarray, burn_in: int) -> np.ndarray:
 def trace_figure(result: FitResult) -> Figure:
     """Walker traces of every free parameter and the log posterior; burn-in shaded."""
     names = list(result.free)
-    fig = Figure(figsize=(8.0, 1.7 * (len(names) + 1) + 0.5), layout="constrained")
+    fig, grid = _fixed_grid(8.0, 1.7 * (len(names) + 1) + 0.5, len(names) + 1, 1, _TRACE_MARGINS)
     if result.mcmc is None:
-        ax = fig.add_subplot()
+        ax = fig.add_subplot(grid[:, 0])
         ax.text(0.5, 0.5, "no chain (fit run without MCMC)", ha="center", va="center")
         ax.set_axis_off()
         return fig
     m = result.mcmc
-    axes = fig.subplots(len(names) + 1, 1, sharex=True, squeeze=False)[:, 0]
+    axes = grid.subplots(sharex=True, squeeze=False)[:, 0]
     steps = np.arange(m.n_steps)
     stride = max(1, math.ceil(m.n_steps / MAX_TRACE_POINTS))
     shown = _shown_walkers(m.log_prob, m.burn_in)

@@ -66,9 +66,14 @@ pre { background: #f7f7f7; padding: 0.8em; overflow-x: auto; font-size: 0.85em; 
 """
 
 
+#: zlib level of the PNG files: 3 compresses these figures as well as the default 6 in
+#: less time (benchmarks/bench_report.py).
+_PNG_COMPRESSION = 3
+
+
 def _png(fig: Figure, path: Path) -> bytes:
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110)
+    fig.savefig(buffer, format="png", dpi=110, pil_kwargs={"compress_level": _PNG_COMPRESSION})
     data = buffer.getvalue()
     write_atomic(path, data)
     return data
