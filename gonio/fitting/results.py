@@ -367,7 +367,9 @@ class FitResult:
         write_atomic(path, json.dumps(self.to_dict(), indent=1, allow_nan=False))
         if self.mcmc is not None:
             buffer = io.BytesIO()
-            np.savez_compressed(buffer, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob)
+            # uncompressed: zlib gains ~25 % on a chain's random doubles at ten times the
+            # time (2 s for a 256-walker Fig 16 chain)
+            np.savez(buffer, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob)
             write_atomic(directory / CHAIN_FILE, buffer.getvalue())
             self._write_inference_data(directory / INFERENCE_DATA_FILE)
         write_atomic(directory / SUMMARY_FILE, self.summary() + "\n")

@@ -368,6 +368,38 @@ _ROUGHEST_SQ = (math.pi / 2.0) ** 2
 _FLOOR_FREE_SHAPE = _c1_rad(_ROUGHEST_SQ) / _saturation(_ROUGHEST_SQ, C23_SATURATION)
 
 
+def _oren_nayar_shapes(theta_i, phi_i, theta_r, phi_r) -> tuple[np.ndarray, np.ndarray]:
+    """direct_shape and ir_shape of eq 33-34 (see :func:`_prepare_oren_nayar`), angles [rad].
+
+    Written with in-place operations on a few temporaries (the plain call's cost is the
+    number of passes over the arrays): the same formulas as :func:`c2`, :func:`c3` and
+    :func:`interreflection_coefficient` (tests/models/test_oren_nayar_functional.py), with
+    cos(dphi) and sin(alpha) from half-angle tangents (:mod:`gonio.models._trig`).
+    """
+    cos_dphi = cos_from_half_tangent(np.subtract(phi_r, phi_i))
+    alpha = np.maximum(theta_i, theta_r)
+    beta = np.minimum(theta_i, theta_r)
+    b = beta * _TWO_OVER_PI                     # 2 beta / pi
+    ir_shape = b * b                            # (2 beta / pi)^2
+    angular_c2 = sin_from_half_tangent(alpha)   # sin(alpha) - (2 beta/pi)^3 [cos dphi < 0]
+    angular_c2 -= ir_shape * b * (cos_dphi < 0.0)
+    ir_shape *= cos_dphi
+    direct_shape = np.tan(beta)
+    direct_shape *= cos_dphi
+    direct_shape *= angular_c2
+    direct_shape *= C2_AMPLITUDE
+    c3 = alpha * beta                           # C3' = (4 alpha beta / pi^2)^2
+    c3 *= _FOUR_OVER_PI_SQ
+    c3 *= c3
+    c3 *= 1.0 - np.abs(cos_dphi)
+    half = alpha + beta
+    half *= 0.5
+    c3 *= np.tan(half)
+    c3 *= C3_AMPLITUDE
+    direct_shape += c3
+    return direct_shape, ir_shape
+
+
 def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
     """Geometry-only terms of eq 33-34 (angles [rad]); returns f(rho, sigma, ir_weight).
 
@@ -384,16 +416,7 @@ def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
     this form as its ``linear_form`` (:class:`gonio.models.LinearForm`), exact wherever
     the floor cannot act (direct_shape >= -0.579 for every parameter in range).
     """
-    cos_dphi = cos_from_half_tangent(phi_r - phi_i)
-    alpha = np.maximum(theta_i, theta_r)
-    beta = np.minimum(theta_i, theta_r)
-    two_beta_over_pi = _TWO_OVER_PI * beta
-    angular_c2 = sin_from_half_tangent(alpha) - np.where(cos_dphi < 0.0, two_beta_over_pi**2 * two_beta_over_pi, 0.0)
-    direct_shape = C2_AMPLITUDE * cos_dphi * angular_c2 * np.tan(beta)
-    direct_shape += (
-        C3_AMPLITUDE * (1.0 - np.abs(cos_dphi)) * _c3_angular(alpha, beta) * np.tan(0.5 * (alpha + beta))
-    )
-    ir_shape = cos_dphi * two_beta_over_pi**2
+    direct_shape, ir_shape = _oren_nayar_shapes(theta_i, phi_i, theta_r, phi_r)
 
     def evaluate(rho: float, sigma: float, ir_weight: float) -> np.ndarray:
         a, b, c = _oren_nayar_coefficients(rho, sigma, ir_weight)
