@@ -30,7 +30,8 @@ from .clock import SimClock
 
 __all__ = ["AxisConfig", "DEFAULT_AXES", "MotionProfile", "trapezoid_profile", "move_duration", "crossing_time",
            "Esp300Firmware", "GENERAL_ERRORS", "AXIS_ERRORS", "MAX_WS_DELAY_MS", "RATE_REFERENCE_TIME_S",
-           "ANGULAR_UNITS", "MAX_COMMAND_LINE"]
+           "ANGULAR_UNITS", "MAX_COMMAND_LINE",
+           "SETUP_SETTINGS", "SetupSetting", "MAX_PROGRAMS", "PROGRAM_MEMORY"]
 
 #: General (non-axis) error messages, ESP300 manual Appendix A.
 GENERAL_ERRORS = {
@@ -51,6 +52,7 @@ AXIS_ERRORS = {
     7: "NEGATIVE SOFTWARE LIMIT DETECTED",
     10: "MAXIMUM VELOCITY EXCEEDED",
     11: "MAXIMUM ACCELERATION EXCEEDED",
+    0: "MOTOR TYPE NOT DEFINED",
     13: "MOTOR NOT ENABLED",
     29: "DIGITAL I/O INTERLOCK DETECTED",
 }
@@ -307,6 +309,80 @@ def stop_profile(t0: float, position: float, velocity: float, acceleration: floa
     _check_motion("the duration of the stop", duration, positive=False)
     return MotionProfile(((t0, position, velocity, -math.copysign(acceleration, velocity), duration),))
 
+#: Largest gain or feed-forward factor (manual, command ``KP``, p. 3-93: 0 to 2e9).
+MAX_GAIN = 2e9
+
+
+@dataclass(frozen=True)
+class SetupSetting:
+    """A motor or servo setting of an axis that the firmware stores (docs/protocol.md).
+
+    Attributes
+    ----------
+    mnemonic : str
+        Two-letter command, e.g. ``"KP"``.
+    kind : str
+        ``"units"`` (a position, velocity, acceleration or jerk in the axis's ``SN`` units,
+        stored in degrees), ``"real"`` (a unitless factor or a current or voltage),
+        ``"integer"`` or ``"hex"`` (a bit field, written and read in hexadecimal).
+    default : callable
+        ``default(config) -> value``: the power-on value [deg-based for ``"units"``].
+    low, high : callable
+        ``low(axis)``, ``high(axis)``: the accepted range [deg-based for ``"units"``].
+    above_code : int
+        Axis error key for a value above ``high`` (1 PARAMETER OUT OF RANGE, 10 MAXIMUM
+        VELOCITY EXCEEDED); below ``low`` is always 1.
+    """
+
+    mnemonic: str
+    kind: str
+    default: Callable[[AxisConfig], float]
+    low: Callable[["AxisState"], float]
+    high: Callable[["AxisState"], float]
+    above_code: int = 1
+
+
+def _constant(value: float) -> Callable:
+    return lambda _: value
+
+
+def _velocity_setting(mnemonic: str, default: Callable[[AxisConfig], float], low=None) -> SetupSetting:
+    """A velocity up to ``VU`` (x10 above, x01 below one encoder count per second)."""
+    return SetupSetting(mnemonic, "units", default, low or (lambda axis: axis.config.min_velocity),
+                        lambda axis: axis.max_velocity, above_code=10)
+
+
+#: The motor and servo settings behind InstrumentKit's ``setup_axis``/``read_setup``; their
+#: ranges and power-on values, and which of them act on the emulated motion, are listed in
+#: docs/protocol.md ("Motor and servo settings").
+SETUP_SETTINGS = {spec.mnemonic: spec for spec in (
+    SetupSetting("JK", "units", lambda c: 10.0 * c.max_acceleration, lambda a: a.config.resolution,
+                 _constant(MAX_GAIN)),
+    _velocity_setting("VB", _constant(0.0), low=_constant(0.0)),
+    _velocity_setting("JH", lambda c: 0.5 * c.max_velocity),
+    _velocity_setting("JW", lambda c: 0.1 * c.max_velocity),
+    SetupSetting("FR", "units", lambda c: c.resolution, lambda a: 1e-9, _constant(MAX_GAIN)),
+    SetupSetting("FE", "units", _constant(1.0), lambda a: a.config.resolution, _constant(MAX_GAIN)),
+    SetupSetting("QI", "real", _constant(1.0), _constant(0.0), _constant(3.0)),
+    SetupSetting("QV", "real", _constant(24.0), _constant(0.0), _constant(48.0)),
+    SetupSetting("QM", "integer", _constant(1), _constant(0), _constant(1)),
+    SetupSetting("QS", "integer", _constant(10), _constant(1), _constant(250)),
+    SetupSetting("KP", "real", _constant(0.005), _constant(0.0), _constant(MAX_GAIN)),
+    SetupSetting("KI", "real", _constant(0.0001), _constant(0.0), _constant(MAX_GAIN)),
+    SetupSetting("KD", "real", _constant(0.02), _constant(0.0), _constant(MAX_GAIN)),
+    SetupSetting("KS", "real", _constant(0.5), _constant(0.0), _constant(MAX_GAIN)),
+    SetupSetting("AF", "real", _constant(0.0), _constant(0.0), _constant(MAX_GAIN)),
+    SetupSetting("FP", "integer", _constant(3), _constant(0), _constant(7)),
+    SetupSetting("TJ", "integer", _constant(1), _constant(1), _constant(1)),
+    SetupSetting("ZB", "hex", _constant(0x110), _constant(0), _constant(0xFFFF)),
+    SetupSetting("ZH", "hex", _constant(0x24), _constant(0), _constant(0xFFFF)),
+)}
+
+#: Stored programs (manual 3.3 "Program execution mode", p. 3-3): up to 100 programs in
+#: 64 kB of program memory.
+MAX_PROGRAMS = 100
+PROGRAM_MEMORY = 64 * 1024
+
 
 @dataclass
 class AxisState:
@@ -329,6 +405,8 @@ class AxisState:
     units: int = 7
     profile: MotionProfile = field(default=None)  # type: ignore[assignment]
     pending_error: int | None = None  # queued when the current motion ends
+    setup: dict[str, float] = field(default_factory=dict)  # motor and servo settings (SETUP_SETTINGS)
+    torque_reduction: tuple[int, int] = (0, 0)  # QR: idle time [ms], percentage of the current
 
     def __post_init__(self) -> None:
         c = self.config
@@ -336,10 +414,25 @@ class AxisState:
         self.estop_deceleration = c.max_acceleration
         self.max_velocity, self.max_acceleration = c.max_velocity, c.max_acceleration
         self.homing_velocity = c.velocity
+        self.setup = {spec.mnemonic: spec.default(c) for spec in SETUP_SETTINGS.values()}
         self.left_limit, self.right_limit = c.software_limits
         self.desired = c.home
         self.home_preset = c.home
         self.profile = MotionProfile(((0.0, c.home, 0.0, 0.0, 0.0),))
+
+    def saved_settings(self) -> dict:
+        """The settings ``SM`` saves and ``RS`` restores (manual command ``SM``)."""
+        names = ("velocity", "acceleration", "deceleration", "estop_deceleration", "max_velocity",
+                 "max_acceleration", "homing_velocity", "left_limit", "right_limit", "units",
+                 "torque_reduction")
+        saved = {name: getattr(self, name) for name in names}
+        saved["setup"] = dict(self.setup)
+        return saved
+
+    def restore(self, saved: dict) -> None:
+        """Load settings saved by :meth:`saved_settings`."""
+        for name, value in saved.items():
+            setattr(self, name, dict(value) if name == "setup" else value)
 
     @property
     def unit_size(self) -> float:
@@ -418,6 +511,10 @@ class Esp300Firmware:
         self.axes = {c.number: AxisState(c) for c in axes}
         self.errors: list[tuple[int, int]] = []
         self.limit_faults: set[int] = set()
+        self.programs: dict[int, list[str]] = {}
+        self.recording: int | None = None  # program number while in program entry mode (EP)
+        self.saved: dict[int, dict] = {}  # settings saved by SM, loaded by RS
+        self._running_program = False
 
     # -- state ------------------------------------------------------------------------
     def _update(self, t: float) -> None:
@@ -467,10 +564,18 @@ class Esp300Firmware:
         if len(line) > MAX_COMMAND_LINE:
             self._push(6)
             return b""
+        replies = self._run_commands(line.split(";"))
+        return b"".join(r.encode("ascii") + self.reply_terminator for r in replies)
+
+    def _run_commands(self, commands: Sequence[str]) -> list[str]:
+        """Execute (or, in program entry mode, store) ``commands``; return the query replies."""
         replies: list[str] = []
-        for command in line.split(";"):
+        for command in commands:
             command = _BLANKS.sub("", command)
             if not command:
+                continue
+            if self.recording is not None:
+                self._record(command)
                 continue
             self._update(self.clock.now())
             try:
@@ -479,8 +584,22 @@ class Esp300Firmware:
                 self._push(error.code)
                 continue
             if reply is not None:
-                replies.append(reply)
-        return b"".join(r.encode("ascii") + self.reply_terminator for r in replies)
+                replies.extend(reply if isinstance(reply, list) else [reply])
+        return replies
+
+    def _record(self, command: str) -> None:
+        """Program entry mode: store ``command`` unevaluated; ``QP`` ends the mode (manual p. 3-3).
+
+        A command that does not fit in the program memory is not stored (error 27).
+        """
+        if command.upper() == "QP":
+            self.recording = None
+            return
+        used = sum(len(c) + 1 for program in self.programs.values() for c in program)
+        if used + len(command) + 1 > PROGRAM_MEMORY:
+            self._push(27)
+            return
+        self.programs[self.recording].append(command)
 
     def internal_error(self, error: Exception) -> bytes:
         """An unexpected failure while executing a line: error 27 (COMMAND NOT ALLOWED), no reply."""
@@ -519,7 +638,7 @@ class Esp300Firmware:
         """A quantity in degrees as the axis reports it: in its units, 5 decimals."""
         return _fmt(degrees / axis.unit_size)
 
-    def _execute(self, command: str) -> str | None:
+    def _execute(self, command: str) -> str | list[str] | None:
         match = _COMMAND.match(command)
         if not match:
             raise _EspError(6)
@@ -527,6 +646,8 @@ class Esp300Firmware:
         query = rest == "?"
         if mnemonic in _QUERIES_WITHOUT_MARK and rest == "":
             query = True
+        if mnemonic in SETUP_SETTINGS:
+            return self._setup_command(digits, rest, query, mnemonic)
         handler = getattr(self, f"_cmd_{mnemonic}", None)
         if handler is None:
             raise _EspError(6)
@@ -571,12 +692,15 @@ class Esp300Firmware:
         t = self.clock.now()
         for number, axis in list(self.axes.items()):
             fresh = AxisState(axis.config)
+            if number in self.saved:
+                fresh.restore(self.saved[number])
             position = axis.position(t)
             fresh.profile = MotionProfile(((t, position, 0.0, 0.0, 0.0),))
             fresh.desired = round(position / axis.config.resolution) * axis.config.resolution
             self.axes[number] = fresh
         self.errors.clear()
         self.limit_faults.clear()
+        self.recording = None
         return None
 
     # -- axis queries -----------------------------------------------------------------
@@ -629,6 +753,8 @@ class Esp300Firmware:
     def _check_move(self, axis: AxisState, target: float, software_limits: bool = True) -> None:
         """Refuse a move of ``axis`` to the controller position ``target`` [deg] (see docs/protocol.md)."""
         n = axis.config.number
+        if axis.setup["QM"] == 0:
+            raise _EspError(100 * n + 0)
         if not axis.motor_on:
             raise _EspError(100 * n + 13)
         if axis.moving(self.clock.now()):
@@ -831,6 +957,8 @@ class Esp300Firmware:
             axis = self._axis(digits)
             axis.velocity = min(axis.velocity, axis.max_velocity)
             axis.homing_velocity = min(axis.homing_velocity, axis.max_velocity)
+            for mnemonic in ("VB", "JH", "JW"):
+                axis.setup[mnemonic] = min(axis.setup[mnemonic], axis.max_velocity)
         return reply
 
     def _cmd_AU(self, digits, rest, query):
@@ -884,3 +1012,222 @@ class Esp300Firmware:
         if not math.isclose(value, axis.config.resolution, rel_tol=1e-9):
             raise _EspError(100 * axis.config.number + 1)
         return None
+
+    # -- motor and servo settings (InstrumentKit's setup_axis / read_setup) ---------------
+    def _setup_command(self, digits, rest, query, mnemonic):
+        """A setting of :data:`SETUP_SETTINGS`: ``xxAAnn`` stores it, ``xxAA?`` reads it back.
+
+        Out of range: x01 (x10 for a velocity above ``VU``); nothing changes.
+        """
+        axis = self._axis(digits)
+        spec = SETUP_SETTINGS[mnemonic]
+        if query:
+            return self._format_setup(axis, spec, axis.setup[mnemonic])
+        value = self._parse_setup(axis, spec, rest)
+        n = axis.config.number
+        if value > spec.high(axis):
+            raise _EspError(100 * n + spec.above_code)
+        if not value >= spec.low(axis):
+            raise _EspError(100 * n + 1)
+        axis.setup[mnemonic] = value
+        return None
+
+    def _parse_setup(self, axis: AxisState, spec: SetupSetting, text: str) -> float:
+        """The parameter of a setting command, in degrees for a ``"units"`` setting."""
+        if spec.kind == "units":
+            return self._quantity(text, axis)
+        if spec.kind == "hex":
+            return self._hex(text, axis)
+        value = self._number(text, axis)
+        if spec.kind == "integer" and not value.is_integer():
+            raise _EspError(100 * axis.config.number + 1)
+        return value
+
+    @staticmethod
+    def _hex(text: str, axis: AxisState) -> int:
+        """A bit field: hexadecimal digits with an optional ``H`` (manual, command ``ZS``, p. 3-169).
+
+        It must begin with a decimal digit (``0F25H``; ``F25H`` is not a command: error 6).
+        """
+        if text == "":
+            raise _EspError(38)
+        if not text[0].isdigit():
+            raise _EspError(6)
+        digits = text[:-1] if text[-1] in "hH" else text
+        if not re.fullmatch(r"[0-9A-Fa-f]{1,8}", digits, re.ASCII):
+            raise _EspError(100 * axis.config.number + 1)
+        return int(digits, 16)
+
+    def _format_setup(self, axis: AxisState, spec: SetupSetting, value: float) -> str:
+        if spec.kind == "units":
+            return self._out(axis, value)
+        if spec.kind == "hex":
+            return f"{int(value):X}H"
+        if spec.kind == "integer":
+            return str(int(value))
+        return _fmt(value)
+
+    def _cmd_QR(self, digits, rest, query):
+        """Reduce motor torque: ``xxQRtime,percent`` (0 to 60000 ms, 0 to 100 %), else x01.
+
+        ``xxQR?`` replies ``time, percent``.  Stored; the emulated stages hold their
+        position whatever the holding current.
+        """
+        axis = self._axis(digits)
+        if query:
+            time_ms, percent = axis.torque_reduction
+            return f"{time_ms}, {percent}"
+        parts = rest.split(",")
+        if rest == "" or len(parts) != 2:
+            raise _EspError(38)
+        values = [self._number(part, axis) for part in parts]
+        if not all(v.is_integer() for v in values) or not (0 <= values[0] <= 60000 and 0 <= values[1] <= 100):
+            raise _EspError(100 * axis.config.number + 1)
+        axis.torque_reduction = (int(values[0]), int(values[1]))
+        return None
+
+    def _axis_action(self, digits, rest, query) -> AxisState:
+        """The axis of an action command without parameter and without query form (else error 6)."""
+        if query or rest:
+            raise _EspError(6)
+        return self._axis(digits)
+
+    def _cmd_UF(self, digits, rest, query):
+        """Update the servo filter with ``KP``, ``KI``, ``KD``, ``KS`` (manual p. 3-93).
+
+        The emulated servo loop follows the profile exactly (within the repeatability), so
+        the gains have no effect on the motion.
+        """
+        self._axis_action(digits, rest, query)
+        return None
+
+    def _cmd_QD(self, digits, rest, query):
+        """Update the motor driver with ``QI``, ``QV``, ``QS``, ``QR`` (no effect on the motion)."""
+        self._axis_action(digits, rest, query)
+        return None
+
+    def _cmd_SM(self, digits, rest, query):
+        """Save the settings of every axis to non-volatile memory; ``RS`` loads them."""
+        if query or rest or digits:
+            raise _EspError(6)
+        self.saved = {number: axis.saved_settings() for number, axis in self.axes.items()}
+        return None
+
+    # -- moves to a limit -------------------------------------------------------------
+    def _direction(self, text: str, axis: AxisState) -> float:
+        """``+`` or ``-`` (empty: ``+``, the emulator's choice), else x01."""
+        if text in ("", "+"):
+            return 1.0
+        if text == "-":
+            return -1.0
+        raise _EspError(100 * axis.config.number + 1)
+
+    def _move_to(self, axis: AxisState, target: float, pending_error: int | None) -> None:
+        """Start a move of ``axis`` to the controller position ``target`` at ``VA``, with no
+        repeatability error (the end is a limit, not a servo target)."""
+        t = self.clock.now()
+        axis.desired = target
+        axis.profile = trapezoid_profile(t, axis.position(t), target - axis.offset, axis.velocity,
+                                         axis.acceleration, axis.deceleration)
+        axis.pending_error = pending_error
+
+    def _cmd_MT(self, digits, rest, query):
+        """Move to the hardware travel limit ``+`` or ``-`` at ``VA``, past the software limits.
+
+        The axis stops on the limit switch without an error (that is the command's end).
+        ``xxMT?``: ``0`` while the axis moves, ``1`` when it is stopped.
+        """
+        axis = self._axis(digits)
+        if query:
+            return "0" if axis.moving(self.clock.now()) else "1"
+        direction = self._direction(rest, axis)
+        lo, hi = axis.config.hardware_limits
+        target = (hi if direction > 0 else lo) + axis.offset
+        self._check_move(axis, target, software_limits=False)
+        self._move_to(axis, target, None)
+        return None
+
+    def _cmd_MV(self, digits, rest, query):
+        """Move indefinitely ``+`` or ``-`` at ``VA`` until ``ST``, ``AB`` or ``MF`` (manual p. 3-101).
+
+        An axis that is not stopped runs into its software limit and stops there with
+        x06 / x07, queued when it stops.  ``xxMV?``: ``0`` while the axis moves, ``1`` when
+        it is stopped.
+        """
+        axis = self._axis(digits)
+        if query:
+            return "0" if axis.moving(self.clock.now()) else "1"
+        direction = self._direction(rest, axis)
+        n = axis.config.number
+        limit, code = (axis.right_limit, 6) if direction > 0 else (axis.left_limit, 7)
+        if direction * (limit - axis.encoder_reading(self.clock.now())) <= 0:
+            raise _EspError(100 * n + code)  # already at (or beyond) that limit
+        self._check_move(axis, limit, software_limits=False)
+        self._move_to(axis, limit, 100 * n + code)
+        return None
+
+    # -- stored programs (manual 3.3, p. 3-3) ---------------------------------------------
+    def _program_number(self, digits: str) -> int:
+        """The program number ``xx``: 1 to :data:`MAX_PROGRAMS` (37 missing, 7 outside)."""
+        if not digits:
+            raise _EspError(37)
+        number = int(digits)
+        if not 1 <= number <= MAX_PROGRAMS:
+            raise _EspError(7)
+        return number
+
+    def _cmd_EP(self, digits, rest, query):
+        """Enter program entry mode for program ``xx``: the following commands are stored,
+        unevaluated, up to ``QP``.  Refused with 27 if program ``xx`` exists (erase it with
+        ``XX`` first) or inside a running program."""
+        if query or rest:
+            raise _EspError(6)
+        number = self._program_number(digits)
+        if self.programs.get(number) or self._running_program:
+            raise _EspError(27)
+        self.programs[number] = []
+        self.recording = number
+        return None
+
+    def _cmd_QP(self, digits, rest, query):
+        """Quit program entry mode (in program entry mode, see :meth:`_record`); otherwise nothing."""
+        if query or rest or digits:
+            raise _EspError(6)
+        return None
+
+    def _cmd_XX(self, digits, rest, query):
+        """Erase program ``xx`` (nothing if it does not exist)."""
+        if query or rest:
+            raise _EspError(6)
+        self.programs.pop(self._program_number(digits), None)
+        return None
+
+    def _stored(self, digits: str) -> list[str]:
+        program = self.programs.get(self._program_number(digits))
+        if not program:
+            raise _EspError(27)
+        return program
+
+    def _cmd_EX(self, digits, rest, query):
+        """Execute program ``xx``: its commands run in order, their query replies are sent.
+
+        Refused with 27 if the program is empty or missing, or from inside a program (a
+        program cannot start another, so no program runs for ever).  The program runs to
+        its end before the next command of the host is read.
+        """
+        if query or rest:
+            raise _EspError(6)
+        program = self._stored(digits)
+        if self._running_program:
+            raise _EspError(27)
+        self._running_program = True
+        try:
+            return self._run_commands(program)
+        finally:
+            self._running_program = False
+
+    def _cmd_LP(self, digits, rest, query):
+        """List program ``xx``: one reply line per stored command (27 if empty or missing)."""
+        if query or rest:
+            raise _EspError(6)
+        return list(self._stored(digits))

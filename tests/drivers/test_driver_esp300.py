@@ -90,7 +90,7 @@ def test_wait_advances_simulated_time(stage, emu):
         ("2PA-5", 207, "NEGATIVE SOFTWARE LIMIT DETECTED"),
         ("1PA45", 129, "DIGITAL I/O INTERLOCK DETECTED"),  # camera onto the lamp (home 45, 0)
         ("7PA10", 9, "AXIS NUMBER OUT OF RANGE"),
-        ("1XX5", 6, "COMMAND DOES NOT EXIST"),
+        ("1YY5", 6, "COMMAND DOES NOT EXIST"),
         ("PA30", 37, "AXIS NUMBER MISSING"),
         ("1PA", 38, "COMMAND PARAMETER MISSING"),
         ("1VA500", 110, "MAXIMUM VELOCITY EXCEEDED"),

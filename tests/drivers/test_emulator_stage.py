@@ -130,7 +130,7 @@ def test_minimum_separation_refuses_end_point_only():
 
 def test_error_codes_of_malformed_commands():
     fw = make_stage()
-    assert ask(fw, "1XX") == ""
+    assert ask(fw, "1YY") == ""
     assert ask(fw, "7TP") == ""  # a failing query produces no reply
     assert ask(fw, "PA30") == ""
     assert ask(fw, "1PA") == ""
@@ -150,7 +150,7 @@ def test_tb_reports_code_timestamp_message_fifo_and_buffer_is_ten_deep():
     assert ask(fw, "TB?") == "9, 2500, AXIS NUMBER OUT OF RANGE\r\n"
     assert ask(fw, "TB") == "113, 5000, MOTOR NOT ENABLED\r\n"
     for _ in range(12):
-        ask(fw, "1XX")
+        ask(fw, "1YY")
     assert len(errors(fw)) == 10
 
 

@@ -14,9 +14,9 @@ is missing, and ``make test`` from a fresh clone installs them all):
   and the ``test`` extra lists the dependencies it really needs (quantities, future,
   pyusb, python-usbtmc, python-vxi11, ruamel.yaml).
 
-Every feature the stock drivers offer for what the rig has is exercised; the features the
-emulation does not have (InstrumentKit's stored programs, motor setup, jog, move to a
-hardware limit) are listed in docs/protocol.md, "Manual commands not emulated".
+Every feature the stock drivers offer is exercised, InstrumentKit's motor and servo setup
+(``setup_axis``/``read_setup``), stored programs, ``move_to_hardware_limit`` and
+``move_indefinitely`` included; docs/protocol.md lists the manual commands not emulated.
 """
 from __future__ import annotations
 
@@ -221,6 +221,8 @@ def instrumentkit_esp(lab, request):
     ik = pytest.importorskip("instruments", reason="InstrumentKit is not installed: pip install --no-deps "
                              "instrumentkit==0.6.0 (see the Makefile; its ruamel.yaml pin does not build on 3.11)")
     rig, addresses = lab
+    rig.stage.saved.clear()  # factory settings (an earlier test may have saved others with SM)
+    rig.stage.programs.clear()
     rig.channels["stage"].process("RS")
     address = addresses["stage"][request.param]
     if request.param == "pty":
@@ -296,5 +298,96 @@ def test_instrumentkit_esp301_status_and_units(instrumentkit_esp):
     with pytest.raises(ik.newport.NewportError, match=r"Error: 1\. Axis: 3\."):  # x01, 301
         axis.units = NewportESP301Units.millimeter
     axis.units = NewportESP301Units.degree
-    with pytest.raises(ik.newport.NewportError, match="COMMAND DOES NOT EXIST"):
-        axis.move_to_hardware_limit()  # MT: not emulated (docs/protocol.md)
+    assert float(axis.desired_velocity) == float(axis.desired_position)  # InstrumentKit 0.6 reads DP? for it
+
+
+@pytest.mark.parametrize("instrumentkit_esp", TRANSPORTS, indirect=True)
+def test_instrumentkit_esp301_hardware_limit_and_jog(instrumentkit_esp):
+    rig, ik, esp = instrumentkit_esp
+    axis = esp.axis[0]
+    axis.enable()
+    axis.move_to_hardware_limit()  # MT (no direction: +) past SR = 90 onto the limit switch
+    axis.wait_for_stop()
+    assert float(axis.position) == pytest.approx(95.0, abs=1e-9)
+    assert rig.control.true_state().positions_deg[0] == pytest.approx(95.0, abs=1e-9)
+    axis.move(0.0)
+    axis.wait_for_stop()
+    axis.move_indefinitely()  # MV (+): runs until stopped
+    assert not axis.is_motion_done
+    axis.stop_motion()
+    axis.wait_for_stop()
+    stopped = float(axis.position)
+    assert 0.0 < stopped < 90.0 and axis.is_motion_done
+    axis.move_indefinitely()
+    with pytest.raises(ik.newport.NewportError, match=r"Error: 6\. Axis: 1\."):
+        axis.wait_for_stop()  # not stopped: it runs into the software limit SR = 90 (106)
+    assert float(axis.position) == pytest.approx(90.0, abs=1e-9)
+    with pytest.raises(ik.newport.NewportError, match=r"Error: 6\. Axis: 1\."):
+        axis.move_indefinitely()  # already at the limit: 106
+
+
+@pytest.mark.parametrize("instrumentkit_esp", TRANSPORTS, indirect=True)
+def test_instrumentkit_esp301_setup_axis_and_read_setup(instrumentkit_esp):
+    rig, ik, esp = instrumentkit_esp
+    axis = esp.axis[1]
+    setup = dict(motor_type=1, feedback_configuration=110, full_step_resolution=0.002,
+                 position_display_resolution=4, current=1.5, voltage=30.0, units=7,
+                 encoder_resolution=0.001, max_acceleration=100.0, max_velocity=25.0,
+                 max_base_velocity=2.0, homing_velocity=12.0, jog_high_velocity=20.0,
+                 jog_low_velocity=3.0, acceleration=50.0, velocity=18.0, deceleration=40.0,
+                 estop_deceleration=90.0, jerk=500.0, error_threshold=0.5, proportional_gain=0.25,
+                 derivative_gain=0.125, integral_gain=0.0625, integral_saturation_gain=0.75,
+                 home=45.0, microstep_factor=20, acceleration_feed_forward=0.5, trajectory=1,
+                 hardware_limit_configuration=24, reduce_motor_torque_time=500,
+                 reduce_motor_torque_percentage=50)
+    config = axis.setup_axis(**setup)  # every setting, then QR, UF, QD, SM and read_setup
+    expected = {key: value for key, value in setup.items() if key in config}
+    expected["feedback_configuration"] = 0x11  # "110H": InstrumentKit 0.6 drops the last hex digit
+    expected["hardware_limit_configuration"] = 2  # "24H" read as decimal without its last digit
+    assert str(config.pop("units").dimensionality) == "deg"
+    del expected["units"]
+    assert {key: float(value) for key, value in config.items()} == pytest.approx(expected)
+    assert esp.query("2ZB?").strip() == "110H" and esp.query("2ZH?").strip() == "24H"
+    assert esp.query("2QR?").strip() == "500, 50" and float(axis.error_threshold) == 0.5
+    esp.reset()  # RS loads the settings saved by SM
+    assert float(axis.jerk) == 500.0 and float(axis.max_velocity) == 25.0
+    assert float(axis.proportional_gain) == 0.25
+    with pytest.raises(ik.newport.NewportError, match="MAXIMUM VELOCITY EXCEEDED"):
+        axis.jog_high_velocity = 26.0  # above VU
+    with pytest.raises(ik.newport.NewportError, match=r"Error: 1\. Axis: 2\."):
+        axis.motor_type = 2  # a stepper motor on the DC-servo stage: 201
+    axis.motor_type = 0  # undefined: no move
+    axis.enable()
+    with pytest.raises(ik.newport.NewportError, match=r"Error: 0\. Axis: 2\."):  # 200 MOTOR TYPE NOT DEFINED
+        axis.move(30.0)
+    assert float(axis.max_deceleration) == 100.0  # InstrumentKit reads AU? for it
+
+
+@pytest.mark.parametrize("instrumentkit_esp", TRANSPORTS, indirect=True)
+def test_instrumentkit_esp301_stored_programs(instrumentkit_esp):
+    rig, ik, esp = instrumentkit_esp
+    axis = esp.axis[0]
+    axis.enable()
+    axis.move(0.0, wait=True, block=True)
+    with esp.execute_bulk_command():  # XX, EP, the moves and QP on one line: stored, not run
+        with esp.define_program(15):
+            axis.move(12.0)
+            axis.wait_for_stop()
+            axis.move(-3.0, absolute=False)
+    assert float(axis.position) == pytest.approx(0.0, abs=0.01)
+    esp.run_program(15)  # EX
+    axis.wait_for_stop()
+    assert float(axis.position) == pytest.approx(9.0, abs=0.01)
+    with pytest.raises(ik.newport.NewportError, match="COMMAND NOT ALLOWED"):
+        esp.run_program(16)  # no such program: 27
+    with pytest.raises(ValueError):
+        esp.run_program(101)  # refused by the driver itself
+    # Alone, define_program asks TB? after EP; in program entry mode the controller stores
+    # that query as program text and does not answer (manual p. 3-3): the driver times out.
+    connection = esp._file._conn  # InstrumentKit 0.6's timeout setter fails on a socket
+    connection.settimeout(0.3) if hasattr(connection, "settimeout") else setattr(connection, "timeout", 0.3)
+    with pytest.raises((IOError, OSError)):
+        with esp.define_program(20):
+            axis.move(1.0)
+    esp.sendcmd("QP")
+    assert esp.query("20LP").strip() == "TB?"
