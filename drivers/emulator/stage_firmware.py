@@ -5,6 +5,11 @@ Motion Controller/Driver User's Manual", section 3 "Remote mode", 3.4.1 command 
 the command descriptions including TE and TB, and Appendix A error messages); the subset
 and the emulator's decisions are documented in docs/protocol.md.
 
+Besides moves, limits, units and errors it stores the motor and servo settings
+(:data:`SETUP_SETTINGS`, saved by ``SM`` and loaded by ``RS``), moves to a hardware limit
+(``MT``) or indefinitely (``MV``), and stores and runs programs (``EP``, ``QP``, ``XX``,
+``EX``, ``LP``; manual 3.3, p. 3-3).
+
 Axes (degrees): 1 camera swing, 2 lamp polar angle, 3 lamp azimuth.  Moves follow
 trapezoidal velocity profiles in simulated time; a move is refused when its end point is
 outside the software limits or would bring camera and lamp closer than the minimum
