@@ -474,6 +474,11 @@ _BLANKS = re.compile(r"[ \t]+")  # manual 3.4.1, p. 3-8: blank spaces are ignore
 _QUERIES_WITHOUT_MARK = {"TP", "TE", "TB", "VE"}
 
 
+def _stored_size(command: str) -> int:
+    """Program memory taken by a stored command [bytes]: its characters and a separator."""
+    return len(command) + 1
+
+
 def _fmt(value: float) -> str:
     return f"{value:.5f}"
 
@@ -520,6 +525,7 @@ class Esp300Firmware:
         self.recording: int | None = None  # program number while in program entry mode (EP)
         self.saved: dict[int, dict] = {}  # settings saved by SM, loaded by RS
         self._running_program = False
+        self._used_program_memory = 0  # [bytes], see _stored_size
 
     # -- state ------------------------------------------------------------------------
     def _update(self, t: float) -> None:
@@ -600,11 +606,11 @@ class Esp300Firmware:
         if command.upper() == "QP":
             self.recording = None
             return
-        used = sum(len(c) + 1 for program in self.programs.values() for c in program)
-        if used + len(command) + 1 > PROGRAM_MEMORY:
+        if self._used_program_memory + _stored_size(command) > PROGRAM_MEMORY:
             self._push(27)
             return
         self.programs[self.recording].append(command)
+        self._used_program_memory += _stored_size(command)
 
     def internal_error(self, error: Exception) -> bytes:
         """An unexpected failure while executing a line: error 27 (COMMAND NOT ALLOWED), no reply."""
@@ -1204,7 +1210,8 @@ class Esp300Firmware:
         """Erase program ``xx`` (nothing if it does not exist)."""
         if query or rest:
             raise _EspError(6)
-        self.programs.pop(self._program_number(digits), None)
+        erased = self.programs.pop(self._program_number(digits), [])
+        self._used_program_memory -= sum(_stored_size(command) for command in erased)
         return None
 
     def _stored(self, digits: str) -> list[str]:
