@@ -152,5 +152,9 @@ def test_a_program_cannot_start_a_program_and_memory_is_bounded():
         fw.handle_line(chunk)
     ask(fw, "QP")
     assert errors(fw)[:1] == [27]
+    ask(fw, "6EP;1TP;QP")  # memory full: not stored
+    assert errors(fw) == [27] and ask(fw, "6LP") == ""
+    ask(fw, "4XX;6XX;6EP;1TP;QP")  # erasing frees the memory
+    assert ask(fw, "6LP") == "1TP\r\n" and errors(fw) == [27]  # 27: the earlier 6LP of an empty program
     assert ask(fw, "RS;5EP;QP;5LP") == ""  # RS ends program entry mode; programs are kept
     assert ask(fw, "1LP") == "1EX\r\n2EP\r\n"
