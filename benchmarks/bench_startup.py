@@ -154,9 +154,12 @@ def main() -> int:
     parser.add_argument("--previous", default=PREVIOUS_REVISION,
                         help=f"git revision timed as the previous method (default {PREVIOUS_REVISION}; '' for none)")
     args = parser.parse_args()
+    load_before = os.getloadavg()
     results = measure(args.repeats, args.previous or None)
     cached = results["cached"]
     payload = {
+        # the machine is shared: 1-minute load averages before and after the run
+        "load_average_before_after": [load_before[0], os.getloadavg()[0]],
         "benchmark": "start-up",
         "command": f"python benchmarks/bench_startup.py --repeats {args.repeats}",
         "previous_revision": args.previous or None,

@@ -13,6 +13,13 @@ Each function takes a :class:`gonio.fitting.FitResult` and returns a
 * :func:`residual_figure` - normalised residuals (data - model) / sigma;
 * :func:`corner_figure` - one- and two-dimensional marginals of the posterior;
 * :func:`trace_figure` - walker traces with the burn-in shaded, and the log posterior.
+
+A figure's cost does not grow with the number of incidences or walkers: points are drawn
+as one scatter collection per kind (coloured per point), walker traces as one line
+collection per panel (at most MAX_TRACE_WALKERS walkers and MAX_TRACE_POINTS steps), the
+model bands of every data panel come from one set of posterior draws, and the axes sit
+on fixed margins instead of a layout engine's extra drawing pass
+(benchmarks/bench_report.py measures it).
 """
 from __future__ import annotations
 

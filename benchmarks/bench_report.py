@@ -1,0 +1,346 @@
+"""Speed of the fit report, and where the time of ``gonio fit ... --report`` goes.
+
+1. **Report against the number of measurements.** Oren-Nayar (rho = 0.8, sigma = 25 deg,
+   interreflection weight 1) is fitted, least squares then a 2000-step MCMC chain, to
+   200, 1,000 and 10,000 BRDF values with 2 % noise at random geometries, every value at
+   an incidence of its own (image-based data such as CUReT: the worst case for a figure
+   that draws per incidence). For each fit: the wall time of
+   :func:`gonio.report.fit_report.write_report` (the five figures as PNG plus the HTML),
+   and of each figure (built and rendered to PNG). The previous method, the figure code of
+   revision :data:`PREVIOUS_REVISION` (one artist per incidence, one posterior draw set per
+   model band, a constrained layout pass) read from git, is timed in the same run on the
+   same fits up to ``--previous-max`` measurements (default 1,000: at 10,000 it takes
+   minutes). Target (issue "Fast inference"): a 10,000-point fit's report within 2 s; the
+   ratio to the 200-point report says whether the cost grows with the data.
+
+2. **``gonio fit`` of the Fig 16 recording with ``--report``.** The shipped protocol is run
+   on the embedded emulator (``gonio run protocols/oren-nayar-fig16-plaster.toml``), then
+   ``gonio fit REC --model oren-nayar --fix ir_weight=1 --report --quiet`` is timed as a
+   command (wall time of the process), and again phase by phase in a fresh interpreter
+   (``--phases``, the same steps as ``gonio.cli.fit``): start-up of the command line, the
+   heavy imports (scipy with emcee, ArviZ with numba, xarray, pandas and
+   matplotlib.pyplot, matplotlib for the report), the reduction of the recording, least
+   squares, MCMC, the result's summary, saving it (result.json, chain.npz, posterior.nc)
+   and the report. ``python -c pass`` and ``import numpy`` are timed the same way as the
+   references. Target: at most 2.5 s wall.
+
+Medians of ``--repeats`` runs. Writes docs/benchmarks/report.json and report.png.
+Run: ``python benchmarks/bench_report.py [--repeats N] [--previous-max N]``.
+"""
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import types
+import warnings
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import OUT, ROOT, machine, random_geometries, write_json  # noqa: E402
+
+#: Sizes of the benchmark fits (measurements, each at its own incidence).
+SIZES = (200, 1000, 10000)
+#: The figure code timed as the previous method (before figures stopped growing with the
+#: number of incidences).
+PREVIOUS_REVISION = "f06a8d8"
+#: Targets of issue "Fast inference" [s].
+REPORT_TARGET_S = 2.0
+FIT_TARGET_S = 2.5
+#: The recording's protocol and the command timed.
+PROTOCOL = ROOT / "protocols" / "oren-nayar-fig16-plaster.toml"
+FIT_ARGUMENTS = ("--model", "oren-nayar", "--fix", "ir_weight=1", "--report", "--quiet")
+#: The PNG resolution of gonio.report.fit_report [dpi].
+DPI = 110
+GONIO = Path(sys.executable).with_name("gonio")
+
+
+# ----------------------------------------------------------------------- report vs size
+def benchmark_fit(n: int):
+    """Oren-Nayar fitted to ``n`` noisy BRDF values at random geometries (2000 MCMC steps)."""
+    import gonio
+    from gonio.fitting import ConvergenceWarning, Dataset, fit
+
+    geometry = random_geometries(n, seed=n, max_theta=85.0)
+    truth = gonio.brdf("oren-nayar", *geometry, rho=0.8, sigma=25.0, ir_weight=1.0)
+    sigma = 0.02 * truth + 1e-4
+    rng = np.random.default_rng(1)
+    data = Dataset(*geometry, truth + sigma * rng.standard_normal(n), sigma, label=f"{n} random geometries")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)  # the chain's length is fixed here
+        warnings.simplefilter("ignore", UserWarning)  # ArviZ on ensembles of more walkers than steps
+        return fit(data, "oren-nayar", fixed={"ir_weight": 1.0}, max_steps=2000, seed=0)
+
+
+def previous_figures(revision: str) -> types.ModuleType:
+    """The figure module ``gonio/report/fit_figures.py`` of ``revision``, read from git."""
+    source = subprocess.run(["git", "show", f"{revision}:gonio/report/fit_figures.py"], cwd=ROOT, check=True,
+                            capture_output=True, text=True).stdout
+    module = types.ModuleType("previous_fit_figures")
+    module.__file__ = f"{revision}:gonio/report/fit_figures.py"
+    sys.modules[module.__name__] = module  # dataclasses look their module up there
+    exec(compile(source, module.__file__, "exec"), module.__dict__)
+    return module
+
+
+def figure_seconds(make: Callable, result) -> float:
+    """Wall time [s] to build one figure and render it to PNG as the report does."""
+    start = time.perf_counter()
+    make(result).savefig(io.BytesIO(), format="png", dpi=DPI)
+    return time.perf_counter() - start
+
+
+def time_figures(module, result, repeats: int) -> dict[str, float]:
+    """Median seconds of each of the report's figures made by ``module``."""
+    from gonio.report.fit_report import FIGURES
+
+    names = [(filename, make.__name__) for filename, _, make, _ in FIGURES]
+    return {filename: statistics.median(figure_seconds(getattr(module, name), result) for _ in range(repeats))
+            for filename, name in names}
+
+
+def time_write_report(result, repeats: int) -> tuple[float, float, float]:
+    """Median wall time, median CPU time of this process and least wall time [s] of
+    write_report (figures, PNG files and HTML) into a scratch folder. On a shared machine
+    the CPU time and the least wall time are what other jobs inflate least."""
+    from gonio.report.fit_report import write_report
+
+    wall, cpu = [], []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory(prefix="gonio-report-") as folder:
+            start, start_cpu = time.perf_counter(), time.process_time()
+            write_report(result, folder)
+            wall.append(time.perf_counter() - start)
+            cpu.append(time.process_time() - start_cpu)
+    return statistics.median(wall), statistics.median(cpu), min(wall)
+
+
+def report_scaling(repeats: int, previous_max: int) -> list[dict]:
+    """Report and figure times of the current and the previous code for every size."""
+    from gonio.report import fit_figures
+
+    previous = previous_figures(PREVIOUS_REVISION)
+    rows = []
+    for n in SIZES:
+        start = time.perf_counter()
+        result = benchmark_fit(n)
+        fit_seconds = time.perf_counter() - start
+        figures = time_figures(fit_figures, result, repeats)
+        wall, cpu, least = time_write_report(result, repeats)
+        row = {"n": n, "incidences": len(result.dataset.incidences()[0]), "walkers": result.mcmc.n_walkers,
+               "steps": result.mcmc.n_steps, "fit_s": fit_seconds, "write_report_s": wall, "write_report_cpu_s": cpu,
+               "write_report_min_s": least, "figures_s": figures, "figures_total_s": sum(figures.values())}
+        if n <= previous_max:
+            old = time_figures(previous, result, repeats)
+            row.update(previous_figures_s=old, previous_figures_total_s=sum(old.values()),
+                       speed_up_of_figures=sum(old.values()) / sum(figures.values()))
+        rows.append(row)
+        print(f"  {n:6d} points: report {wall:.2f} s (CPU {cpu:.2f} s; figures {row['figures_total_s']:.2f} s)"
+              + (f", previous figures {row['previous_figures_total_s']:.2f} s" if "previous_figures_s" in row else ""),
+              flush=True)
+    for row in rows:
+        row["ratio_to_smallest_report"] = row["write_report_s"] / rows[0]["write_report_s"]
+    return rows
+
+
+# --------------------------------------------------------------- gonio fit --report
+def make_recording(folder: Path) -> Path:
+    """The Fig 16 protocol measured on the embedded emulator (seed 0) into ``folder/plaster``."""
+    recording = folder / "plaster"
+    subprocess.run([str(GONIO), "run", str(PROTOCOL), "--out", str(recording)], check=True, capture_output=True)
+    return recording
+
+
+def command_seconds(command: list[str]) -> float:
+    """Wall time [s] of a process, from its start to its exit."""
+    start = time.perf_counter()
+    subprocess.run(command, check=True, capture_output=True)
+    return time.perf_counter() - start
+
+
+def _timed(phases: dict[str, float], name: str, step: Callable):
+    start = time.perf_counter()
+    value = step()
+    phases[name] = time.perf_counter() - start
+    return value
+
+
+def run_phases(recording: str, out: str) -> dict:
+    """``gonio fit RECORDING ... --report`` step by step: ``{"phases": {step: seconds},
+    "points": number of values fitted}``.
+
+    The steps are those of ``gonio.cli.fit`` (with its argument defaults); the heavy
+    libraries are imported first, each on its own, so that the later steps are free of
+    import time.
+    """
+    phases: dict[str, float] = {}
+    args = _timed(phases, "command line (gonio.cli, parser)", lambda: _parse([recording, *FIT_ARGUMENTS, "--out", out]))
+    _timed(phases, "import scipy.optimize, emcee (scipy.stats)", _import_sampler)
+    _timed(phases, "import arviz (numba, xarray, pandas, matplotlib.pyplot)", _import_arviz)
+    _timed(phases, "import matplotlib, gonio.report", lambda: __import__("gonio.report.fit_report"))
+    from gonio.cli.fit import _load
+    from gonio.fitting import FitProblem, FitResult, fit_least_squares, sample_posterior
+    from gonio.fitting.mcmc import DEFAULT_WALKERS
+    from gonio.report.fit_report import write_report
+
+    dataset, priors = _timed(phases, "reduce the recording", lambda: _load(Path(recording), None))
+    problem = FitProblem("oren-nayar", dataset, {"ir_weight": 1.0}, {}, False)
+    least = _timed(phases, "least squares", lambda: fit_least_squares(problem, seed=args.seed, priors=priors))
+    chain, used = _timed(phases, "MCMC", lambda: sample_posterior(
+        problem, least, priors=priors, n_walkers=args.walkers or DEFAULT_WALKERS, max_steps=args.max_steps,
+        rhat_limit=args.rhat_limit, seed=args.seed))
+    result = _timed(phases, "result and summary", lambda: _summarised(FitResult.build(problem, least, chain, used)))
+    _timed(phases, "save (result.json, chain.npz, posterior.nc)", lambda: result.save(out))
+    _timed(phases, "report", lambda: write_report(out))
+    return {"phases": phases, "points": dataset.n}
+
+
+def _parse(arguments: list[str]) -> argparse.Namespace:
+    from gonio.cli import build_parser
+
+    return build_parser().parse_args(["fit", *arguments])
+
+
+def _import_sampler() -> None:
+    import emcee  # noqa: F401
+    import scipy.optimize  # noqa: F401
+
+
+def _import_arviz() -> None:
+    from gonio.fitting.diagnostics import arviz
+
+    arviz()
+
+
+def _summarised(result):
+    result.summary()
+    return result
+
+
+def fit_command(repeats: int) -> dict:
+    """Wall time of the command, its phases and the interpreter references (medians) [s]."""
+    with tempfile.TemporaryDirectory(prefix="gonio-fig16-") as scratch:
+        folder = Path(scratch)
+        recording = make_recording(folder)
+        totals, phase_runs, start_up, numpy = [], [], [], []
+        for k in range(repeats):
+            out = folder / f"fit-{k}"
+            totals.append(command_seconds([str(GONIO), "fit", str(recording), *FIT_ARGUMENTS, "--out", str(out)]))
+            shutil.rmtree(out)
+            probe = subprocess.run([sys.executable, __file__, "--phases", str(recording), str(out)], check=True,
+                                   capture_output=True, text=True, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+            phase_runs.append(json.loads(probe.stdout.strip().splitlines()[-1]))
+            shutil.rmtree(out)
+            start_up.append(command_seconds([sys.executable, "-c", "pass"]))
+            numpy.append(command_seconds([sys.executable, "-c", "import numpy"]))
+    phases = {name: statistics.median(run["phases"][name] for run in phase_runs) for name in phase_runs[0]["phases"]}
+    total = statistics.median(totals)
+    imports = sum(v for k, v in phases.items() if k.startswith(("command line", "import")))
+    return {
+        "command": f"gonio fit RECORDING {' '.join(FIT_ARGUMENTS)} --out FOLDER",
+        "points": phase_runs[0]["points"],
+        "wall_s": total,
+        "wall_min_s": min(totals),
+        "wall_runs_s": totals,
+        "within_target": total <= FIT_TARGET_S,
+        "phases_s": phases,
+        "phases_sum_s": sum(phases.values()),
+        "imports_s": imports,
+        "interpreter_start_s": statistics.median(start_up),
+        "interpreter_with_numpy_s": statistics.median(numpy),
+        "ratio_to_interpreter_with_numpy": total / statistics.median(numpy),
+    }
+
+
+# ------------------------------------------------------------------------------ chart
+def chart(scaling: list[dict], command: dict, path: Path) -> None:
+    """Report time against size (current and previous figures) and the command's phases."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+    fig = Figure(figsize=(12.0, 4.4), layout="constrained")
+    left, right = fig.subplots(1, 2, width_ratios=(1.0, 1.4))
+    n = [row["n"] for row in scaling]
+    left.plot(n, [row["write_report_s"] for row in scaling], "o-", color="C0", label="write_report (figures + HTML), wall")
+    left.plot(n, [row["write_report_cpu_s"] for row in scaling], "o:", color="C0", label="write_report, CPU time")
+    old = [(row["n"], row["previous_figures_total_s"]) for row in scaling if "previous_figures_total_s" in row]
+    if old:
+        left.plot(*zip(*old), "s--", color="C3", label=f"figures of {PREVIOUS_REVISION} (previous)")
+    left.axhline(REPORT_TARGET_S, color="k", ls=":", lw=1, label=f"target {REPORT_TARGET_S:g} s at 10,000 points")
+    left.set_xscale("log")
+    left.set_yscale("log")
+    top = max([row["write_report_s"] for row in scaling] + [t for _, t in old])
+    left.set_yticks([t for t in (0.5, 1, 2, 5, 10, 20, 50, 100, 200) if t <= 2 * top])
+    left.yaxis.set_major_formatter(ScalarFormatter())
+    left.yaxis.set_minor_formatter(NullFormatter())
+    left.set_xlabel("measurements, each at its own incidence")
+    left.set_ylabel("wall time [s]")
+    left.set_title("Fit report against the number of measurements", fontsize=10)
+    left.legend(fontsize=8)
+    left.grid(alpha=0.3, which="both")
+    phases = command["phases_s"]
+    start = 0.0
+    for k, (name, seconds) in enumerate(phases.items()):
+        right.barh(0, seconds, left=start, color=matplotlib.colormaps["tab20"](k % 20), label=f"{name}: {seconds:.2f} s")
+        start += seconds
+    right.barh(1, command["wall_s"], color="0.3", label=f"whole command: {command['wall_s']:.2f} s")
+    right.axvline(FIT_TARGET_S, color="k", ls=":", lw=1)
+    right.set_yticks([0, 1], ["phases", "command"])
+    right.set_xlabel("wall time [s]")
+    right.set_title(f"gonio fit of the Fig 16 recording with --report (target {FIT_TARGET_S:g} s)", fontsize=10)
+    right.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
+    fig.savefig(path, dpi=110)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3, help="runs per measurement (default 3)")
+    parser.add_argument("--previous-max", type=int, default=1000,
+                        help="largest fit whose report the previous figure code draws (default 1000)")
+    parser.add_argument("--phases", nargs=2, metavar=("RECORDING", "OUT"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.phases:  # child mode: one phase-by-phase run, JSON on stdout
+        print(json.dumps(run_phases(*args.phases)))
+        return 0
+    load_before = os.getloadavg()
+    print("report against the number of measurements:", flush=True)
+    scaling = report_scaling(args.repeats, args.previous_max)
+    print("gonio fit of the Fig 16 recording with --report:", flush=True)
+    command = fit_command(args.repeats)
+    payload = {
+        # the machine is shared: 1-minute load averages before and after the run
+        "load_average_before_after": [load_before[0], os.getloadavg()[0]],
+        "benchmark": "report",
+        "command": f"python benchmarks/bench_report.py --repeats {args.repeats} --previous-max {args.previous_max}",
+        "machine": machine(),
+        "previous_revision": PREVIOUS_REVISION,
+        "report_target_s": REPORT_TARGET_S,
+        "report_scaling": scaling,
+        "report_of_10000_within_target": scaling[-1]["write_report_s"] <= REPORT_TARGET_S,
+        "fit_command": command,
+    }
+    path = write_json("report", payload)
+    chart(scaling, command, OUT / "report.png")
+    for name, seconds in command["phases_s"].items():
+        print(f"  {name:58s} {seconds:6.2f} s")
+    print(f"  {'phases together':58s} {command['phases_sum_s']:6.2f} s")
+    print(f"  {'the command (wall)':58s} {command['wall_s']:6.2f} s  (python -c pass {command['interpreter_start_s']:.2f} s)")
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
