@@ -200,7 +200,7 @@ def test_no_walker_is_stuck_on_lambertian_rig_data(tmp_path):
         acquisition.run_protocol(protocols.loads(text), rig, tmp_path / "rec", metadata=meta,
                                  clock=emulator.control.now, change_sample=lambda which: change(which, 0.99))
     dataset, priors = acquisition.reduce_recording(tmp_path / "rec").fit_inputs()
-    result = fit(dataset, "oren-nayar", fixed={"ir_weight": 1.0}, priors=priors, jitter=True, seed=0)
+    result = fit(dataset, "oren-nayar", fixed={"ir_weight": 1.0}, priors=priors, jitter=True, seed=0, n_walkers=32)  # the 32 walkers of the report
     assert result.converged
     m = result.mcmc
     sigma = m.chain[m.burn_in :, :, list(result.free).index("sigma")]
