@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from drivers.emulator.clock import SimClock
+from esp300_helpers import ask, errors
 from drivers.emulator.stage_firmware import Esp300Firmware, move_duration
 from drivers.emulator.world import separation_deg
 
@@ -20,17 +21,6 @@ def make_stage(min_sep: float | None = 5.0, seed: int = 0) -> Esp300Firmware:
         return separation_deg(*positions) >= min_sep
 
     return Esp300Firmware(SimClock(), np.random.default_rng(seed), interlock=interlock if min_sep else None)
-
-
-def ask(fw: Esp300Firmware, line: str) -> str:
-    return fw.handle_line(line).decode("ascii")
-
-
-def errors(fw: Esp300Firmware) -> list[int]:
-    codes = []
-    while (code := int(ask(fw, "TE?"))) != 0:
-        codes.append(code)
-    return codes
 
 
 def test_identity_and_power_on_state():

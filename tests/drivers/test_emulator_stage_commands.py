@@ -11,22 +11,12 @@ import numpy as np
 import pytest
 
 from drivers.emulator.clock import SimClock
+from esp300_helpers import ask, errors
 from drivers.emulator.stage_firmware import MAX_COMMAND_LINE, Esp300Firmware, move_duration
 
 
 def make_stage(seed: int = 0) -> Esp300Firmware:
     return Esp300Firmware(SimClock(), np.random.default_rng(seed))
-
-
-def ask(fw: Esp300Firmware, line: str) -> str:
-    return fw.handle_line(line).decode("ascii")
-
-
-def errors(fw: Esp300Firmware) -> list[int]:
-    codes = []
-    while (code := int(ask(fw, "TE?"))) != 0:
-        codes.append(code)
-    return codes
 
 
 def test_stage_identification():  # manual p. 3-86
