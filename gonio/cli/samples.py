@@ -1,4 +1,4 @@
-"""Sample specs of the emulated rig: a registered model or a measured CUReT material.
+"""Sample specs of the emulated rig: a registered model, a rendered surface or a CUReT material.
 
 The one parser behind ``--sample`` of ``gonio emulator`` and ``gonio run`` (and the
 in-process rig of tests and the demo, :func:`gonio.cli.run.emulated_rig`):
@@ -6,6 +6,11 @@ in-process rig of tests and the demo, :func:`gonio.cli.run.emulated_rig`):
 ``MODEL[:key=value,...]``
     A registered model with parameter values, e.g. ``oren-nayar:sigma=30,rho=0.9``
     (:func:`gonio.cli.models.parse_model_spec`).
+``surface:kind=KIND,key=value,...``
+    A micro-surface rendered by Monte Carlo path tracing (:mod:`gonio.surfaces`), e.g.
+    ``surface:kind=vgrooves,sigma=30,rho=0.9``: a surface no model wrote.  Its BRDF table
+    is read from the table cache, or rendered there on first use with progress on
+    stderr (:mod:`gonio.surfaces.table`; keys: :mod:`gonio.surfaces.spec`).
 ``curet:SAMPLE``
     A CUReT material (Dana et al. 1999) by number or name, e.g. ``curet:10`` or
     ``curet:plaster_a``: its 205 measured values interpolated over the hemisphere by the
@@ -19,6 +24,7 @@ This module is where gonio models are turned into the plain callable the emulato
 from __future__ import annotations
 
 import functools
+import sys
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -27,12 +33,15 @@ import numpy as np
 from . import CLIError
 from .models import parse_model_spec
 
-__all__ = ["CURET_PREFIX", "SPEC_SYNTAX", "EmulatedSample", "parse_sample_spec"]
+__all__ = ["CURET_PREFIX", "SURFACE_PREFIX", "SPEC_SYNTAX", "EmulatedSample", "parse_sample_spec",
+           "check_sample_spec", "table_progress"]
 
 #: Prefix of a CUReT sample spec.
 CURET_PREFIX = "curet:"
+#: Prefix of a rendered-surface sample spec.
+SURFACE_PREFIX = "surface:"
 #: The accepted forms, for help texts and error messages.
-SPEC_SYNTAX = "MODEL[:key=value,...] or curet:NUMBER|NAME"
+SPEC_SYNTAX = "MODEL[:key=value,...] or surface:kind=KIND,... or curet:NUMBER|NAME"
 
 
 @dataclass(frozen=True)
@@ -46,9 +55,10 @@ class EmulatedSample:
     brdf : callable
         ``brdf(theta_i, phi_i, theta_r, phi_r) -> numpy.ndarray`` [1/sr], degrees.
     model : str
-        Registered model name, or ``"curet"``.
+        Registered model name, ``"surface"`` or ``"curet"``.
     parameters : dict
-        Model parameters, or the CUReT sample and its interpolation (plain values for the
+        Model parameters, the rendered surface (kind, parameters, paths, seed, bounces,
+        table file), or the CUReT sample and its interpolation (plain values for the
         recording's metadata).
     """
 
@@ -56,6 +66,46 @@ class EmulatedSample:
     brdf: Callable[..., np.ndarray]
     model: str
     parameters: dict = field(default_factory=dict)
+
+    def prepare(self) -> None:
+        """Load what the BRDF needs before the rig starts: a rendered surface's table is
+        read from the cache, or rendered now (with progress on stderr)."""
+        load = getattr(self.brdf, "load", None)
+        if callable(load):
+            load()
+
+
+def table_progress(spec: str) -> Callable[[int, int, float | None], None]:
+    """A progress printer on stderr for the rendering of a surface table, with time left."""
+    from .progress import ProgressLine
+
+    line = ProgressLine("table nodes")
+    started = []
+
+    def show(done: int, total: int, seconds_left: float | None) -> None:
+        if not started:
+            started.append(True)
+            print(f"rendering the BRDF table of {spec} (first use; cached for later runs)", file=sys.stderr,
+                  flush=True)
+        line.update(done, total, seconds_left)
+
+    return show
+
+
+def _surface_sample(spec: str) -> EmulatedSample:
+    from gonio.surfaces.spec import parse_surface_spec
+    from gonio.surfaces.table import TabulatedSurface
+
+    try:
+        parsed = parse_surface_spec(spec[len(SURFACE_PREFIX):])
+        brdf = TabulatedSurface(parsed, progress=table_progress(spec))
+    except ValueError as error:
+        raise CLIError(str(error)) from None
+    parameters = {"kind": parsed.surface.kind, **{k: v for k, v in parsed.surface.parameters().items()},
+                  "paths": parsed.paths, "seed": parsed.seed,
+                  "bounces": "all" if parsed.bounces is None else parsed.bounces,
+                  "canonical": SURFACE_PREFIX + parsed.text(), "table": brdf.path.name}
+    return EmulatedSample(spec, brdf, "surface", parameters)
 
 
 def _curet_sample(spec: str) -> EmulatedSample:
@@ -87,17 +137,20 @@ def parse_sample_spec(text: str) -> EmulatedSample:
     Parameters
     ----------
     text : str
-        ``MODEL[:key=value,...]`` or ``curet:NUMBER|NAME``.
+        ``MODEL[:key=value,...]``, ``surface:kind=KIND,...`` or ``curet:NUMBER|NAME``.
 
     Returns
     -------
     EmulatedSample
+        For a surface, the table is not touched yet: :meth:`EmulatedSample.prepare` (or
+        the first evaluation) loads or renders it.
 
     Raises
     ------
     CLIError
-        Unknown model or parameter, out-of-range value, unknown CUReT sample (naming the
-        key and the valid numbers and names), missing CUReT files (naming the folder).
+        Unknown model, surface kind or parameter, out-of-range value, unknown CUReT
+        sample (naming the key and the valid numbers and names), missing CUReT files
+        (naming the folder).
 
     Examples
     --------
@@ -110,5 +163,43 @@ def parse_sample_spec(text: str) -> EmulatedSample:
     spec = text.strip()
     if spec.lower().startswith(CURET_PREFIX):
         return _curet_sample(spec)
+    if spec.lower().startswith(SURFACE_PREFIX):
+        return _surface_sample(spec)
     name, values = parse_model_spec(spec)
     return EmulatedSample(text, functools.partial(gonio.brdf, name, **values), name, dict(values))
+
+
+def check_sample_spec(text: str) -> None:
+    """Check a sample spec without building its BRDF (for protocol files).
+
+    Model and surface specs are checked completely (model, kind, parameter names and
+    ranges; no table is read or rendered); a CUReT spec for its form (``curet:`` and a
+    number or name), since its data need not be present where the protocol is read.
+
+    Raises
+    ------
+    CLIError
+        What :func:`parse_sample_spec` would say.
+
+    Examples
+    --------
+    >>> check_sample_spec("surface:kind=vgrooves,sigma=30,rho=0.9")
+    >>> check_sample_spec("surface:kind=vgrooves,sigma=300,rho=0.9")
+    Traceback (most recent call last):
+    ...
+    gonio.cli.CLIError: surface spec 'kind=vgrooves,sigma=300,rho=0.9': sigma [deg] = 300 is outside its valid range [0, 90]
+    """
+    spec = text.strip()
+    if spec.lower().startswith(CURET_PREFIX):
+        if not spec[len(CURET_PREFIX):].strip():
+            raise CLIError(f"sample spec {spec!r}: expected curet:NUMBER or curet:NAME, e.g. curet:10")
+        return
+    if spec.lower().startswith(SURFACE_PREFIX):
+        from gonio.surfaces.spec import parse_surface_spec
+
+        try:
+            parse_surface_spec(spec[len(SURFACE_PREFIX):])
+        except ValueError as error:
+            raise CLIError(str(error)) from None
+        return
+    parse_model_spec(spec)

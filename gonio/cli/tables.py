@@ -1,8 +1,11 @@
-"""``gonio tables``: build, inspect and clear the tables of the tabulated models.
+"""``gonio tables``: build, inspect and clear the tables of the tabulated models and rendered surfaces.
 
 ``gonio tables build [NAME ...]`` evaluates the exact model on the table grid (minutes on
 a few cores) and writes the table to the user cache, or to ``--output``;
-``gonio tables info`` says which table each tabulated model would read;
+``gonio tables build surface:kind=...`` renders the table of a surface sample into the
+cache (what its first use as an emulated sample would do, docs/surfaces.md);
+``gonio tables info`` says which table each tabulated model would read and lists the
+rendered surface tables in the cache;
 ``gonio tables clear`` deletes the tables ``gonio tables build`` wrote into the user cache
 (recognised by name and by a signature inside the file) and lists every other file there,
 which it keeps (never the tables shipped with gonio, never a user's own files).
@@ -46,10 +49,34 @@ def check_output_file(output: str) -> None:
                        "(gonio never overwrites files it did not write); choose another name")
 
 
+def _build_surface(spec: str, args: argparse.Namespace) -> None:
+    """Render (or find) the table of the surface sample ``spec`` in the user cache."""
+    from .samples import SURFACE_PREFIX, parse_sample_spec, table_progress
+
+    if args.output is not None or args.grid:
+        raise CLIError(f"{spec}: --output and --grid apply to model tables; a surface table is cached under "
+                       "its key (docs/surfaces.md)")
+    sample = parse_sample_spec(spec)
+    if args.workers is not None:
+        sample.brdf.workers = args.workers
+    if args.quiet:
+        sample.brdf.progress = None
+    sample.prepare()
+    state = "rendered" if sample.brdf.rendered else "already cached"
+    print(f"{state}: {sample.brdf.path} ({SURFACE_PREFIX}{sample.brdf.spec.text()})")
+
+
 def _run_build(args: argparse.Namespace) -> int:
     from gonio.models import tabulated
 
-    names = args.name or sorted(tabulated.TABLES)
+    from .samples import SURFACE_PREFIX
+
+    surfaces = [name for name in args.name if name.lower().startswith(SURFACE_PREFIX)]
+    for spec in surfaces:
+        _build_surface(spec, args)
+    if surfaces and len(surfaces) == len(args.name):
+        return 0
+    names = [name for name in args.name if name not in surfaces] or sorted(tabulated.TABLES)
     unknown = [name for name in names if name not in tabulated.TABLES]
     if unknown:
         raise CLIError(f"unknown table {unknown[0]!r}; known tables: {sorted(tabulated.TABLES)}")
@@ -96,7 +123,21 @@ def _run_info(args: argparse.Namespace) -> int:
         print(f"    {info['path']} ({origin}, {info['bytes'] / 1e6:.1f} MB)")
         print(f"    grid {' x '.join(map(str, info['shape']))} = {info['nodes']} nodes, exact rtol {info['rtol']:g}, "
               f"built in {info['build_seconds']:.0f} s")
+    if not args.name:
+        _print_surface_tables()
     return 0
+
+
+def _print_surface_tables() -> None:
+    """The rendered surface tables in the user cache (docs/surfaces.md)."""
+    from gonio.surfaces.table import cached_tables
+
+    found = cached_tables()
+    print(f"rendered surfaces (gonio.surfaces): {len(found)} table{'s' if len(found) != 1 else ''} in the user cache")
+    for entry in found:
+        print(f"    {entry['path'].name}: surface:{entry['spec']}")
+        print(f"        {entry['nodes']} nodes, Monte Carlo error per node median {entry['median_error']:.2%} "
+              f"(max {entry['max_error']:.2%}), {entry['bytes'] / 1e3:.0f} kB, rendered in {entry['build_seconds']:.0f} s")
 
 
 def _run_clear(args: argparse.Namespace) -> int:
@@ -120,14 +161,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("tables", help="build, inspect or clear the tables of tabulated models")
     actions = parser.add_subparsers(dest="action", metavar="ACTION")
     build = actions.add_parser("build", help="compute a table with the exact model (slow: minutes)")
-    build.add_argument("name", nargs="*", help="table names (default: all)")
+    build.add_argument("name", nargs="*", help="table names (default: all) or surface sample specs "
+                                                "(surface:kind=...,...)")
     build.add_argument("--output", help="file to write instead of the user cache")
     build.add_argument("--rtol", type=float, default=1e-5, help="accuracy of oren-nayar-exact at the nodes")
-    build.add_argument("--workers", type=int, default=None, help="processes (default: all CPUs)")
+    build.add_argument("--workers", type=int, default=None,
+                       help="processes (threads for a surface) (default: all CPUs)")
     build.add_argument("--grid", help="node counts 'y,zeta,t,s' (default: the shipped grid)")
     build.add_argument("--quiet", action="store_true", help="no progress output")
     build.set_defaults(func=_run_build)
-    info = actions.add_parser("info", help="which table each tabulated model reads")
+    info = actions.add_parser("info", help="which table each tabulated model reads; the rendered surface tables")
     info.add_argument("name", nargs="*", help="table names (default: all)")
     info.set_defaults(func=_run_info)
     clear = actions.add_parser("clear", help="delete the tables gonio built in the user cache (other files are kept)")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import zipfile
 from functools import lru_cache
 from pathlib import Path
@@ -19,7 +20,8 @@ from typing import Mapping
 import numpy as np
 
 __all__ = ["PACKAGE_DIR", "cache_dir", "find", "load", "save", "clear_cache", "cache_contents", "is_built_table",
-           "written_by_builder", "table_file_names", "check_constants", "TableError", "SIGNATURE_KEY"]
+           "written_by_builder", "table_file_names", "check_constants", "TableError", "SIGNATURE_KEY",
+           "RENDERED_NAME"]
 
 #: Directory of the tables shipped with gonio.
 PACKAGE_DIR = Path(__file__).resolve().parent / "data"
@@ -28,6 +30,9 @@ SIGNATURE_KEY = "gonio_table_format"
 SIGNATURE_VERSION = 1
 #: Arrays every table built before the signature holds (what ``describe`` reads).
 LEGACY_KEYS = frozenset({"shape", "rtol", "build_seconds"})
+#: Names of the tables of rendered surfaces (:mod:`gonio.surfaces.table`): one per
+#: sample, named by its kind and the start of the SHA-256 of its cache key.
+RENDERED_NAME = re.compile(r"surface-[a-z]+-[0-9a-f]{16}\.npz")
 
 
 class TableError(ValueError):
@@ -127,8 +132,10 @@ def written_by_builder(path: Path) -> bool:
 
 def is_built_table(path: Path) -> bool:
     """Whether ``path`` is a table of the user cache that gonio built: its name is one of
-    :func:`table_file_names` and :func:`written_by_builder` recognises its content."""
-    return path.name in table_file_names() and written_by_builder(path)
+    :func:`table_file_names` or of a rendered surface (:data:`RENDERED_NAME`), and
+    :func:`written_by_builder` recognises its content."""
+    named = path.name in table_file_names() or RENDERED_NAME.fullmatch(path.name) is not None
+    return named and written_by_builder(path)
 
 
 def cache_contents() -> tuple[list[Path], list[Path]]:
