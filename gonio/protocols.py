@@ -288,6 +288,8 @@ class Protocol:
     checks: Checks = Checks()
     source: str = "<string>"
     text: str = ""
+    #: The sample spec the emulated rig puts on the stage (``[sample] emulated``), or None.
+    emulated: str | None = None
 
 
 # --------------------------------------------------------------------------- field reading
@@ -525,7 +527,7 @@ def loads(text: str, source: str = "<string>") -> Protocol:
     f = _Fields(source)
     f.unknown(data, _TOP_LEVEL, "")
     name, description = _read_header(f, data)
-    sample, metadata = _read_sample(f, data)
+    sample, metadata, emulated = _read_sample(f, data)
     rig = _read_rig(f, f.table(data, "rig", ""))
     exposure = _read_exposure(f, f.table(data, "exposure", ""))
     darks = _read_darks(f, f.table(data, "darks", ""))
@@ -535,7 +537,7 @@ def loads(text: str, source: str = "<string>") -> Protocol:
     return Protocol(
         name=name, sample=sample, description=description, metadata=dict(metadata), rig=rig,
         exposure=exposure, darks=darks, blocks=tuple(blocks), reference=reference, checks=checks,
-        source=source, text=text,
+        source=source, text=text, emulated=emulated,
     )
 
 
@@ -561,13 +563,32 @@ def _read_header(f: _Fields, data: Mapping) -> tuple[str, str]:
     return name, description
 
 
-def _read_sample(f: _Fields, data: Mapping) -> tuple[str, Mapping]:
+def _read_sample(f: _Fields, data: Mapping) -> tuple[str, Mapping, str | None]:
     table = f.table(data, "sample", "", required=True)
-    f.unknown(table, ("label", "metadata"), "sample")
+    f.unknown(table, ("label", "metadata", "emulated"), "sample")
     label = f.string(table, "label", "sample")
     metadata = f.table(table, "metadata", "sample")
     f.finite_tree(metadata, "sample.metadata")
-    return label, metadata
+    emulated = None
+    if "emulated" in table:
+        emulated = f.string(table, "emulated", "sample").strip()
+        _check_emulated_sample(f, emulated)
+    return label, metadata, emulated
+
+
+def _check_emulated_sample(f: _Fields, spec: str) -> None:
+    """Refuse a ``[sample] emulated`` that the emulator's sample parser refuses.
+
+    The parser of ``--sample`` (:func:`gonio.cli.samples.check_sample_spec`, imported here
+    so that this module stays light); a CUReT spec is checked for its form only, its data
+    are read when a rig is emulated.
+    """
+    from .cli.samples import SPEC_SYNTAX, check_sample_spec
+
+    try:
+        check_sample_spec(spec)
+    except ValueError as error:
+        raise f.fail("sample.emulated", f"a sample spec ({SPEC_SYNTAX}); {error}", show_got=False) from None
 
 
 def _read_rig(f: _Fields, table: Mapping) -> RigLimits:

@@ -70,6 +70,7 @@ def measure(folder: Path, head: str = HEAD, sample: str = SAMPLE, tables: str = 
     (whatever the protocol says its reflectance is)."""
     protocol = protocols.loads(protocol_text(head, sample, tables, block), source="fields.toml")
     reflectance = standard
+    emulated = protocol.emulated or emulated  # as gonio run chooses (gonio.cli.run.emulated_sample)
     with emulated_rig(emulated, 0, name=f"fields-{folder.parent.name}-{folder.name}") as (rig, emulator, change, meta):
         result = acquisition.run_protocol(protocol, rig, folder, metadata=meta, clock=emulator.control.now,
                                           warm_up=False, change_sample=lambda w: change(w, reflectance), **options)
@@ -93,6 +94,8 @@ CASES: dict[str, tuple[dict, Callable[[Run], Any]]] = {
     "sample.label": ({"sample": 'label = "other matte"'}, lambda r: r.meta["sample"]["label"]),
     "sample.metadata": ({"sample": 'label = "matte"\n[sample.metadata]\nsupplier = "Labsphere"'},
                         lambda r: r.meta["sample"]["metadata"]),
+    "sample.emulated": ({"sample": 'label = "matte"\nemulated = "lambert:rho=0.3"'},
+                        lambda r: [round(x, -2) for x in r.sample_rows()["roi_mean"]]),
     "rig.camera_range": ({"tables": "[rig]\ncamera_range = [-20, 20]"}, _status),
     "rig.lamp_theta_range": ({"tables": "[rig]\nlamp_theta_range = [0, 30]"}, _status),
     "rig.lamp_phi_range": ({"tables": "[rig]\nlamp_phi_range = [-10, 10]", "block": BLOCK + "\nphi_i = 30"}, _status),
@@ -186,7 +189,7 @@ def test_apertures_of_the_protocol_are_used_when_the_rig_reports_none(tmp_path):
 
 
 def test_the_table_covers_every_field_the_parser_knows():
-    known = {f"protocol.{k}" for k in ("name", "description")} | {"sample.label", "sample.metadata"}
+    known = {f"protocol.{k}" for k in ("name", "description")} | {"sample.label", "sample.metadata", "sample.emulated"}
     for section, cls in (("rig", protocols.RigLimits), ("exposure", protocols.Exposure), ("darks", protocols.Darks),
                          ("checks", protocols.Checks), ("block", protocols.Block)):
         known |= {f"{section}.{f.name}" for f in dataclasses.fields(cls)}

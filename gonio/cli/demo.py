@@ -33,6 +33,10 @@ from .progress import ProgressLine
 #: The emulated sample and its true parameters.
 SAMPLE_MODEL = "oren-nayar-exact"
 TRUTH = {"rho": 0.9, "sigma": 30.0}
+#: The default sample spec (``--sample``).
+DEFAULT_SAMPLE = f"{SAMPLE_MODEL}:" + ",".join(f"{k}={v:g}" for k, v in TRUTH.items())
+#: Parameters of a sample spec that the candidates can recover (the truth table's rows).
+TRUTH_PARAMETERS = ("rho", "sigma")
 #: The models the demo compares: Lambert, the qualitative model (eq 30), the paper's
 #: approximation (eq 33-35, its interreflection term at full weight) and the table of the
 #: exact model (docs/tabulated.md).
@@ -181,6 +185,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "adequate, 3 chain not converged, 4 model inadequate, 2 bad input (docs/fitting.md).",
     )
     parser.add_argument("--out", default="gonio-demo", help="output folder (default gonio-demo)")
+    parser.add_argument("--sample", default=DEFAULT_SAMPLE, metavar="MODEL[:k=v,...]|surface:kind=...|curet:NUMBER|NAME",
+                        help=f"the emulated sample (default {DEFAULT_SAMPLE}, the paper's wall plaster); e.g. "
+                             "surface:kind=vgrooves,sigma=30,rho=0.9, a rendered V-groove field (docs/surfaces.md)")
     parser.add_argument("--seed", type=int, default=0, help="emulator and sampler seed (default 0)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.set_defaults(func=_run)
@@ -191,8 +198,37 @@ def _say(quiet: bool, text: str) -> None:
         print(text, flush=True)
 
 
-def measure_demo(out: Path, seed: int = 0, quiet: bool = True):
-    """Measure the demo protocols on the emulated plaster into ``out/recordings``.
+def sample_truth(sample: str) -> dict[str, float]:
+    """The true values of :data:`TRUTH_PARAMETERS` that a sample spec states.
+
+    A model's parameters, or a rendered surface's (the height field's sigma is the
+    Oren-Nayar roughness it is matched to, docs/surfaces.md); none for a CUReT material.
+
+    Examples
+    --------
+    >>> sample_truth("surface:kind=vgrooves,sigma=20,rho=0.5")
+    {'rho': 0.5, 'sigma': 20.0}
+    """
+    from .samples import parse_sample_spec
+
+    parameters = parse_sample_spec(sample).parameters
+    return {name: float(parameters[name]) for name in TRUTH_PARAMETERS
+            if isinstance(parameters.get(name), (int, float)) and not isinstance(parameters.get(name), bool)}
+
+
+def measure_demo(out: Path, seed: int = 0, quiet: bool = True, sample: str = DEFAULT_SAMPLE):
+    """Measure the demo protocols on the emulated sample into ``out/recordings``.
+
+    Parameters
+    ----------
+    out : Path
+        The demo's output folder.
+    seed : int
+        Emulator seed.
+    quiet : bool
+        No progress lines.
+    sample : str
+        The sample spec (default: the paper's wall plaster, :data:`DEFAULT_SAMPLE`).
 
     Returns
     -------
@@ -203,7 +239,6 @@ def measure_demo(out: Path, seed: int = 0, quiet: bool = True):
 
     from .run import emulated_rig
 
-    sample = f"{SAMPLE_MODEL}:" + ",".join(f"{k}={v:g}" for k, v in TRUTH.items())
     folders = []
     _say(quiet, f"gonio demo: emulated rig with sample {sample} (seed {seed})")
     with emulated_rig(sample, seed, name=f"gonio-demo-{seed}") as (rig, emulator, change_sample, metadata):
@@ -220,8 +255,8 @@ def measure_demo(out: Path, seed: int = 0, quiet: bool = True):
             )
             _say(quiet, "  " + result.summary())
             folders.append(folder)
-    return acquisition.combine_reduced([acquisition.reduce_recording(f) for f in folders],
-                                       label="wall plaster (emulated)")
+    label = "wall plaster (emulated)" if sample == DEFAULT_SAMPLE else f"{sample} (emulated)"
+    return acquisition.combine_reduced([acquisition.reduce_recording(f) for f in folders], label=label)
 
 
 def fit_demo(reduced, seed: int = 0, quiet: bool = True):
@@ -263,21 +298,26 @@ def _run(args: argparse.Namespace) -> int:
     from gonio.fitting.results import _clean
     from gonio.report.fit_report import write_report
 
+    from .samples import parse_sample_spec
+
     start = time.perf_counter()
+    parse_sample_spec(args.sample)  # a bad spec fails before anything is written
+    truth = sample_truth(args.sample)
     out = _prepare_output(args.out)
-    reduced = measure_demo(out, args.seed, args.quiet)
+    reduced = measure_demo(out, args.seed, args.quiet, args.sample)
     result, comparison = fit_demo(reduced, args.seed, args.quiet)
     fit_folder = out / FIT_FOLDER
     result.save(fit_folder)
     (fit_folder / COMPARISON_FILE).write_text(comparison.summary() + "\n")
     (fit_folder / COMPARISON_JSON).write_text(json.dumps(_clean(comparison.to_dict()), indent=1, allow_nan=False))
-    table = truth_table(result)
-    (fit_folder / TRUTH_FILE).write_text(f"sample: {SAMPLE_MODEL}\n{table}\n")
+    table = truth_table(result, truth, args.sample)
+    described = SAMPLE_MODEL if args.sample == DEFAULT_SAMPLE else args.sample
+    (fit_folder / TRUTH_FILE).write_text(f"sample: {described}\n{table}\n")
     report = write_report(fit_folder)
     print()
     print(result.summary())
     print()
-    print(f"sample {SAMPLE_MODEL}; chosen and fitted {comparison.chosen}")
+    print(f"sample {described}; chosen and fitted {comparison.chosen}")
     print(table)
     print(f"least-squares reduced chi-square {result.least_squares.redchi:.3f} "
           f"({result.dataset.n} values, no extra-noise term)")
@@ -292,33 +332,37 @@ def _run(args: argparse.Namespace) -> int:
     return result.exit_code()
 
 
-def truth_table(result) -> str:
+def truth_table(result, truth: dict[str, float] | None = None, sample: str = DEFAULT_SAMPLE) -> str:
     """Fitted parameters against the emulator's truth, with the 95 % interval.
 
-    A truth outside its interval is flagged with the bias (median - truth) in units of
-    the interval's half-width on that side; a parameter the fitted model does not have is
-    named as such.
+    ``truth`` defaults to :data:`TRUTH` (the default sample's).  A truth outside its
+    interval is flagged with the bias (median - truth) in units of the interval's
+    half-width on that side; a parameter the fitted model does not have is named as such.
     """
+    truth = TRUTH if truth is None else truth
+    described = SAMPLE_MODEL if sample == DEFAULT_SAMPLE else sample
     rows = {row["name"]: row for row in result.parameter_rows()}
     lines = ["parameter   truth     fitted (median)   95 % interval           truth inside"]
+    if not truth:
+        lines.append(f"(the sample {sample} states no value of {', '.join(TRUTH_PARAMETERS)})")
     flags = []
-    for name, truth in TRUTH.items():
+    for name, value in truth.items():
         if name not in rows:
-            lines.append(f"{name:<10} {truth:8.4g}   (not a parameter of {result.model})")
+            lines.append(f"{name:<10} {value:8.4g}   (not a parameter of {result.model})")
             continue
         row = rows[name]
         median = row.get("median", row["value"])
         low, high = row.get("p2_5"), row.get("p97_5")
         if low is None:
-            lines.append(f"{name:<10} {truth:8.4g}   {median:12.5g}      (no interval: least squares only)")
+            lines.append(f"{name:<10} {value:8.4g}   {median:12.5g}      (no interval: least squares only)")
             continue
-        inside = low <= truth <= high
-        lines.append(f"{name:<10} {truth:8.4g}   {median:12.5g}      [{low:.5g}, {high:.5g}] {row['unit']:<6}  "
+        inside = low <= value <= high
+        lines.append(f"{name:<10} {value:8.4g}   {median:12.5g}      [{low:.5g}, {high:.5g}] {row['unit']:<6}  "
                      f"{'yes' if inside else 'NO'}")
         if not inside:
-            half_width = (median - low) if truth < low else (high - median)
+            half_width = (median - low) if value < low else (high - median)
             unit = "" if row["unit"] in ("", "-") else f" {row['unit']}"
-            flags.append(f"BIAS: {name} is {median - truth:+.3g}{unit} from the truth, "
-                         f"{abs(median - truth) / max(half_width, 1e-300):.1f} times the interval's half-width: "
-                         f"{result.model} does not reproduce the sample's {SAMPLE_MODEL} within these data's noise")
+            flags.append(f"BIAS: {name} is {median - value:+.3g}{unit} from the truth, "
+                         f"{abs(median - value) / max(half_width, 1e-300):.1f} times the interval's half-width: "
+                         f"{result.model} does not reproduce the sample's {described} within these data's noise")
     return "\n".join(lines + flags)

@@ -1,4 +1,5 @@
-"""``gonio emulator``: run the emulated goniometer with a registered reflectance model or a CUReT material as sample."""
+"""``gonio emulator``: run the emulated goniometer with a registered reflectance model, a rendered surface or a
+CUReT material as sample."""
 from __future__ import annotations
 
 import argparse
@@ -31,6 +32,7 @@ def build_rig(args: argparse.Namespace):
     from drivers.emulator.rig import EmulatedRig
 
     sample = parse_sample_spec(args.sample)
+    sample.prepare()  # a rendered surface's table: loaded, or rendered now with progress
     return EmulatedRig(
         sample.brdf,
         seed=args.seed,
@@ -88,7 +90,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "emulator",
         help="run the emulated goniometer (stage, camera, lamp) on pseudo-terminals / TCP",
         description=(
-            "Run the emulated rig with a registered reflectance model or a measured CUReT material "
+            "Run the emulated rig with a registered reflectance model, a rendered micro-surface "
+            "(surface:kind=..., docs/surfaces.md) or a measured CUReT material "
             "(curet:NUMBER|NAME, docs/curet-samples.md) as the sample. Each "
             "instrument (stage: ESP300 dialect, camera and lamp: SCPI; see docs/protocol.md) "
             "gets a raw pseudo-terminal and/or a TCP port on 127.0.0.1. Serves until "
@@ -96,7 +99,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("--sample", default="lambert", metavar=SPEC_SYNTAX.replace(" or ", "|"),
-                        help="sample BRDF, e.g. oren-nayar:sigma=30,rho=0.9 or curet:plaster_a (default lambert)")
+                        help="sample BRDF, e.g. oren-nayar:sigma=30,rho=0.9, surface:kind=vgrooves,sigma=30,rho=0.9 "
+                             "(a rendered surface, docs/surfaces.md) or curet:plaster_a (default lambert)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random process (default 0)")
     parser.add_argument("--realtime", action="store_true",
                         help="answer with hardware timing (default: fast mode, simulated clock jumps)")

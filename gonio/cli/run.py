@@ -27,14 +27,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Run a protocol on the rig and record every point as it is measured (see "
             "docs/data-format.md). Without --stage/--camera/--lamp an emulated rig is started "
-            "in-process with --sample as the sample. Ctrl-C stops cleanly; --resume continues."
+            "in-process with --sample as the sample (else the protocol's [sample] emulated, else "
+            f"{DEFAULT_SAMPLE}). Ctrl-C stops cleanly; --resume continues."
         ),
     )
     parser.add_argument("protocol", help="protocol TOML file (docs/protocols.md)")
     parser.add_argument("--out", required=True, help="recording folder (created; never overwritten)")
     parser.add_argument("--resume", action="store_true", help="continue an interrupted recording in --out")
-    parser.add_argument("--sample", default=DEFAULT_SAMPLE, metavar="MODEL[:k=v,...]|curet:NUMBER|NAME",
-                        help=f"emulated sample: a model or a CUReT material, e.g. curet:plaster_a (default {DEFAULT_SAMPLE})")
+    parser.add_argument("--sample", default=None, metavar="MODEL[:k=v,...]|surface:kind=...|curet:NUMBER|NAME",
+                        help="emulated sample: a model, a rendered surface (e.g. surface:kind=vgrooves,sigma=30,rho=0.9) "
+                             "or a CUReT material (e.g. curet:plaster_a); default: the protocol's [sample] emulated, "
+                             f"else {DEFAULT_SAMPLE}")
     parser.add_argument("--seed", type=int, default=0, help="emulator seed (default 0)")
     parser.add_argument("--stage", help="stage port or URL of a real rig (e.g. /dev/ttyUSB0)")
     parser.add_argument("--camera", help="camera port or URL of a real rig")
@@ -61,6 +64,7 @@ def emulated_rig(sample: str, seed: int, name: str = "gonio-run", **emulator_opt
     from drivers.rig import Rig
 
     parsed = parse_sample_spec(sample)
+    parsed.prepare()  # a rendered surface's table: loaded, or rendered now with progress
     brdf = parsed.brdf
     emulator = EmulatedRig(brdf, seed=seed, name=name, **{"lamp_warm": False, **emulator_options})
     emulator.start(pty=False)
@@ -125,6 +129,12 @@ def check_ports(ports: dict[str, str | None]) -> None:
                            "/dev/ttyUSB0, or a pyserial URL such as socket://host:port)")
 
 
+def emulated_sample(cli_sample: str | None, protocol: protocols.Protocol) -> str:
+    """The sample the emulated rig mounts: ``--sample``, else the protocol's ``[sample]
+    emulated``, else :data:`DEFAULT_SAMPLE`."""
+    return cli_sample or protocol.emulated or DEFAULT_SAMPLE
+
+
 def _run(args: argparse.Namespace) -> int:
     check_output_folder(args.out, "recording")
     check_ports({"--stage": args.stage, "--camera": args.camera, "--lamp": args.lamp})
@@ -148,7 +158,8 @@ def _run(args: argparse.Namespace) -> int:
                 )
         else:
             options = {"monitor": False} if args.no_monitor else {}
-            with emulated_rig(args.sample, args.seed, **options) as (rig, emulator, change_sample, metadata):
+            sample = emulated_sample(args.sample, protocol)
+            with emulated_rig(sample, args.seed, **options) as (rig, emulator, change_sample, metadata):
                 result = acquisition.run_protocol(
                     protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
                     warm_up=not args.no_warm_up,
