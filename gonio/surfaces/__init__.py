@@ -27,8 +27,8 @@ Importing this package loads neither numba nor scipy.
 """
 from __future__ import annotations
 
-from .estimator import RENDERER_VERSION, Rendering, render, render_albedo
+from .estimator import RENDERER_VERSION, Albedo, Rendering, render, render_albedo
 from .shapes import KINDS, HeightField, PittedPlane, Surface, VGroove, VGrooveField, rms_slope_angle
 
 __all__ = ["Surface", "VGroove", "VGrooveField", "HeightField", "PittedPlane", "KINDS", "rms_slope_angle",
-           "Rendering", "render", "render_albedo", "RENDERER_VERSION"]
+           "Albedo", "Rendering", "render", "render_albedo", "RENDERER_VERSION"]

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 
 from .shapes import HeightField, PittedPlane, Surface, VGroove, VGrooveField
 
-__all__ = ["Rendering", "render", "render_albedo", "RENDERER_VERSION", "THETA_LIMIT", "kernel_inputs"]
+__all__ = ["Rendering", "Albedo", "render", "render_albedo", "RENDERER_VERSION", "THETA_LIMIT", "kernel_inputs"]
 
 #: Version of the estimator and the kernel; part of every table's cache key, so a change
 #: of the numbers (a fix, another sampler) never reuses an old table.
@@ -72,6 +72,25 @@ class Rendering:
     bounces: int | None
     cut: np.ndarray
     segments: np.ndarray
+
+
+@dataclass(frozen=True)
+class Albedo:
+    """A directional-hemispherical reflectance [-] with its Monte Carlo standard error.
+
+    Attributes
+    ----------
+    value, standard_error : float
+        The reflectance (all vertices traced under the bounce limit) and its error.
+    orders, order_error : numpy.ndarray
+        Shape (3,): what the first vertex, the second and all further vertices reflect,
+        with their standard errors.
+    """
+
+    value: float
+    standard_error: float
+    orders: np.ndarray
+    order_error: np.ndarray
 
 
 def kernel_inputs(surface: Surface) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
@@ -286,7 +305,7 @@ def _with_flat_part(surface: PittedPlane, values: np.ndarray, errors: np.ndarray
 
 
 def render_albedo(surface: Surface, theta_i: float, phi_i: float = 0.0, paths: int = 100_000, seed: int = 0,
-                  bounces: int | None = None, workers: int = 1) -> tuple[float, float]:
+                  bounces: int | None = None, workers: int = 1) -> Albedo:
     """Directional-hemispherical reflectance of ``surface`` by the estimator of :func:`render`.
 
     Parameters
@@ -306,10 +325,11 @@ def render_albedo(surface: Surface, theta_i: float, phi_i: float = 0.0, paths: i
 
     Returns
     -------
-    albedo, standard_error : float
+    Albedo
         rho_dh = integral of f_r cos(theta_r) over the hemisphere [-] (Forsyth & Ponce,
         ch. 2), estimated as pi times the mean of one-path BRDF estimates at viewing
-        directions drawn with density cos(theta_r)/pi; and its standard error.
+        directions drawn with density cos(theta_r)/pi; its standard error; the same for
+        the first, the second and the further vertices of the paths.
 
     Notes
     -----
@@ -319,8 +339,8 @@ def render_albedo(surface: Surface, theta_i: float, phi_i: float = 0.0, paths: i
 
     Examples
     --------
-    >>> albedo, error = render_albedo(VGrooveField(sigma=0.0, rho=0.7), 40.0, paths=1000)
-    >>> round(albedo, 12), error
+    >>> albedo = render_albedo(VGrooveField(sigma=0.0, rho=0.7), 40.0, paths=1000)
+    >>> round(albedo.value, 12), albedo.standard_error
     (0.7, 0.0)
     """
     _check_render_options(paths, bounces)
@@ -332,11 +352,12 @@ def render_albedo(surface: Surface, theta_i: float, phi_i: float = 0.0, paths: i
     view_phi = 360.0 * u[1]
     seeds = rng.integers(0, np.iinfo(np.uint64).max, size=int(paths), dtype=np.uint64, endpoint=True)
     sources = np.repeat(_unit_vectors(np.array([float(theta_i)]), np.array([float(phi_i)])), int(paths), axis=0)
+    orders = _accumulate(surface, sources, _unit_vectors(view_theta, view_phi), seeds, 1, bounces, workers)[:, 0:3]
     if isinstance(surface, PittedPlane):
-        pit = _accumulate(surface, sources, _unit_vectors(view_theta, view_phi), seeds, 1, bounces, workers)
-        values = (1.0 - surface.coverage) * surface.rho / math.pi + surface.coverage * pit[:, 0:3].sum(axis=1)
-    else:
-        values = _accumulate(surface, sources, _unit_vectors(view_theta, view_phi), seeds, 1, bounces,
-                             workers)[:, 0:3].sum(axis=1)
-    values = math.pi * values
-    return float(values.mean()), float(values.std(ddof=1) / math.sqrt(values.size))
+        orders = surface.coverage * orders
+        orders[:, 0] += (1.0 - surface.coverage) * surface.rho / math.pi
+    orders = math.pi * orders
+    total = orders.sum(axis=1)
+    error = (lambda values: float(values.std(ddof=1) / math.sqrt(values.size)))  # noqa: E731
+    return Albedo(float(total.mean()), error(total), orders.mean(axis=0),
+                  np.array([error(orders[:, k]) for k in range(3)]))
