@@ -44,7 +44,8 @@ def test_public_api_works_without_heavy_libraries():
 
 
 @pytest.mark.parametrize("module", ["gonio.geometry", "gonio.radiometry", "gonio.zernike",
-                                    "gonio.models.chandrasekhar", "gonio.models.kvd", "gonio.protocols"])
+                                    "gonio.models.chandrasekhar", "gonio.models.kvd", "gonio.protocols",
+                                    "gonio.surfaces"])
 def test_light_modules_load_no_heavy_library(module):
     assert _loaded_after(f"import {module}") == []
 
