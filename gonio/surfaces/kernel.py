@@ -300,8 +300,7 @@ def _trace(kind: int, shape: np.ndarray, heights, cell_top, px, py, pz, facet: i
 
 
 @njit(cache=True, nogil=True)
-def _camera_origin(kind: int, shape: np.ndarray, heights, vx, vy, vz,
-                   state: np.ndarray) -> tuple[float, float, float]:
+def _camera_origin(kind: int, shape: np.ndarray, heights, state: np.ndarray) -> tuple[float, float, float]:
     """Origin of a camera ray, uniform over the projected area of one period.
 
     A line of direction -v crossing a horizontal plane at a point uniform over one period
@@ -370,7 +369,7 @@ def _one_path(kind, params, shape, heights, cell_top, source, view, max_bounces:
     azimuth = _path_frame(kind, params, shape, state)
     sx, sy, sz = _rotated(source[0], source[1], source[2], azimuth)
     vx, vy, vz = _rotated(view[0], view[1], view[2], azimuth)
-    ox, oy, oz = _camera_origin(kind, shape, heights, vx, vy, vz, state)
+    ox, oy, oz = _camera_origin(kind, shape, heights, state)
     facet, px, py, pz, nx, ny, nz, segments = _trace(kind, shape, heights, cell_top, ox, oy, oz, -1, -vx, -vy, -vz)
     bins[0] = bins[1] = bins[2] = 0.0
     if facet < 0:
