@@ -22,9 +22,8 @@ Decision: the mapping matches the rms facet slope *angle* weighted by projected 
 because that is what Oren & Nayar's sigma describes (the slope-area distribution is a
 distribution over the mean-plane area, section 3) and it is defined for both surfaces
 whatever their shapes.  The two slope distributions still differ: the height field's
-gradient is Gaussian (its slope angles arctan of a Rayleigh variable, with no facets
-beyond 90 deg and fewer steep ones than the truncated Gaussian in angle of eq 32 at large
-sigma).  With the default l = 8 cells the triangles resolve the smooth field (the rms
+gradient is Gaussian (its slope angles are the arctangent of a Rayleigh variable), while
+eq 32 is a Gaussian in the angle itself, truncated at 90 deg.  With the default l = 8 cells the triangles resolve the smooth field (the rms
 angle of the triangles is within 0.4 % of that of the spectral gradient of the same
 heights, measured from 7 to 63 deg; tested to 1 %).  Roughness is
 limited to sigma <= 60 deg: beyond it the facets needed approach vertical and the
