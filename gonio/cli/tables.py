@@ -51,7 +51,7 @@ def check_output_file(output: str) -> None:
 
 def _build_surface(spec: str, args: argparse.Namespace) -> None:
     """Render (or find) the table of the surface sample ``spec`` in the user cache."""
-    from .samples import SURFACE_PREFIX, parse_sample_spec, table_progress
+    from .samples import SURFACE_PREFIX, parse_sample_spec
 
     if args.output is not None or args.grid:
         raise CLIError(f"{spec}: --output and --grid apply to model tables; a surface table is cached under "
