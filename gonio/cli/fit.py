@@ -46,7 +46,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="fit the rig's alignment as nuisance parameters: 'all' or comma-separated names from "
                              "view_offset, theta_i_offset, phi_i_offset (axis zero offsets), tilt_x, tilt_y (sample "
                              "tilt) [deg], with normal priors N(0, 0.5 deg) unless --prior overrides them; for "
-                             "recordings of this rig (docs/fitting.md, 'Alignment parameters')")
+                             "recordings of this rig (docs/fitting.md, 'The rig's errors as parameters')")
+    parser.add_argument("--stray-light", action="store_true",
+                        help="fit the rig's stray light as a nuisance parameter: stray_light, the stray radiance as a "
+                             "fraction of a white Lambertian's at normal incidence (uniform prior on [0, 0.05])")
     parser.add_argument("--walkers", type=int, default=None,
                         help="number of emcee walkers (default 256 where all walkers are evaluated at once, else 32: gonio.fitting.mcmc.default_walkers, chosen by measurement)")
     parser.add_argument("--max-steps", type=int, default=20000, help="step limit of the chain (default 20000)")
@@ -225,7 +228,7 @@ def _load(path: Path, quantity: str | None):
 def _alignment(items: list[str]) -> tuple[str, ...]:
     """The ``--alignment`` names (repeatable, comma-separated, or 'all')."""
     from gonio.cli import CLIError
-    from gonio.fitting.alignment import parse_alignment
+    from gonio.fitting.rig_errors import parse_alignment
 
     try:
         return parse_alignment(",".join(items))
@@ -236,7 +239,7 @@ def _alignment(items: list[str]) -> tuple[str, ...]:
 def _run(args: argparse.Namespace) -> int:
     from gonio import models
     from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
-    from gonio.fitting.alignment import ALIGNMENT_BOUND_DEG, ALIGNMENT_NAMES
+    from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
     from gonio.fitting.results import EXIT_INADEQUATE
 
     data_path = Path(args.data)
@@ -245,19 +248,19 @@ def _run(args: argparse.Namespace) -> int:
     options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
     alignment = _alignment(args.alignment)
     if len(args.model) > 1:
-        rig = {k: v for k, v in fixed.items() if k in ALIGNMENT_NAMES}  # the rig's alignment: every candidate's
+        rig = {k: v for k, v in fixed.items() if k in RIG_ERROR_NAMES}  # the rig's errors: every candidate's
         candidates = [(name, {**{k: v for k, v in fixed.items() if k in models.get(name).param_names}, **rig})
                       for name in args.model]
         comparison = compare_models(dataset, candidates, priors=priors, jitter=args.jitter or False,
-                                    alignment=alignment)
+                                    alignment=alignment, stray_light=args.stray_light)
         print(comparison.summary())
         return 0 if comparison.chosen_adequate else EXIT_INADEQUATE
     name = args.model[0]
     model = models.get(name)
     for key, text in _pairs(args.prior, "--prior").items():
         bounds = model.param(key).bounds if key in model.param_names else (-float("inf"), float("inf"))
-        if key in ALIGNMENT_NAMES:
-            bounds = (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
+        if key in RIG_ERROR_NAMES:
+            bounds = STRAY_LIGHT.bounds if key == STRAY_LIGHT.name else (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
         priors[key] = parse_prior(text, bounds)
     if args.out is not None and not args.out.strip():
         from gonio.cli import CLIError
@@ -273,7 +276,7 @@ def _run(args: argparse.Namespace) -> int:
         result = fit(
             dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=args.jitter or False, options=options,
             n_walkers=args.walkers, max_steps=args.max_steps, rhat_limit=args.rhat_limit, seed=args.seed,
-            progress=_Progress(args.quiet), alignment=alignment,
+            progress=_Progress(args.quiet), alignment=alignment, stray_light=args.stray_light,
         )
     path = result.save(out)
     print(result.summary())

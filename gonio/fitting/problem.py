@@ -23,11 +23,15 @@ Nuisance parameters
 ``view_offset``, ``theta_i_offset``, ``phi_i_offset``, ``tilt_x``, ``tilt_y`` [deg]
     The rig's alignment (``alignment=``): axis zero offsets and the sample's tilt. The
     model is then evaluated at the true geometry of every walker
-    (:mod:`gonio.fitting.alignment`), so the linear models' sufficient statistics and the
+    (:mod:`gonio.fitting.rig_errors`), so the linear models' sufficient statistics and the
     fixed-geometry fast path do not apply; with every alignment value 0 the likelihood is
     the plain one exactly. Their default priors are normal (N(0, 0.5 deg)):
     :meth:`FitProblem.priors_with_defaults` adds them, as :func:`gonio.fitting.fit` and
     :func:`gonio.fitting.compare_models` do.
+``stray_light`` [-]
+    Stray radiance over the image as a fraction of ``E_0 / pi`` (``stray_light=True``),
+    added to the sample's radiance and to the reference standard's
+    (:mod:`gonio.fitting.rig_errors`). Range [0, 0.05], uniform prior.
 
 Correlated errors
 -----------------
@@ -48,8 +52,8 @@ import numpy as np
 from gonio import models
 from gonio.models import Model, Param
 
-from .alignment import ALIGNMENT_NAMES, ALIGNMENT_PARAMETERS, AlignedPrediction, alignment_prior, is_identity, \
-    parse_alignment
+from .rig_errors import ALIGNMENT_NAMES, ALIGNMENT_PARAMETERS, RIG_ERROR_NAMES, STRAY_LIGHT, RigPrediction, \
+    alignment_prior, is_identity, parse_alignment
 from .dataset import Dataset
 from .priors import Prior
 
@@ -130,19 +134,19 @@ def predict_quantity(
     """Predicted measured quantity at arbitrary geometries [deg] (plots, reports).
 
     ``values`` holds the model parameters and, for relative radiance, ``scale``; other keys
-    (``jitter``) are ignored. Alignment values among them (``view_offset``, ...: not all 0)
-    make it the prediction of the misaligned rig at these recorded geometries
-    (:class:`gonio.fitting.alignment.AlignedPrediction`, with the dataset's ``metadata``
-    for its reference standard); parameter values may then be columns (D, 1) against
-    flat geometries, giving (D, N).
+    (``jitter``) are ignored. Rig errors among them (alignment values, ``stray_light``: not
+    all 0) make it the prediction of that rig at these recorded geometries
+    (:class:`gonio.fitting.rig_errors.RigPrediction`, with the dataset's ``metadata`` for
+    its reference standard); parameter values may then be columns (D, 1) against flat
+    geometries, giving (D, N).
     """
     model = models.get(model) if isinstance(model, str) else model
     params = {k: v for k, v in values.items() if k in model.param_names}
-    alignment = {k: v for k, v in values.items() if k in ALIGNMENT_NAMES}
-    if not is_identity(alignment):
+    if not is_identity({k: v for k, v in values.items() if k in RIG_ERROR_NAMES}):
         flat = [np.ravel(a) for a in np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))]
-        aligned = AlignedPrediction(model, quantity, flat, dict(options or {}), metadata or {})
-        out = aligned(params, alignment, values.get("scale", 1.0))
+        rig = RigPrediction(model, quantity, flat, dict(options or {}), metadata or {})
+        out = rig(params, {k: v for k, v in values.items() if k in ALIGNMENT_NAMES}, values.get("scale", 1.0),
+                  values.get(STRAY_LIGHT.name, 0.0))
         return out.reshape(np.shape(out)[:-1] + np.broadcast(theta_i, phi_i, theta_r, phi_r).shape)
     ti, pi_, tr, pr = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))
     brdf = model(ti, pi_, tr, pr, **params, **dict(options or {}))
@@ -231,8 +235,11 @@ class FitProblem:
         ("relative"); see the module docstring.
     alignment : str or sequence of str, optional
         Alignment nuisance parameters to fit (``"all"`` or names of
-        :data:`gonio.fitting.alignment.ALIGNMENT_NAMES`); one given in ``fixed`` is part
+        :data:`gonio.fitting.rig_errors.ALIGNMENT_NAMES`); one given in ``fixed`` is part
         of the problem at its fixed value without being listed here.
+    stray_light : bool
+        Fit the rig's stray light (``stray_light``, :mod:`gonio.fitting.rig_errors`); a
+        value in ``fixed`` includes it at that value.
 
     Raises
     ------
@@ -257,6 +264,7 @@ class FitProblem:
         options: Mapping[str, Any] | None = None,
         jitter: bool | str = False,
         alignment: str | Sequence[str] | None = None,
+        stray_light: bool = False,
     ) -> None:
         #: The registered model the user asked for.
         self.base_model = models.get(model) if isinstance(model, str) else model
@@ -279,9 +287,13 @@ class FitProblem:
         elif self.jitter == "relative":
             specs.append(Param("rel_jitter", "-", 0.0, (0.0, 10.0), _REL_JITTER_DESCRIPTION))
         included = set(parse_alignment(alignment)) | {name for name in (fixed or {}) if name in ALIGNMENT_NAMES}
-        #: The alignment parameters of the problem, free or fixed (gonio.fitting.alignment).
+        #: The alignment parameters of the problem, free or fixed (gonio.fitting.rig_errors).
         self.alignment: tuple[str, ...] = tuple(name for name in ALIGNMENT_NAMES if name in included)
         specs.extend(p for p in ALIGNMENT_PARAMETERS if p.name in included)
+        #: Whether the rig's stray light is a parameter (free or fixed).
+        self.stray_light = bool(stray_light) or STRAY_LIGHT.name in (fixed or {})
+        if self.stray_light:
+            specs.append(STRAY_LIGHT)
         self.specs: tuple[Param, ...] = tuple(specs)
         self._spec = {p.name: p for p in self.specs}
         self.fixed: dict[str, float] = {}
@@ -296,8 +308,9 @@ class FitProblem:
         if not self.free:
             raise ValueError(f"every parameter of {self.model.name!r} is fixed; nothing to fit")
         _, self.options = self.model.resolve(self.options)
-        self._aligned = (AlignedPrediction(self.model, dataset.quantity, dataset.geometry, self.options, dataset.metadata)
-                         if self.alignment else None)
+        self._rig_errors = tuple(self.alignment) + ((STRAY_LIGHT.name,) if self.stray_light else ())
+        self._rig = (RigPrediction(self.model, dataset.quantity, dataset.geometry, self.options, dataset.metadata)
+                     if self._rig_errors else None)
         self._fast = self.model.at(*dataset.geometry, **self.options)
         self._normal_index = None
         if dataset.quantity == "normalised_radiance":
@@ -320,8 +333,8 @@ class FitProblem:
         """(linear form, :class:`QuadraticChiSquare`) when the prediction is linear in the
         form's coefficients at every measurement for every parameter value (BRDF or
         radiance data, no free extra noise, a model with an exact LinearForm there), else
-        None. Not with alignment parameters that move the geometry."""
-        if self.jitter or self.dataset.quantity not in ("brdf", "radiance") or self.moves_geometry:
+        None. Not with rig errors that change the prediction."""
+        if self.jitter or self.dataset.quantity not in ("brdf", "radiance") or self.has_rig_errors:
             return None
         form = self._fast.linear_form()
         if form is None or not np.all(form.exact) or not np.all(np.isfinite(form.terms)):
@@ -331,10 +344,10 @@ class FitProblem:
         return form, QuadraticChiSquare(whitened, self.whiten(np.asarray(self.dataset.value, float))[0])
 
     @property
-    def moves_geometry(self) -> bool:
-        """Whether an alignment parameter is free or fixed away from 0 (the model is then
-        evaluated at the true geometry, not the recorded one)."""
-        return any(name in self.free or self.fixed[name] != 0.0 for name in self.alignment)
+    def has_rig_errors(self) -> bool:
+        """Whether a rig error (alignment, stray light) is free or fixed away from 0: the
+        prediction is then that of :class:`~gonio.fitting.rig_errors.RigPrediction`."""
+        return any(name in self.free or self.fixed[name] != 0.0 for name in self._rig_errors)
 
     @property
     def vectorised(self) -> bool:
@@ -349,7 +362,7 @@ class FitProblem:
 
     def priors_with_defaults(self, priors: Mapping[str, Prior] | None = None) -> dict[str, Prior]:
         """``priors`` plus the default normal prior of every free alignment parameter not
-        given there (:func:`gonio.fitting.alignment.alignment_prior`)."""
+        given there (:func:`gonio.fitting.rig_errors.alignment_prior`)."""
         out: dict[str, Prior] = {name: alignment_prior(name) for name in self.alignment if name in self.free}
         out.update(priors or {})
         return out
@@ -402,10 +415,9 @@ class FitProblem:
     def _predict_checked(self, values: Mapping[str, Any], params: dict[str, float]) -> np.ndarray:
         """:meth:`predict` for complete, validated model parameters ``params``."""
         self.evaluations += 1
-        if self._aligned is not None:
+        if self._rig is not None and not is_identity({name: values[name] for name in self._rig_errors}):
             alignment = {name: values[name] for name in self.alignment}
-            if not is_identity(alignment):
-                return self._aligned(params, alignment, values.get("scale", 1.0))
+            return self._rig(params, alignment, values.get("scale", 1.0), values.get(STRAY_LIGHT.name, 0.0))
         brdf = self._fast.unchecked(**params)
         normal = None
         if self._normal_index is not None:

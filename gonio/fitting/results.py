@@ -35,6 +35,7 @@ from .dataset import Dataset
 from .least_squares import LeastSquaresResult, _with_unit
 from .mcmc import LogPosterior, McmcResult
 from .priors import Prior, prior_from_dict
+from .rig_errors import RIG_ERROR_NAMES
 from .problem import FitProblem, combine_prediction, evaluated_model, jitter_mode, predict_quantity
 from .selection import information_criteria
 
@@ -130,7 +131,9 @@ class FitResult:
         The goodness-of-fit verdict (:mod:`gonio.fitting.adequacy`): chi-square and
         posterior predictive p-values, extra noise relative to the stated uncertainties.
     alignment : tuple of str
-        The alignment parameters of the fit, free or fixed (:mod:`gonio.fitting.alignment`).
+        The alignment parameters of the fit, free or fixed (:mod:`gonio.fitting.rig_errors`).
+    stray_light : bool
+        Whether the rig's stray light is a parameter of the fit.
     """
 
     model: str
@@ -148,6 +151,7 @@ class FitResult:
     gonio_version: str = ""
     adequacy: Adequacy | None = None
     alignment: tuple[str, ...] = ()
+    stray_light: bool = False
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -170,6 +174,7 @@ class FitResult:
             priors=dict(priors or {}),
             jitter=problem.jitter,
             alignment=problem.alignment,
+            stray_light=problem.stray_light,
             created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             gonio_version=gonio.__version__,
         )
@@ -204,7 +209,8 @@ class FitResult:
 
     def problem(self) -> FitProblem:
         """Rebuild the :class:`FitProblem` of this fit."""
-        return FitProblem(self.model, self.dataset, self.fixed, self.options, self.jitter, self.alignment)
+        return FitProblem(self.model, self.dataset, self.fixed, self.options, self.jitter, self.alignment,
+                          self.stray_light)
 
     @property
     def converged(self) -> bool | None:
@@ -262,8 +268,8 @@ class FitResult:
         """
         model = evaluated_model(self.model, self.dataset)
         ti, pi_, tr, pr = geometry
-        if any(name in self.free for name in self.alignment):  # every draw has its own geometry
-            return self._predict_aligned_draws(model, draws, geometry)
+        if any(name in self.free or self.fixed.get(name, 0.0) != 0.0 for name in RIG_ERROR_NAMES):
+            return self._predict_rig_draws(model, draws, geometry)
         at_views = model.at(ti, pi_, tr, pr, **self.options)
         at_normal = model.at(ti, pi_, np.zeros_like(tr), pi_, **self.options) \
             if self.dataset.quantity == "normalised_radiance" else None
@@ -283,9 +289,9 @@ class FitResult:
                                                           scale)
         return out
 
-    def _predict_aligned_draws(self, model, draws: np.ndarray, geometry: list[np.ndarray]) -> np.ndarray:
-        """:meth:`_predict_draws` of a fit with free alignment parameters: the draws as
-        columns of one prediction of the misaligned rig per chunk (predict_quantity)."""
+    def _predict_rig_draws(self, model, draws: np.ndarray, geometry: list[np.ndarray]) -> np.ndarray:
+        """:meth:`_predict_draws` of a fit with rig errors (alignment, stray light): the draws
+        as columns of one prediction of that rig per chunk (predict_quantity)."""
         chunk = max(1, _PREDICTIVE_ELEMENTS // max(geometry[0].size * 49, 1))  # 49 aperture sub-rays
         base = dict(self.least_squares.values)
         out = np.empty((draws.shape[0], geometry[0].size))
@@ -327,6 +333,7 @@ class FitResult:
             "options": self.options,
             "jitter": self.jitter,
             "alignment": list(self.alignment),
+            "stray_light": self.stray_light,
             "priors": {name: prior.to_dict() for name, prior in self.priors.items()},
             "least_squares": self.least_squares.to_dict(),
             "information_criteria": self.information(),
@@ -497,6 +504,7 @@ class FitResult:
             priors={k: prior_from_dict(v) for k, v in data["priors"].items()},
             jitter=jitter_mode(data["jitter"]),
             alignment=tuple(data.get("alignment", ())),
+            stray_light=bool(data.get("stray_light", False)),
             posterior=posterior,
             flags=list(data["flags"]),
             created=data.get("created", ""),

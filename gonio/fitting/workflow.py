@@ -31,6 +31,7 @@ def fit(
     seed: int | None = 0,
     progress: Callable[[int, int, float], None] | None = None,
     alignment: str | Sequence[str] | None = None,
+    stray_light: bool = False,
 ) -> FitResult:
     """Fit a registered model to a dataset: least squares, then (optionally) MCMC.
 
@@ -57,8 +58,10 @@ def fit(
         Passed to :func:`gonio.fitting.mcmc.sample_posterior`.
     alignment : str or sequence of str, optional
         Alignment nuisance parameters to fit (``"all"`` or names such as
-        ``"view_offset"``, ``"tilt_y"``; :mod:`gonio.fitting.alignment`), with their
+        ``"view_offset"``, ``"tilt_y"``; :mod:`gonio.fitting.rig_errors`), with their
         default normal priors unless ``priors`` overrides them.
+    stray_light : bool
+        Fit the rig's stray light (``stray_light``, :mod:`gonio.fitting.rig_errors`).
 
     Returns
     -------
@@ -73,7 +76,7 @@ def fit(
     >>> round(result.best_values()["rho"], 3)
     0.5
     """
-    problem = FitProblem(model, dataset, fixed, options, jitter, alignment)
+    problem = FitProblem(model, dataset, fixed, options, jitter, alignment, stray_light)
     priors = problem.priors_with_defaults(priors)
     least_squares = fit_least_squares(problem, start=start, seed=seed, priors=priors)
     if not mcmc:

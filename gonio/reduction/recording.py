@@ -18,9 +18,10 @@ __all__ = ["reduce_recording", "combine_reduced"]
 
 def _reference(rows: Readings, protocol, aperture) -> tuple[float | None, float | None, dict[str, float], dict, dict]:
     """E_0 from the reference standard, reduced like the sample, with its budget (relative),
-    the consistency of its readings and, as ``{"geometry", "weights"}``, the read-back
-    geometry (theta_i, phi_i, theta_r, phi_r) [deg] of every reading and its weight in E_0
-    (what a fit of a misaligned rig needs, gonio.fitting.alignment)."""
+    the consistency of its readings and, as ``{"geometry", "weights", "reflectance"}``, the
+    read-back geometry (theta_i, phi_i, theta_r, phi_r) [deg] of every reading, its weight
+    in E_0 and the standard's reflectance (what a fit of the rig's errors needs,
+    gonio.fitting.rig_errors)."""
     p = rows.points
     ref = rows.index[p["block"][rows.index] == REFERENCE_BLOCK]
     if ref.size == 0 or protocol is None or protocol.reference is None:
@@ -41,7 +42,7 @@ def _reference(rows: Readings, protocol, aperture) -> tuple[float | None, float 
     mean, parts, chi2, varying = combine(np.arange(ref.size), e0, components, shared)
     weights = 1.0 / varying**2 if np.all(varying > 0) else np.ones(ref.size)  # as combine weights them
     record = {"geometry": np.column_stack([theta_i, phi_i, theta_r, phi_r]).tolist(),
-              "weights": (weights / weights.sum()).tolist()}
+              "weights": (weights / weights.sum()).tolist(), "reflectance": [float(standard.reflectance)] * ref.size}
     relative = {f"reference {n}": v / mean for n, v in parts.items() if v > 0}
     relative["certificate"] = standard.reflectance_uncertainty
     relative["angular behaviour"] = standard.angular_uncertainty
@@ -205,4 +206,4 @@ def _combined_reference_record(refs: "list[Reduced]", weights: np.ndarray) -> di
         return None
     geometry = [g for r in records for g in r["geometry"]]
     joint = [float(w * v) for w, r in zip(weights, records) for v in r["weights"]]
-    return {"geometry": geometry, "weights": joint}
+    return {"geometry": geometry, "weights": joint, "reflectance": [v for r in records for v in r["reflectance"]]}

@@ -1,4 +1,4 @@
-"""Alignment nuisance parameters (gonio/fitting/alignment.py, docs/fitting.md "Alignment
+"""Alignment nuisance parameters (gonio/fitting/rig_errors.py, docs/fitting.md "Alignment
 parameters"): axis zero offsets and sample tilt fitted against emulated recordings of a
 misaligned rig (drivers/emulator/systematics.py)."""
 from __future__ import annotations
@@ -14,7 +14,7 @@ from gonio import acquisition, protocols
 from gonio.cli import main
 from gonio.cli.run import emulated_rig
 from gonio.fitting import FitProblem, FitResult, compare_models, fit
-from gonio.fitting.alignment import ALIGNMENT_NAMES, DEFAULT_PRIOR_SD, parse_alignment, reference_calibration
+from gonio.fitting.rig_errors import ALIGNMENT_NAMES, DEFAULT_PRIOR_SD, parse_alignment, reference_calibration
 from gonio.fitting.mcmc import SERIAL_WALKERS, default_walkers
 from gonio.fitting.priors import Normal
 
@@ -91,7 +91,7 @@ def test_offsets_at_zero_give_the_plain_likelihood_exactly(misaligned):
         assert aligned.log_likelihood(vector + [0.0] * 5) == plain.log_likelihood(vector)
         fixed_zero = FitProblem("oren-nayar", dataset, {**FIXED, **{n: 0.0 for n in ALIGNMENT_NAMES}})
         assert fixed_zero.log_likelihood(vector) == plain.log_likelihood(vector)
-        assert not fixed_zero.moves_geometry and fixed_zero.vectorised == plain.vectorised
+        assert not fixed_zero.has_rig_errors and fixed_zero.vectorised == plain.vectorised
 
 
 def test_broadcast_evaluation_equals_one_at_a_time(misaligned):
@@ -128,19 +128,23 @@ def test_bad_alignment_names_and_values_are_clear_errors(misaligned):
         FitProblem("oren-nayar", dataset, alignment=["view_offset", "x"])
     with pytest.raises(ValueError, match=r"view_offset.*9.*\[-5, 5\]"):
         FitProblem("oren-nayar", dataset, {"view_offset": 9.0})
-    bad = dict(dataset.metadata, reference_standard={"geometry": [[30, 0, 10, 180]], "weights": [0.5, 0.5]})
-    with pytest.raises(ValueError, match="1 geometries and 2 weights"):
+    bad = dict(dataset.metadata, reference_standard={"geometry": [[30, 0, 10, 180]], "weights": [0.5, 0.5],
+                                                     "reflectance": [0.99]})
+    with pytest.raises(ValueError, match="1 geometries, 2 weights and 1 reflectances"):
         reference_calibration(bad)
+    with pytest.raises(ValueError, match="expected .*'reflectance'"):
+        reference_calibration(dict(bad, reference_standard={"geometry": [[30, 0, 10, 180]], "weights": [1]}))
 
 
 def test_the_reference_standard_record_reproduces_the_calibration(misaligned):
     """E_0 is the weighted mean of the reference readings' own estimates: the weights the
     reduction records are the ones it used (they sum to 1, one per reading)."""
-    geometry, weights = reference_calibration(misaligned.metadata)
+    geometry, weights, reflectance = reference_calibration(misaligned.metadata)
+    assert np.all(reflectance == 0.99)
     assert geometry.shape == (2, 4) and weights.sum() == pytest.approx(1.0, abs=1e-15)
     assert np.all(np.abs(geometry[:, 2] - 10.0) < 0.01) and np.all(geometry[:, 3] == 180.0)
     joined = acquisition.combine_reduced([misaligned, misaligned])
-    geometry2, weights2 = reference_calibration(joined.metadata)
+    geometry2, weights2, _ = reference_calibration(joined.metadata)
     assert geometry2.shape == (4, 4) and weights2 == pytest.approx(np.tile(weights, 2) / 2, rel=1e-12)
 
 
@@ -192,3 +196,31 @@ def test_a_tilted_sample_is_recovered_from_off_plane_data(tmp_path):
     for name, truth in {"tilt_x": 0.25, "tilt_y": -0.3, "sigma": 30.0}.items():
         assert abs(ls.values[name] - truth) < 3 * ls.stderr[name], (name, ls.values[name], ls.stderr[name])
     assert Systematics(tilt_x=0.25).misaligned
+
+
+# ----------------------------------------------------------------------------- stray light
+def test_stray_light_is_recovered_and_removes_the_bias(tmp_path):
+    reduced = acquisition.reduce_recording(_record(tmp_path / "stray", "ideal:stray_light=0.004"))
+    dataset, priors = reduced.fit_inputs()
+    ignored = fit(dataset, "oren-nayar", FIXED, priors=priors, mcmc=False).least_squares
+    modelled = fit(dataset, "oren-nayar", FIXED, priors=priors, mcmc=False, stray_light=True).least_squares
+    for name, truth in {"stray_light": 0.004, "sigma": 30.0, "rho": 0.9}.items():
+        # a fixed seed; 3 standard errors of the Laplace interval
+        assert abs(modelled.values[name] - truth) < 3 * modelled.stderr[name], (name, modelled.values[name])
+    assert abs(ignored.values["sigma"] - 30.0) > 10 * ignored.stderr["sigma"]  # the test can fail
+
+
+def test_stray_light_at_zero_is_the_plain_likelihood_and_stays_vectorised(misaligned):
+    dataset, _ = misaligned.fit_inputs()
+    plain = FitProblem("oren-nayar", dataset, FIXED)
+    stray = FitProblem("oren-nayar", dataset, FIXED, stray_light=True)
+    vector = [0.9, 30.0, misaligned.reference_irradiance]
+    assert stray.log_likelihood(vector + [0.0]) == plain.log_likelihood(vector)
+    assert stray.free[-1] == "stray_light" and stray.vectorised  # no geometry moves: all walkers at once
+    walkers = np.array([vector + [s] for s in (0.0, 1e-3, 5e-3, 2e-2)])
+    one = np.array([stray.log_likelihood(w) for w in walkers])
+    np.testing.assert_allclose(stray.log_likelihood_batch(walkers), one, rtol=1e-12)
+    both = FitProblem("oren-nayar", dataset, FIXED, alignment="view_offset", stray_light=True)
+    walkers = np.array([vector + [v, s] for v, s in ((0.1, 1e-3), (-0.2, 3e-3), (0.0, 0.0))])
+    np.testing.assert_allclose(both.log_likelihood_batch(walkers), [both.log_likelihood(w) for w in walkers],
+                               rtol=1e-12)

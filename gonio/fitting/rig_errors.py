@@ -1,4 +1,4 @@
-"""Alignment nuisance parameters: the rig's axis zero offsets and the sample's tilt in a fit.
+"""The rig's systematic errors as fit parameters: its alignment and its stray light.
 
 A rig is never perfectly aligned: each axis reads back ``x`` while its true angle is
 ``x + offset``, and the sample's normal is tipped by a fraction of a degree.  A fit can
@@ -13,29 +13,36 @@ name               unit   meaning
 ``phi_i_offset``   deg    zero offset of the lamp's azimuth axis (axis 3)
 ``tilt_x``         deg    tilt of the sample's normal toward +x (in the camera's swing plane)
 ``tilt_y``         deg    tilt of the sample's normal toward +y (along the swing axis)
+``stray_light``    -      stray radiance over the image, as a fraction of the radiance
+                          ``E_0 / pi`` of a white Lambertian sample at normal incidence
 =================  =====  ===================================================================
 
 The geometry is :func:`drivers.rig_geometry.misaligned_angles`, the function the emulator
-places its lamp and camera with, so a fit and the emulated rig agree on what each
-parameter means.  The dataset's angles must be in the rig's frame (azimuth 0 = the side
-of positive camera swings), as the recordings of ``gonio run`` are.
+places its lamp and camera with, and ``stray_light`` means what the emulator's switch of
+the same name means (``drivers.emulator.systematics``), so a fit and the emulated rig
+agree on every parameter.  The dataset's angles must be in the rig's frame (azimuth 0 =
+the side of positive camera swings), as the recordings of ``gonio run`` are.
 
-What the rig reports under misalignment (:class:`AlignedPrediction`): the reduction
-divided each value by the lamp irradiance ``E_0`` that the reference standard gave at
-its *recorded* geometry and, for absolute BRDF, by the recorded ``cos(theta_i)``.  The
-prediction of a value is therefore the model at the true geometry times
-``cos(theta_i,true) / cos(theta_i,recorded)`` times ``c = 1 / sum_k w_k r_k``, where
-``r_k`` is the ratio of the reference standard's true to recorded signal at its ``k``-th
-geometry (the same misalignment acts on it) and ``w_k`` the weights that combined them
-into ``E_0`` (``dataset.metadata["reference_standard"]``).  ``scale`` keeps its meaning,
-the lamp irradiance as the reference measured it, so its calibration prior stays the
-reference's measurement itself.  Normalised radiance divides both factors out.
+What the rig reports (:class:`RigPrediction`): the camera measures the radiance per unit
+on-axis lamp irradiance ``R = f(true geometry) cos(theta_i,true) + stray_light / pi``
+(times ``E_0``); the reduction divided each value by the ``E_0`` the reference standard
+gave at its *recorded* geometry and, for absolute BRDF, by the recorded
+``cos(theta_i)``.  The prediction is therefore ``scale c R`` (relative radiance),
+``c R / cos(theta_i,recorded)`` (absolute BRDF) or ``R / R(normal view)`` (normalised
+radiance), with ``c = 1 / sum_k w_k r_k``, ``r_k`` the ratio of the reference standard's
+true signal (the same misalignment and stray light act on it) to the one the reduction
+assumed at its ``k``-th reading, and ``w_k`` the weights that combined the readings into
+``E_0`` (``dataset.metadata["reference_standard"]``).  ``scale`` keeps its meaning, the
+lamp irradiance as the reference measured it, so its calibration prior stays the
+reference's measurement itself.
 
-Default priors (:data:`DEFAULT_PRIOR_SD`): normal, centred on 0, 0.5 deg wide, within
-the +/-5 deg range.  A rig aligned by eye and an alignment laser is off by a few tenths
-of a degree (docs/emulator.md, "Systematic errors": the ``lab`` preset draws 0.1 to
-0.3 deg); 0.5 deg leaves room for a worse alignment while keeping a parameter the data
+Default priors: normal, N(0, 0.5 deg) within the +/-5 deg range, for the alignment
+(:data:`DEFAULT_PRIOR_SD`).  A rig aligned by eye and an alignment laser is off by a few
+tenths of a degree (docs/emulator.md, "Systematic errors": the ``lab`` preset draws 0.1
+to 0.3 deg); 0.5 deg leaves room for a worse alignment while keeping a parameter the data
 do not constrain (``phi_i_offset`` from in-plane data) from wandering over degrees.
+``stray_light`` is uniform on [0, 0.05]: positive (light only adds), and 5 % of a white
+sample's radiance would be a rig without baffles (the ``lab`` preset has 0.2 %).
 """
 from __future__ import annotations
 
@@ -49,8 +56,9 @@ from gonio.models import Model, Param
 
 from .priors import Normal
 
-__all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG",
-           "parse_alignment", "alignment_prior", "reference_calibration", "AlignedPrediction", "is_identity"]
+__all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG", "STRAY_LIGHT",
+           "RIG_ERROR_NAMES", "parse_alignment", "alignment_prior", "reference_calibration", "RigPrediction",
+           "is_identity"]
 
 #: Range of every alignment parameter [deg]: beyond it the rig is not misaligned but mis-built.
 ALIGNMENT_BOUND_DEG = 5.0
@@ -68,6 +76,11 @@ ALIGNMENT_PARAMETERS = tuple(
 ALIGNMENT_NAMES = tuple(p.name for p in ALIGNMENT_PARAMETERS)
 #: Standard deviation of each parameter's default normal prior [deg] (module docstring).
 DEFAULT_PRIOR_SD = {name: 0.5 for name in ALIGNMENT_NAMES}
+#: The stray-light parameter (module docstring); its default prior is uniform over its range.
+STRAY_LIGHT = Param("stray_light", "-", 0.0, (0.0, 0.05),
+                    "stray radiance over the image as a fraction of E_0 / pi (a white Lambertian at normal incidence)")
+#: Every rig-error parameter.
+RIG_ERROR_NAMES = ALIGNMENT_NAMES + (STRAY_LIGHT.name,)
 
 
 def parse_alignment(names: str | Iterable[str] | None) -> tuple[str, ...]:
@@ -105,15 +118,17 @@ def alignment_prior(name: str) -> Normal:
     return Normal(0.0, DEFAULT_PRIOR_SD[name], -ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
 
 
-def reference_calibration(metadata: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
-    """The reference standard's recorded geometries (K, 4) [deg] and combination weights (K,)
-    from ``metadata["reference_standard"]`` (written by :mod:`gonio.reduction`), or None.
+def reference_calibration(metadata: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The reference standard's recorded geometries (K, 4) [deg], combination weights (K,)
+    and reflectances (K,) from ``metadata["reference_standard"]`` (written by
+    :mod:`gonio.reduction`), or None.
 
     Raises
     ------
     ValueError
         A record that is not ``{"geometry": [[theta_i, phi_i, theta_r, phi_r], ...],
-        "weights": [...]}`` with as many non-negative weights as geometries.
+        "weights": [...], "reflectance": [...]}`` with one non-negative weight and one
+        reflectance in (0, 1] per geometry.
     """
     record = metadata.get("reference_standard") if metadata else None
     if record is None:
@@ -126,17 +141,23 @@ def reference_calibration(metadata: Mapping[str, Any]) -> tuple[np.ndarray, np.n
     try:
         geometry = np.asarray(record["geometry"], float).reshape(-1, 4)
         weights = np.asarray(record["weights"], float).reshape(-1)
+        reflectance = np.asarray(record["reflectance"], float).reshape(-1)
     except (TypeError, KeyError, ValueError):
         raise ValueError(f"dataset metadata reference_standard = {metadata.get('reference_standard')!r:.200}: "
-                         "expected {'geometry': [[theta_i, phi_i, theta_r, phi_r], ...], 'weights': [...]}") from None
-    if weights.size != geometry.shape[0] or weights.size == 0 or np.any(weights < 0) or not np.all(np.isfinite(geometry)):
-        raise ValueError(f"dataset metadata reference_standard: {geometry.shape[0]} geometries and {weights.size} "
-                         "weights; expected one finite geometry and one non-negative weight per reference reading")
-    return geometry, weights / weights.sum()
+                         "expected {'geometry': [[theta_i, phi_i, theta_r, phi_r], ...], 'weights': [...], "
+                         "'reflectance': [...]}") from None
+    k = geometry.shape[0]
+    if (weights.size != k or reflectance.size != k or k == 0 or np.any(weights < 0)
+            or not np.all(np.isfinite(geometry)) or not np.all((reflectance > 0) & (reflectance <= 1))):
+        raise ValueError(f"dataset metadata reference_standard: {k} geometries, {weights.size} weights and "
+                         f"{reflectance.size} reflectances; expected one finite geometry, one non-negative weight and "
+                         "one reflectance in (0, 1] per reference reading")
+    return geometry, weights / weights.sum(), reflectance
 
 
-class AlignedPrediction:
-    """The measured quantity of a misaligned rig at recorded geometries (module docstring).
+class RigPrediction:
+    """The measured quantity of a misaligned rig with stray light at recorded geometries
+    (module docstring).
 
     Parameters
     ----------
@@ -166,46 +187,58 @@ class AlignedPrediction:
         self.cos_recorded = np.cos(np.radians(self.geometry[0]))
         ti, pi_ = self.geometry[0], self.geometry[1]
         self.normal_geometry = (ti, pi_, np.zeros_like(ti), pi_)  # the normal view of each incidence
+        self._fixed: dict[str, Any] = {}  # the model at the recorded geometry, built on first use
         self.reference = None
         if quantity in ("brdf", "radiance"):
             calibration = reference_calibration(metadata)
             if calibration is not None:
-                geometry_k, weights = calibration
+                geometry_k, weights, reflectance = calibration
                 probe = Dataset(*geometry_k.T, np.ones(len(weights)), 1.0, metadata=dict(metadata))
                 lambert = evaluated_model("lambert", probe)  # the reduction's model of the standard
-                self.reference = (lambert, tuple(geometry_k.T), weights, self._signal(lambert, tuple(geometry_k.T)))
+                recorded = reflectance * self._signal(lambert, tuple(geometry_k.T))
+                self.reference = (lambert, tuple(geometry_k.T), weights, reflectance, recorded)
 
     @staticmethod
     def _signal(lambert: Model, geometry) -> np.ndarray:
         """A white Lambertian standard's signal per unit irradiance, <f cos theta_i> [1/sr]."""
         return lambert(*geometry, rho=1.0) * np.cos(np.radians(geometry[0]))
 
-    def calibration_factor(self, alignment: Mapping[str, Any]) -> np.ndarray | float:
-        """``c = 1 / sum_k w_k r_k``: what the misalignment did to ``E_0`` (1 without a
-        reference standard); shape (W, 1) for alignment columns of shape (W, 1)."""
+    def calibration_factor(self, alignment: Mapping[str, Any], stray_light: Any = 0.0) -> np.ndarray | float:
+        """``c = 1 / sum_k w_k r_k``: what misalignment and stray light did to ``E_0`` (1
+        without a reference standard); shape (W, 1) for parameter columns of shape (W, 1)."""
         if self.reference is None:
             return 1.0
-        lambert, geometry, weights, recorded = self.reference
-        true = self._signal(lambert, misaligned_angles(*geometry, **alignment))
+        lambert, geometry, weights, reflectance, recorded = self.reference
+        moved = geometry if is_identity(alignment) else misaligned_angles(*geometry, **alignment)
+        true = reflectance * self._signal(lambert, moved) + np.asarray(stray_light) / np.pi
         return 1.0 / np.sum(weights * true / recorded, axis=-1, keepdims=True)
 
-    def brdf(self, params: Mapping[str, Any], alignment: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray | None]:
-        """The apparent BRDF at every recorded geometry and, for normalised radiance, at the
-        normal view of its incidence [1/sr]: the model at the true geometry, with the
-        factors the reduction applied under the recorded one (module docstring)."""
-        true = misaligned_angles(*self.geometry, **alignment)
-        values = self.model(*true, **params, **self.options)
-        if self.quantity == "normalised_radiance":
-            normal = self.model(*misaligned_angles(*self.normal_geometry, **alignment), **params, **self.options)
-            return values, normal
-        ratio = np.divide(np.cos(np.radians(true[0])), self.cos_recorded,
-                          out=np.zeros(np.shape(true[0])), where=self.cos_recorded > 0)
-        return values * ratio * self.calibration_factor(alignment), None
+    def _model_at(self, which: str, params: Mapping[str, Any], alignment: Mapping[str, Any]) -> np.ndarray:
+        """``f cos(theta_i)`` at the true geometry of the recorded ``which`` ('data' or
+        'normal' view) geometries [1/sr]; the fixed-geometry path when nothing moves."""
+        recorded = self.geometry if which == "data" else self.normal_geometry
+        if is_identity(alignment):
+            if which not in self._fixed:
+                self._fixed[which] = self.model.at(*recorded, **self.options)
+            return self._fixed[which].unchecked(**params) * self.cos_recorded
+        true = misaligned_angles(*recorded, **alignment)
+        return self.model(*true, **params, **self.options) * np.clip(np.cos(np.radians(true[0])), 0.0, None)
 
-    def __call__(self, params: Mapping[str, Any], alignment: Mapping[str, Any], scale: Any = 1.0) -> np.ndarray:
-        """The predicted measured values: shape (N,) or (W, N) for parameter columns (W, 1)."""
-        values, normal = self.brdf(params, alignment)
-        return self._combine(self.quantity, values, normal, self.cos_recorded, scale)
+    def __call__(self, params: Mapping[str, Any], alignment: Mapping[str, Any], scale: Any = 1.0,
+                 stray_light: Any = 0.0) -> np.ndarray:
+        """The predicted measured values: shape (N,) or (W, N) for parameter columns (W, 1).
+
+        ``params`` are the model's (checked), ``alignment`` the five alignment values (or
+        some of them) [deg], ``scale`` and ``stray_light`` as in the module docstring.
+        """
+        stray = np.asarray(stray_light, float) / np.pi
+        radiance = self._model_at("data", params, alignment) + stray
+        if self.quantity == "normalised_radiance":
+            normal = self._model_at("normal", params, alignment) + stray
+            return self._combine(self.quantity, radiance, normal, self.cos_recorded, scale)
+        apparent = np.divide(radiance, self.cos_recorded, out=np.zeros(np.shape(radiance)),
+                             where=self.cos_recorded > 0) * self.calibration_factor(alignment, stray_light)
+        return self._combine(self.quantity, apparent, None, self.cos_recorded, scale)
 
 
 def is_identity(alignment: Mapping[str, Any]) -> bool:
