@@ -41,6 +41,8 @@ def test_gonio_run_records_the_realism_and_reads_back_the_planned_geometry(tmp_p
 def test_the_default_realism_is_the_ideal_rig():
     args = build_parser().parse_args(["run", "x.toml", "--out", "y"])
     assert args.realism == "ideal"
+    assert build_parser().parse_args(["demo"]).realism == "ideal"
+    assert build_parser().parse_args(["demo", "--realism", "lab"]).realism == "lab"
     args = build_parser().parse_args(["emulator", "--seed", "2", "--realism", "lab", "--no-pty"])
     assert build_rig(args).systematics == realism("lab", 2)
 

@@ -29,6 +29,7 @@ from pathlib import Path
 
 from . import CLIError
 from .progress import ProgressLine
+from .realism import REALISM_HELP, REALISM_SYNTAX
 
 #: The emulated sample and its true parameters.
 SAMPLE_MODEL = "oren-nayar-exact"
@@ -182,6 +183,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", default="gonio-demo", help="output folder (default gonio-demo)")
     parser.add_argument("--seed", type=int, default=0, help="emulator and sampler seed (default 0)")
+    parser.add_argument("--realism", default="ideal", metavar=REALISM_SYNTAX,
+                        help=REALISM_HELP + "; the demo's fits do not model them, so they show what ignoring them does")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.set_defaults(func=_run)
 
@@ -191,8 +194,9 @@ def _say(quiet: bool, text: str) -> None:
         print(text, flush=True)
 
 
-def measure_demo(out: Path, seed: int = 0, quiet: bool = True):
-    """Measure the demo protocols on the emulated plaster into ``out/recordings``.
+def measure_demo(out: Path, seed: int = 0, quiet: bool = True, realism: str = "ideal"):
+    """Measure the demo protocols on the emulated plaster into ``out/recordings``, on a rig
+    with the systematic errors of ``realism`` (:func:`gonio.cli.realism.parse_realism`).
 
     Returns
     -------
@@ -205,8 +209,9 @@ def measure_demo(out: Path, seed: int = 0, quiet: bool = True):
 
     sample = f"{SAMPLE_MODEL}:" + ",".join(f"{k}={v:g}" for k, v in TRUTH.items())
     folders = []
-    _say(quiet, f"gonio demo: emulated rig with sample {sample} (seed {seed})")
-    with emulated_rig(sample, seed, name=f"gonio-demo-{seed}") as (rig, emulator, change_sample, metadata):
+    _say(quiet, f"gonio demo: emulated rig with sample {sample} (seed {seed}, realism {realism})")
+    with emulated_rig(sample, seed, name=f"gonio-demo-{seed}", realism=realism) as (rig, emulator, change_sample,
+                                                                                   metadata):
         for name in PROTOCOLS:
             protocol = protocols.load(protocols_folder() / name)
             folder = out / "recordings" / protocol.name
@@ -265,7 +270,7 @@ def _run(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     out = _prepare_output(args.out)
-    reduced = measure_demo(out, args.seed, args.quiet)
+    reduced = measure_demo(out, args.seed, args.quiet, args.realism)
     result, comparison = fit_demo(reduced, args.seed, args.quiet)
     fit_folder = out / FIT_FOLDER
     result.save(fit_folder)
