@@ -144,9 +144,7 @@ def predict_quantity(
     params = {k: v for k, v in values.items() if k in model.param_names}
     if not is_identity({k: v for k, v in values.items() if k in RIG_ERROR_NAMES}):
         flat = [np.ravel(a) for a in np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))]
-        rig = RigPrediction(model, quantity, flat, dict(options or {}), metadata or {})
-        out = rig(params, {k: v for k, v in values.items() if k in ALIGNMENT_NAMES}, values.get("scale", 1.0),
-                  values.get(STRAY_LIGHT.name, 0.0))
+        out = RigPrediction(model, quantity, flat, dict(options or {}), metadata or {}).of_values(values)
         return out.reshape(np.shape(out)[:-1] + np.broadcast(theta_i, phi_i, theta_r, phi_r).shape)
     ti, pi_, tr, pr = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))
     brdf = model(ti, pi_, tr, pr, **params, **dict(options or {}))
@@ -416,8 +414,7 @@ class FitProblem:
         """:meth:`predict` for complete, validated model parameters ``params``."""
         self.evaluations += 1
         if self._rig is not None and not is_identity({name: values[name] for name in self._rig_errors}):
-            alignment = {name: values[name] for name in self.alignment}
-            return self._rig(params, alignment, values.get("scale", 1.0), values.get(STRAY_LIGHT.name, 0.0))
+            return self._rig.of_values({**values, **params})
         brdf = self._fast.unchecked(**params)
         normal = None
         if self._normal_index is not None:

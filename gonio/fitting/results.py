@@ -35,7 +35,7 @@ from .dataset import Dataset
 from .least_squares import LeastSquaresResult, _with_unit
 from .mcmc import LogPosterior, McmcResult
 from .priors import Prior, prior_from_dict
-from .rig_errors import RIG_ERROR_NAMES
+from .rig_errors import RIG_ERROR_NAMES, RigPrediction
 from .problem import FitProblem, combine_prediction, evaluated_model, jitter_mode, predict_quantity
 from .selection import information_criteria
 
@@ -291,15 +291,14 @@ class FitResult:
 
     def _predict_rig_draws(self, model, draws: np.ndarray, geometry: list[np.ndarray]) -> np.ndarray:
         """:meth:`_predict_draws` of a fit with rig errors (alignment, stray light): the draws
-        as columns of one prediction of that rig per chunk (predict_quantity)."""
+        as columns of one prediction of that rig per chunk (RigPrediction, as predict_quantity)."""
         chunk = max(1, _PREDICTIVE_ELEMENTS // max(geometry[0].size * 49, 1))  # 49 aperture sub-rays
+        rig = RigPrediction(model, self.dataset.quantity, geometry, self.options, self.dataset.metadata)
         base = dict(self.least_squares.values)
         out = np.empty((draws.shape[0], geometry[0].size))
         for start in range(0, draws.shape[0], chunk):
             block = draws[start:start + chunk]
-            values = dict(base, **{name: block[:, [k]] for k, name in enumerate(self.free)})
-            out[start:start + chunk] = predict_quantity(model, self.dataset.quantity, *geometry, values, self.options,
-                                                        self.dataset.metadata)
+            out[start:start + chunk] = rig.of_values(dict(base, **{name: block[:, [k]] for k, name in enumerate(self.free)}))
         return out
 
     def information(self) -> dict[str, float]:

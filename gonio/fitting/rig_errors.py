@@ -240,6 +240,14 @@ class RigPrediction:
                              where=self.cos_recorded > 0) * self.calibration_factor(alignment, stray_light)
         return self._combine(self.quantity, apparent, None, self.cos_recorded, scale)
 
+    def of_values(self, values: Mapping[str, Any]) -> np.ndarray:
+        """:meth:`__call__` for a mapping of every value of a fit (model parameters, rig
+        errors, ``scale``; others such as ``jitter`` ignored); model parameters must be
+        valid (they are not checked here), missing ones take their defaults."""
+        params = {p.name: values.get(p.name, p.default) for p in self.model.params}
+        alignment = {name: values[name] for name in ALIGNMENT_NAMES if name in values}
+        return self(params, alignment, values.get("scale", 1.0), values.get(STRAY_LIGHT.name, 0.0))
+
 
 def is_identity(alignment: Mapping[str, Any]) -> bool:
     """Whether every alignment value is the scalar 0 (the recorded geometry is the true one)."""
