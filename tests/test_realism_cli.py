@@ -57,3 +57,19 @@ def test_a_bad_realism_is_a_one_line_error(tmp_path, capsys, spec, words):
     err = capsys.readouterr().err
     assert "--realism" in err and words in err and "Traceback" not in err
     assert not (tmp_path / "rec").exists()
+
+
+def test_the_demo_blames_a_bias_on_the_rig_when_it_has_systematic_errors():
+    from types import SimpleNamespace
+
+    from gonio.cli.demo import truth_table
+
+    rows = [{"name": "rho", "unit": "-", "value": 0.91, "median": 0.91, "p2_5": 0.905, "p97_5": 0.915},
+            {"name": "sigma", "unit": "deg", "value": 30.0, "median": 30.0, "p2_5": 29.9, "p97_5": 30.1}]
+    result = SimpleNamespace(model="oren-nayar-tabulated", parameter_rows=lambda: rows)
+    assert "does not reproduce the sample's" in truth_table(result, "ideal")
+    assert "does not reproduce the sample's" in truth_table(result, "lab:view_offset=0,theta_i_offset=0,phi_i_offset=0,"
+                                                                    "tilt_x=0,tilt_y=0,stray_light=0,nonlinearity=0,"
+                                                                    "beam_falloff=0")
+    text = truth_table(result, "lab")
+    assert "BIAS: rho" in text and "--realism lab) are not modelled" in text and "BIAS: sigma" not in text
