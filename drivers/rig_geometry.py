@@ -8,7 +8,10 @@ the lamp's side of the normal (backward scattering), matching gonio's signed in-
 viewing angle. All angles in degrees.
 
 These are pure functions on numbers and numpy arrays; :class:`drivers.rig.Rig` uses them
-to refuse a geometry before any command is sent.
+to refuse a geometry before any command is sent. :func:`misaligned_angles` is the geometry
+of a rig that is not perfectly aligned (axis zero offsets, a tilted sample): the emulator
+uses it to place its lamp and camera, and gonio's fits use the same function for their
+alignment parameters (docs/emulator.md, "Systematic errors").
 """
 from __future__ import annotations
 
@@ -30,6 +33,8 @@ __all__ = [
     "plan_moves",
     "MovePlan",
     "separation_of_axes",
+    "misaligned_angles",
+    "ALIGNMENT_ERRORS",
 ]
 
 AXIS_VIEW, AXIS_THETA_I, AXIS_PHI_I = 1, 2, 3
@@ -211,3 +216,90 @@ def plan_moves(
     if best is not None:
         return best
     return None
+
+
+#: The alignment errors of :func:`misaligned_angles`, in its keyword order [deg].
+ALIGNMENT_ERRORS = ("view_offset", "theta_i_offset", "phi_i_offset", "tilt_x", "tilt_y")
+
+
+def _direction_angles(x, y, z):
+    """Polar angle and azimuth [deg] of (not necessarily unit) direction components."""
+    return np.degrees(np.arctan2(np.hypot(x, y), z)), np.degrees(np.arctan2(y, x))
+
+
+def misaligned_angles(theta_i, phi_i, theta_r, phi_r, *, view_offset=0.0, theta_i_offset=0.0,
+                      phi_i_offset=0.0, tilt_x=0.0, tilt_y=0.0):
+    """True lamp and camera directions in the sample's frame of a misaligned rig [deg].
+
+    The rig reads back the geometry ``(theta_i, phi_i, theta_r, phi_r)`` (lamp polar
+    angle and azimuth from axes 2 and 3, camera direction from the swing of axis 1); the
+    directions the sample actually sees differ by the rig's alignment errors:
+
+    - **zero offsets** of the axes: the true angle of an axis is its readback plus its
+      offset. The camera is swung about the swing axis (y) by ``view_offset``, so a camera
+      in the swing plane sits at the signed view ``view + view_offset``; the lamp is at polar
+      angle ``theta_i + theta_i_offset`` and azimuth ``phi_i + phi_i_offset``.
+    - **sample tilt**: the sample's normal is tipped by ``tilt_x`` toward +x (within the
+      swing plane, toward the camera at positive views) and by ``tilt_y`` toward +y (along
+      the swing axis), i.e. the sample frame is the lab frame rotated by
+      ``R = R_y(tilt_x) R_x(-tilt_y)``, whose normal is
+      ``(sin tilt_x cos tilt_y, sin tilt_y, cos tilt_x cos tilt_y)``. Directions are expressed
+      in the sample frame as ``R^T d``.
+
+    Parameters
+    ----------
+    theta_i, phi_i, theta_r, phi_r : array_like
+        The geometry the rig read back [deg] (``theta_r = |view|``, ``phi_r`` 0 for
+        ``view >= 0`` and 180 otherwise on this rig; any direction is accepted).
+    view_offset, theta_i_offset, phi_i_offset : array_like
+        Zero offsets of axes 1, 2 and 3 [deg]: true angle = readback + offset.
+    tilt_x, tilt_y : array_like
+        Tilt of the sample's normal toward +x and +y [deg].
+
+    Returns
+    -------
+    theta_i, phi_i, theta_r, phi_r : numpy.ndarray
+        The true directions in the sample's frame [deg], broadcast over every argument:
+        polar angles in [0, 180] (above 90: the direction is behind the sample), azimuths
+        in (-180, 180].
+
+    Notes
+    -----
+    A lamp pushed through the normal by its offset (``theta_i + theta_i_offset < 0``)
+    comes out at the opposite azimuth, as the vector form gives it. With every error 0 the
+    result is the input to rounding (azimuths wrapped into (-180, 180]).
+
+    References
+    ----------
+    E. Molloy, P. Saunders, A. Koo, "Effects of rotation errors on goniometric
+    measurements", Metrologia 59(2), 2022 (axis offsets and sample alignment as error
+    sources of a goniometer).
+
+    Examples
+    --------
+    >>> ti, pi, tr, pr = misaligned_angles(30.0, 0.0, 20.0, 0.0, view_offset=0.5, theta_i_offset=-0.2)
+    >>> [round(float(a), 9) for a in (ti, pi, tr, pr)]
+    [29.8, 0.0, 20.5, 0.0]
+    >>> ti, _, tr, _ = misaligned_angles(30.0, 0.0, 20.0, 180.0, tilt_x=1.0)
+    >>> round(float(ti), 9), round(float(tr), 9)      # the normal tips toward the lamp
+    (29.0, 21.0)
+    """
+    rad = np.pi / 180.0
+    t_lamp = (np.asarray(theta_i, float) + theta_i_offset) * rad
+    p_lamp = (np.asarray(phi_i, float) + phi_i_offset) * rad
+    lamp = (np.sin(t_lamp) * np.cos(p_lamp), np.sin(t_lamp) * np.sin(p_lamp), np.cos(t_lamp))
+    t_cam, p_cam = np.asarray(theta_r, float) * rad, np.asarray(phi_r, float) * rad
+    swing = np.asarray(view_offset, float) * rad
+    cx, cy, cz = np.sin(t_cam) * np.cos(p_cam), np.sin(t_cam) * np.sin(p_cam), np.cos(t_cam)
+    camera = (cx * np.cos(swing) + cz * np.sin(swing), cy, cz * np.cos(swing) - cx * np.sin(swing))
+    a, b = np.asarray(tilt_x, float) * rad, np.asarray(tilt_y, float) * rad
+    ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
+
+    def to_sample(x, y, z):
+        # R^T (x, y, z) with R = R_y(a) R_x(-b): first R_y(-a), then R_x(b)
+        x1, z1 = x * ca - z * sa, x * sa + z * ca
+        return x1, y * cb - z1 * sb, y * sb + z1 * cb
+
+    ti, pi_ = _direction_angles(*to_sample(*lamp))
+    tr, pr = _direction_angles(*to_sample(*camera))
+    return np.broadcast_arrays(ti, pi_, tr, pr)

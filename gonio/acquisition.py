@@ -142,9 +142,9 @@ def experiment_description(protocol: Protocol, lamp_voltage: float, rig: Any,
     """What must stay the same for a recording to be resumed (``metadata["experiment"]``).
 
     The protocol by the SHA-256 of its text, the lamp voltage, the rig's configuration as
-    the caller describes it (emulated sample, model parameters, seed; port paths of a real
-    rig excluded, they may change between sessions), the instruments' identities and
-    whether a lamp monitor is fitted.
+    the caller describes it (emulated sample, model parameters, seed, the realism of its
+    systematic errors; port paths of a real rig excluded, they may change between
+    sessions), the instruments' identities and whether a lamp monitor is fitted.
     """
     rig_meta = dict((metadata or {}).get("rig", {}))
     for key in _PORT_KEYS:

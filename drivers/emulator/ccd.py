@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .systematics import nonlinear_signal
+
 __all__ = ["CCDParams", "CCDSensor", "Exposure"]
 
 
@@ -126,6 +128,10 @@ class CCDSensor:
         How the electron count is drawn: ``"poisson"`` exactly; ``"gaussian"`` (default)
         from the normal distribution with the Poisson mean and variance (see the module
         notes).
+    nonlinearity : float
+        Relative signal deficit at the ADC's full scale (a systematic error outside the
+        linear EMVA 1288 model, :func:`drivers.emulator.systematics.nonlinear_signal`;
+        default 0, a linear camera).
 
     Examples
     --------
@@ -136,10 +142,13 @@ class CCDSensor:
     """
 
     def __init__(self, params: CCDParams = CCDParams(), seed: int | np.random.SeedSequence = 0,
-                 fixed_pattern: bool = True, shot_noise: str = "gaussian") -> None:
+                 fixed_pattern: bool = True, shot_noise: str = "gaussian", nonlinearity: float = 0.0) -> None:
         if shot_noise not in ("gaussian", "poisson"):
             raise ValueError(f"shot_noise must be 'gaussian' or 'poisson', got {shot_noise!r}")
+        if not 0.0 <= nonlinearity < 1.0 / 3.0:
+            raise ValueError(f"nonlinearity must be in [0, 1/3) (a monotonic response), got {nonlinearity!r}")
         self.shot_noise = shot_noise
+        self.nonlinearity = float(nonlinearity)
         self.params = params
         rng = np.random.default_rng(seed)
         shape = (params.height, params.width)
@@ -162,10 +171,12 @@ class CCDSensor:
         return self.params.base_gain_dn_per_e * gain_factor
 
     def mean_dn(self, photons: np.ndarray | float, exposure_s: float, gain_factor: float) -> np.ndarray:
-        """Expected digital value per pixel below saturation (EMVA eq. for ``mu_y``) [DN]."""
+        """Expected digital value per pixel below saturation (EMVA eq. for ``mu_y``, with
+        the non-linearity when there is one) [DN]."""
         p = self.params
         electrons = p.quantum_efficiency * np.asarray(photons, float) * self.response_map + self.dark_map * exposure_s
-        return p.offset_dn + self.system_gain(gain_factor) * electrons
+        return p.offset_dn + nonlinear_signal(self.system_gain(gain_factor) * electrons, self.nonlinearity,
+                                              p.max_dn - p.offset_dn)
 
     def expose(self, photons: np.ndarray | float, exposure_s: float, gain_factor: float,
                rng: np.random.Generator) -> Exposure:
@@ -210,6 +221,8 @@ class CCDSensor:
             electrons += p.read_noise_e * rng.standard_normal(shape)
         dn = electrons
         dn *= self.system_gain(gain_factor)
+        if self.nonlinearity:
+            dn = nonlinear_signal(dn, self.nonlinearity, p.max_dn - p.offset_dn)
         dn += p.offset_dn + 0.5
         np.floor(dn, out=dn)
         np.clip(dn, 0, p.max_dn, out=dn)

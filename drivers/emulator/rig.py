@@ -29,8 +29,11 @@ from .lamp import Lamp, LampParams
 from .lamp_firmware import LampFirmware
 from .monitor import LampMonitor, MonitorParams
 from .stage_firmware import DEFAULT_AXES, AxisConfig, Esp300Firmware
+from .systematics import Systematics, beam_profile, nonlinear_signal
 from .transports import DeviceChannel, PtyTransport, TcpTransport
-from .world import Optics, camera_angles, cone_averaged_reflectance, footprint_coverage, separation_deg
+from .world import (Optics, camera_angles, cone_averaged_reflectance, footprint_coverage, pixel_sample_coordinates,
+                    separation_deg)
+from ..rig_geometry import misaligned_angles
 
 __all__ = ["EmulatedRig", "RigControl", "Scene", "TrueState", "find_rig", "BAUDRATES",
            "DEFAULT_LAMP_IRRADIANCE_W_M2"]
@@ -66,7 +69,8 @@ class TrueState:
     positions_deg : tuple of float
         True axis positions (a1, a2, a3) [deg].
     theta_i, phi_i, theta_r, phi_r : float
-        Lamp and camera directions [deg].
+        Lamp and camera directions in the sample's frame [deg] (with the rig's
+        misalignment, :class:`~drivers.emulator.systematics.Systematics`).
     lamp_output : float
         Lamp output relative to a warm lamp at rated voltage [-] (no flicker).
     irradiance_w_m2 : float
@@ -78,6 +82,8 @@ class TrueState:
         ``<f cos theta_i>`` over the cones [1/sr] (radiance / irradiance).
     moving : tuple of bool
         Whether each axis is moving.
+    stray_radiance_w_m2_sr : float
+        Stray radiance added over the whole image [W/(m^2 sr)] (0 without stray light).
     """
 
     time_s: float
@@ -91,6 +97,7 @@ class TrueState:
     radiance_w_m2_sr: float
     reflectance_factor: float
     moving: tuple[bool, bool, bool]
+    stray_radiance_w_m2_sr: float = 0.0
 
 
 class Scene:
@@ -110,10 +117,15 @@ class Scene:
         In-band irradiance of the warm lamp at rated voltage on a surface facing it [W/m^2].
     rng : numpy.random.Generator
         Lamp flicker source.
+    systematics : Systematics, optional
+        The rig's systematic errors that act on the scene: misalignment (the true
+        directions), stray light and the beam profile (default: none).
     """
 
     def __init__(self, brdf: Brdf, optics: Optics, lamp: Lamp, stage: Esp300Firmware,
-                 lamp_irradiance_w_m2: float, rng: np.random.Generator) -> None:
+                 lamp_irradiance_w_m2: float, rng: np.random.Generator,
+                 systematics: Systematics | None = None) -> None:
+        self.systematics = systematics or Systematics()
         self.brdf = brdf
         self.optics = optics
         self.lamp = lamp
@@ -124,10 +136,15 @@ class Scene:
         self._coverage_cache: dict[float, np.ndarray] = {}
 
     def angles(self, positions: tuple[float, ...]) -> tuple[float, float, float, float]:
-        """(theta_i, phi_i, theta_r, phi_r) [deg] for axis positions (a1, a2, a3)."""
+        """(theta_i, phi_i, theta_r, phi_r) [deg] in the sample's frame for axis positions
+        (a1, a2, a3): the axes' own angles on an aligned rig, moved by the zero offsets and
+        the sample tilt of a misaligned one (:func:`drivers.rig_geometry.misaligned_angles`)."""
         a1, a2, a3 = positions
         theta_r, phi_r = camera_angles(a1)
-        return float(a2), float(a3), theta_r, phi_r
+        if not self.systematics.misaligned:
+            return float(a2), float(a3), theta_r, phi_r
+        angles = misaligned_angles(a2, a3, theta_r, phi_r, **self.systematics.alignment())
+        return tuple(float(a) for a in angles)  # type: ignore[return-value]
 
     def reflectance_factor(self, positions: tuple[float, ...]) -> float:
         """``<f cos theta_i>`` over the lamp and camera cones at these positions [1/sr]."""
@@ -153,8 +170,18 @@ class Scene:
         return cov
 
     def radiance(self, positions: tuple[float, ...], lamp_output: float) -> float:
-        """Sample radiance toward the camera [W/(m^2 sr)]."""
+        """Sample radiance toward the camera on the beam's axis [W/(m^2 sr)]."""
         return self.lamp_irradiance_w_m2 * lamp_output * self.reflectance_factor(positions)
+
+    def stray_radiance(self, lamp_output: float) -> float:
+        """Stray radiance over the whole image [W/(m^2 sr)]: ``stray_light x E_0 / pi``."""
+        return self.systematics.stray_light * self.lamp_irradiance_w_m2 * lamp_output / np.pi
+
+    def beam_map(self, theta_r: float, theta_i: float, phi_i: float) -> np.ndarray:
+        """Irradiance relative to the beam's axis at the sample point each pixel sees,
+        shape (height, width) (:func:`~drivers.emulator.systematics.beam_profile`)."""
+        x, y = pixel_sample_coordinates(self.optics, theta_r)
+        return beam_profile(x[None, :], y[:, None], theta_i, phi_i, self.systematics.beam_falloff)
 
     def lamp_exposure(self, t_start: float, exposure_s: float) -> float:
         """Lamp output of one exposure: its mean over the exposure times one flicker factor [-].
@@ -174,9 +201,14 @@ class Scene:
         if not np.isfinite(radiance) or radiance < 0:
             raise ValueError(f"the sample BRDF gave radiance {radiance!r} at axis positions "
                              f"{tuple(round(p, 3) for p in positions)}")
-        _, _, theta_r, _ = self.angles(positions)
-        rate = radiance * self.optics.photon_rate_per_radiance()
-        return self.coverage(theta_r) * (rate * exposure_s)
+        theta_i, phi_i, theta_r, _ = self.angles(positions)
+        per_radiance = self.optics.photon_rate_per_radiance() * exposure_s
+        image = self.coverage(theta_r) * (radiance * per_radiance)
+        if self.systematics.beam_falloff and theta_r < 90.0:  # at 90 the sample has no image
+            image *= self.beam_map(theta_r, theta_i, phi_i)
+        if self.systematics.stray_light:
+            image += self.stray_radiance(lamp) * per_radiance
+        return image
 
     def __call__(self, t_start: float, exposure_s: float) -> np.ndarray:
         """Mean photons per pixel of an exposure [photons] (:meth:`photons` with a fresh
@@ -295,19 +327,24 @@ class RigControl:
             radiance_w_m2_sr=rig.scene.lamp_irradiance_w_m2 * lamp * factor,
             reflectance_factor=factor,
             moving=tuple(rig.stage.axes[n].moving(t) for n in sorted(rig.stage.axes)),  # type: ignore[arg-type]
+            stray_radiance_w_m2_sr=rig.scene.stray_radiance(lamp),
         )
 
     def expected_dn(self, exposure_s: float, gain: float = 1.0) -> float:
-        """Noise-free mean DN of a pixel fully inside the sample image, without PRNU/DSNU,
-        for an exposure starting now with the current geometry and lamp output [DN]."""
+        """Noise-free mean DN of a pixel fully inside the sample image on the beam's axis,
+        without PRNU/DSNU, for an exposure starting now with the current geometry and lamp
+        output (stray light and the camera's non-linearity included) [DN]."""
         rig = self._rig
         t = rig.clock.now()
         positions = rig.stage.true_positions(t)
-        radiance = rig.scene.radiance(positions, rig.lamp.mean_output(t, t + exposure_s))
+        lamp = rig.lamp.mean_output(t, t + exposure_s)
+        radiance = rig.scene.radiance(positions, lamp) + rig.scene.stray_radiance(lamp)
         photons = radiance * rig.optics.photon_rate_per_radiance() * exposure_s
         p = rig.ccd_params
         electrons = p.quantum_efficiency * photons + p.dark_current_e_per_s * exposure_s
-        return p.offset_dn + p.base_gain_dn_per_e * gain * electrons
+        signal = nonlinear_signal(p.base_gain_dn_per_e * gain * electrons, rig.systematics.nonlinearity,
+                                  p.max_dn - p.offset_dn)
+        return p.offset_dn + float(signal)
 
 
 class EmulatedRig:
@@ -346,6 +383,11 @@ class EmulatedRig:
     axes : sequence of AxisConfig, optional
         Stage axis configuration (default :data:`~drivers.emulator.stage_firmware.DEFAULT_AXES`;
         e.g. another repeatability or encoder resolution).
+    systematics : Systematics, optional
+        The rig's systematic errors (:mod:`drivers.emulator.systematics`: axis zero
+        offsets, sample tilt, stray light, camera non-linearity, beam profile); default
+        none, the ideal rig. ``drivers.emulator.systematics.realism("lab", seed)`` gives
+        typical magnitudes.
     """
 
     def __init__(self, brdf: Brdf, seed: int = 0, realtime: bool = False, min_separation_deg: float = 5.0,
@@ -354,13 +396,16 @@ class EmulatedRig:
                  lamp_params: LampParams | None = None, fixed_pattern: bool = True,
                  lamp_irradiance_w_m2: float = DEFAULT_LAMP_IRRADIANCE_W_M2, monitor: bool = True,
                  monitor_params: MonitorParams | None = None,
-                 axes: Sequence[AxisConfig] = DEFAULT_AXES) -> None:
+                 axes: Sequence[AxisConfig] = DEFAULT_AXES, systematics: Systematics | None = None) -> None:
         if not callable(brdf):
             raise ValueError(f"brdf must be callable brdf(theta_i, phi_i, theta_r, phi_r), got {brdf!r}")
         if not 0.0 <= min_separation_deg < 90.0:
             raise ValueError(f"min_separation_deg must be within 0..90, got {min_separation_deg!r}")
         if lamp_irradiance_w_m2 <= 0:
             raise ValueError(f"lamp_irradiance_w_m2 must be > 0, got {lamp_irradiance_w_m2!r}")
+        if systematics is not None and not isinstance(systematics, Systematics):
+            raise ValueError(f"systematics must be a drivers.emulator.systematics.Systematics, got {systematics!r}")
+        self.systematics = systematics or Systematics()
         self.name = name
         self.seed = seed
         self.min_separation_deg = float(min_separation_deg)
@@ -377,8 +422,10 @@ class EmulatedRig:
         if motors_on:
             for axis in self.stage.axes.values():
                 axis.motor_on = True
-        self.sensor = CCDSensor(self.ccd_params, seed=seeds[2], fixed_pattern=fixed_pattern)
-        self.scene = Scene(brdf, self.optics, self.lamp, self.stage, lamp_irradiance_w_m2, rngs[3])
+        self.sensor = CCDSensor(self.ccd_params, seed=seeds[2], fixed_pattern=fixed_pattern,
+                                nonlinearity=self.systematics.nonlinearity)
+        self.scene = Scene(brdf, self.optics, self.lamp, self.stage, lamp_irradiance_w_m2, rngs[3],
+                           systematics=self.systematics)
         self.monitor = LampMonitor(monitor_params or MonitorParams(), rngs[7]) if monitor else None
         self.camera = CameraFirmware(self.clock, self.sensor, self.optics, self.scene, rngs[4],
                                      monitor=self.monitor)

@@ -24,6 +24,7 @@ __all__ = [
     "cone_quadrature",
     "cone_averaged_reflectance",
     "footprint_coverage",
+    "pixel_sample_coordinates",
     "PLANCK_TIMES_C",
 ]
 
@@ -315,3 +316,26 @@ def footprint_coverage(optics: Optics, theta_r: float) -> np.ndarray:
     fx = _interval_overlap(xs, xs + 1.0, cx - half_w, cx + half_w)
     fy = _interval_overlap(ys, ys + 1.0, cy - half_h, cy + half_h)
     return np.outer(fy, fx)
+
+
+def pixel_sample_coordinates(optics: Optics, theta_r: float) -> tuple[np.ndarray, np.ndarray]:
+    """The point of the sample each pixel's centre sees [mm], as x of every column and y of
+    every row (origin at the sample's centre; image x runs along the sample's x axis).
+
+    The inverse of the image geometry of :func:`footprint_coverage`: a pixel is
+    ``p / m`` [mm] on the sample across the swing plane and ``p / (m cos theta_r)`` along
+    it.  At ``theta_r = 90`` the sample has no image and every x is infinite.
+
+    Examples
+    --------
+    >>> x, y = pixel_sample_coordinates(Optics(), 60.0)
+    >>> round(float(x[256] - x[255]), 4), round(float(y[240] - y[239]), 4)    # mm per pixel
+    (0.3658, 0.1829)
+    """
+    pixel_mm = optics.pixel_pitch_um * 1e-3 / optics.magnification
+    cos_r = max(np.cos(np.radians(theta_r)), 0.0)
+    columns = (np.arange(optics.width) + 0.5 - optics.width / 2.0) * pixel_mm
+    with np.errstate(divide="ignore"):
+        x = columns / cos_r if cos_r > 0 else np.copysign(np.inf, columns)
+    y = (np.arange(optics.height) + 0.5 - optics.height / 2.0) * pixel_mm
+    return x, y

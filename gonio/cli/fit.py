@@ -42,6 +42,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="fit an extra noise term added in quadrature to the uncertainties: 'absolute' "
                              "(the default when given alone; parameter jitter, in data units) or 'relative' "
                              "(rel_jitter, a fraction of the prediction)")
+    parser.add_argument("--alignment", action="append", default=[], metavar="NAMES",
+                        help="fit the rig's alignment as nuisance parameters: 'all' or comma-separated names from "
+                             "view_offset, theta_i_offset, phi_i_offset (axis zero offsets), tilt_x, tilt_y (sample "
+                             "tilt) [deg], with normal priors N(0, 0.5 deg) unless --prior overrides them; for "
+                             "recordings of this rig (docs/fitting.md, 'The rig's errors as parameters')")
+    parser.add_argument("--stray-light", action="store_true",
+                        help="fit the rig's stray light as a nuisance parameter: stray_light, the stray radiance as a "
+                             "fraction of a white Lambertian's at normal incidence (uniform prior on [0, 0.05])")
     parser.add_argument("--walkers", type=int, default=None,
                         help="number of emcee walkers (default 256 where all walkers are evaluated at once, else 32: gonio.fitting.mcmc.default_walkers, chosen by measurement)")
     parser.add_argument("--max-steps", type=int, default=20000, help="step limit of the chain (default 20000)")
@@ -217,24 +225,42 @@ def _load(path: Path, quantity: str | None):
             "radiance": reduced.relative_radiance}[quantity](), {}
 
 
+def _alignment(items: list[str]) -> tuple[str, ...]:
+    """The ``--alignment`` names (repeatable, comma-separated, or 'all')."""
+    from gonio.cli import CLIError
+    from gonio.fitting.rig_errors import parse_alignment
+
+    try:
+        return parse_alignment(",".join(items))
+    except ValueError as error:
+        raise CLIError(f"--alignment: {error}") from None
+
+
 def _run(args: argparse.Namespace) -> int:
     from gonio import models
     from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
+    from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
     from gonio.fitting.results import EXIT_INADEQUATE
 
     data_path = Path(args.data)
     dataset, priors = _load(data_path, args.quantity)
     fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
     options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
+    alignment = _alignment(args.alignment)
     if len(args.model) > 1:
-        comparison = compare_models(dataset, [(name, {k: v for k, v in fixed.items() if k in models.get(name).param_names})
-                                              for name in args.model], priors=priors, jitter=args.jitter or False)
+        rig = {k: v for k, v in fixed.items() if k in RIG_ERROR_NAMES}  # the rig's errors: every candidate's
+        candidates = [(name, {**{k: v for k, v in fixed.items() if k in models.get(name).param_names}, **rig})
+                      for name in args.model]
+        comparison = compare_models(dataset, candidates, priors=priors, jitter=args.jitter or False,
+                                    alignment=alignment, stray_light=args.stray_light)
         print(comparison.summary())
         return 0 if comparison.chosen_adequate else EXIT_INADEQUATE
     name = args.model[0]
     model = models.get(name)
     for key, text in _pairs(args.prior, "--prior").items():
         bounds = model.param(key).bounds if key in model.param_names else (-float("inf"), float("inf"))
+        if key in RIG_ERROR_NAMES:
+            bounds = STRAY_LIGHT.bounds if key == STRAY_LIGHT.name else (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
         priors[key] = parse_prior(text, bounds)
     if args.out is not None and not args.out.strip():
         from gonio.cli import CLIError
@@ -250,7 +276,7 @@ def _run(args: argparse.Namespace) -> int:
         result = fit(
             dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=args.jitter or False, options=options,
             n_walkers=args.walkers, max_steps=args.max_steps, rhat_limit=args.rhat_limit, seed=args.seed,
-            progress=_Progress(args.quiet),
+            progress=_Progress(args.quiet), alignment=alignment, stray_light=args.stray_light,
         )
     path = result.save(out)
     print(result.summary())

@@ -11,14 +11,13 @@ import gonio
 from gonio import acquisition, protocols
 
 from . import CLIError
+from .realism import REALISM_HELP, REALISM_SYNTAX, parse_realism, realism_metadata
 from .samples import parse_sample_spec
 from .paths import check_output_folder
 from .progress import ProgressLine
 
 #: The paper's wall plaster (Oren & Nayar 1995, Fig 16): the default emulated sample.
 DEFAULT_SAMPLE = "oren-nayar:sigma=30,rho=0.9"
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``gonio run``."""
     parser = subparsers.add_parser(
@@ -39,6 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "or a CUReT material (e.g. curet:plaster_a); default: the protocol's [sample] emulated, "
                              f"else {DEFAULT_SAMPLE}")
     parser.add_argument("--seed", type=int, default=0, help="emulator seed (default 0)")
+    parser.add_argument("--realism", default="ideal", metavar=REALISM_SYNTAX, help=REALISM_HELP)
     parser.add_argument("--stage", help="stage port or URL of a real rig (e.g. /dev/ttyUSB0)")
     parser.add_argument("--camera", help="camera port or URL of a real rig")
     parser.add_argument("--lamp", help="lamp supply port or URL of a real rig")
@@ -51,13 +51,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 @contextmanager
-def emulated_rig(sample: str, seed: int, name: str = "gonio-run", **emulator_options) -> Iterator[tuple]:
+def emulated_rig(sample: str, seed: int, name: str = "gonio-run", realism: str = "ideal",
+                 **emulator_options) -> Iterator[tuple]:
     """An in-process emulated rig with a sample spec as sample, opened through the drivers.
 
     Yields ``(rig, emulator, change_sample, metadata)``: the driver-level Rig, the emulator
     (for its clock), a function swapping the sample for a Lambertian reference standard
-    and back, and the configuration to store with the recording. ``emulator_options`` go
-    to :class:`drivers.emulator.rig.EmulatedRig` (e.g. ``monitor=False``,
+    and back, and the configuration to store with the recording. ``realism`` is the rig's
+    systematic errors as a spec (:func:`parse_realism`); the spec and every magnitude it
+    gave are stored in ``metadata["rig"]["realism"]``, so a resume with another realism is
+    refused naming the field. ``emulator_options`` go to
+    :class:`drivers.emulator.rig.EmulatedRig` (e.g. ``monitor=False``,
     ``lamp_params=...``); plain values among them are stored in the metadata.
     """
     from drivers.emulator.rig import EmulatedRig
@@ -66,7 +70,9 @@ def emulated_rig(sample: str, seed: int, name: str = "gonio-run", **emulator_opt
     parsed = parse_sample_spec(sample)
     parsed.prepare()  # a rendered surface's table: loaded, or rendered now with progress
     brdf = parsed.brdf
-    emulator = EmulatedRig(brdf, seed=seed, name=name, **{"lamp_warm": False, **emulator_options})
+    systematics = parse_realism(realism, seed)
+    emulator = EmulatedRig(brdf, seed=seed, name=name, systematics=systematics,
+                           **{"lamp_warm": False, **emulator_options})
     emulator.start(pty=False)
     try:
         rig = Rig.open(emulator.url("stage"), emulator.url("camera"), emulator.url("lamp"))
@@ -80,6 +86,7 @@ def emulated_rig(sample: str, seed: int, name: str = "gonio-run", **emulator_opt
             metadata = {"rig": {"kind": "emulator", "sample": sample, "model": parsed.model,
                                 "parameters": parsed.parameters, "seed": seed,
                                 "min_separation_deg": emulator.min_separation_deg,
+                                "realism": realism_metadata(realism, systematics),
                                 "lamp_monitor": emulator.monitor is not None,
                                 "options": {k: (v if isinstance(v, (bool, int, float, str)) else repr(v))
                                             for k, v in emulator_options.items()},
@@ -159,7 +166,8 @@ def _run(args: argparse.Namespace) -> int:
         else:
             options = {"monitor": False} if args.no_monitor else {}
             sample = emulated_sample(args.sample, protocol)
-            with emulated_rig(sample, args.seed, **options) as (rig, emulator, change_sample, metadata):
+            with emulated_rig(sample, args.seed, realism=args.realism, **options) as (rig, emulator, change_sample,
+                                                                                   metadata):
                 result = acquisition.run_protocol(
                     protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
                     warm_up=not args.no_warm_up,

@@ -227,7 +227,8 @@ def _profile_log_posterior(problem, least_squares, priors, name: str, value: flo
     values = dict(least_squares.values, **{name: value})
     if len(problem.free) > 1:
         fixed = dict(problem.fixed, **{name: value})
-        reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter)
+        reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter,
+                             problem.alignment, problem.stray_light)
         gaussian = {n: priors[n] for n in reduced.free if isinstance(priors[n], Normal)}
         values.update(fit_least_squares(reduced, start=values, n_starts=1, priors=gaussian).values)
     return _log_posterior(problem, priors, np.array([values[n] for n in problem.free], float))
@@ -300,7 +301,8 @@ def _product_evidence(problem, least_squares, priors, factor: str) -> LaplaceEvi
     if not reference > 0:
         return LaplaceEvidence(math.nan)
     fixed = dict(problem.fixed, **{factor: reference})
-    reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter)
+    reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter,
+                         problem.alignment, problem.stray_light)
     reduced_ls = fit_least_squares(reduced, start=least_squares.values, n_starts=1)
     reduced_priors: dict[str, Any] = {n: p for n, p in priors.items() if n in reduced.free}
     reduced_priors["scale"] = _ProductPrior(priors[factor], priors["scale"], problem.spec(factor).bounds, reference)

@@ -20,6 +20,18 @@ Nuisance parameters
     (speckle, sample inhomogeneity, model error).  Its physical range is taken as
     [0, 10 (max|value| + max sigma)]: scatter ten times the signal would make the data
     meaningless, and a finite range gives it a proper uniform prior.
+``view_offset``, ``theta_i_offset``, ``phi_i_offset``, ``tilt_x``, ``tilt_y`` [deg]
+    The rig's alignment (``alignment=``): axis zero offsets and the sample's tilt. The
+    model is then evaluated at the true geometry of every walker
+    (:mod:`gonio.fitting.rig_errors`), so the linear models' sufficient statistics and the
+    fixed-geometry fast path do not apply; with every alignment value 0 the likelihood is
+    the plain one exactly. Their default priors are normal (N(0, 0.5 deg)):
+    :meth:`FitProblem.priors_with_defaults` adds them, as :func:`gonio.fitting.fit` and
+    :func:`gonio.fitting.compare_models` do.
+``stray_light`` [-]
+    Stray radiance over the image as a fraction of ``E_0 / pi`` (``stray_light=True``),
+    added to the sample's radiance and to the reference standard's
+    (:mod:`gonio.fitting.rig_errors`). Range [0, 0.05], uniform prior.
 
 Correlated errors
 -----------------
@@ -33,14 +45,17 @@ from __future__ import annotations
 import json
 
 import math
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from gonio import models
 from gonio.models import Model, Param
 
+from .rig_errors import ALIGNMENT_NAMES, ALIGNMENT_PARAMETERS, RIG_ERROR_NAMES, STRAY_LIGHT, RigPrediction, \
+    alignment_prior, is_identity, parse_alignment
 from .dataset import Dataset
+from .priors import Prior
 
 __all__ = ["FitProblem", "combine_prediction", "predict_quantity"]
 
@@ -114,14 +129,23 @@ def predict_quantity(
     phi_r: Any,
     values: Mapping[str, float],
     options: Mapping[str, Any] | None = None,
+    metadata: Mapping[str, Any] | None = None,
 ) -> np.ndarray:
     """Predicted measured quantity at arbitrary geometries [deg] (plots, reports).
 
     ``values`` holds the model parameters and, for relative radiance, ``scale``; other keys
-    (``jitter``) are ignored.
+    (``jitter``) are ignored. Rig errors among them (alignment values, ``stray_light``: not
+    all 0) make it the prediction of that rig at these recorded geometries
+    (:class:`gonio.fitting.rig_errors.RigPrediction`, with the dataset's ``metadata`` for
+    its reference standard); parameter values may then be columns (D, 1) against flat
+    geometries, giving (D, N).
     """
     model = models.get(model) if isinstance(model, str) else model
     params = {k: v for k, v in values.items() if k in model.param_names}
+    if not is_identity({k: v for k, v in values.items() if k in RIG_ERROR_NAMES}):
+        flat = [np.ravel(a) for a in np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))]
+        out = RigPrediction(model, quantity, flat, dict(options or {}), metadata or {}).of_values(values)
+        return out.reshape(np.shape(out)[:-1] + np.broadcast(theta_i, phi_i, theta_r, phi_r).shape)
     ti, pi_, tr, pr = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))
     brdf = model(ti, pi_, tr, pr, **params, **dict(options or {}))
     normal = model(ti, pi_, np.zeros_like(tr), pi_, **params, **dict(options or {})) if quantity == "normalised_radiance" else None
@@ -207,6 +231,13 @@ class FitProblem:
     jitter : bool or {"absolute", "relative"}
         Add a free extra-noise parameter: ``jitter`` (True or "absolute") or ``rel_jitter``
         ("relative"); see the module docstring.
+    alignment : str or sequence of str, optional
+        Alignment nuisance parameters to fit (``"all"`` or names of
+        :data:`gonio.fitting.rig_errors.ALIGNMENT_NAMES`); one given in ``fixed`` is part
+        of the problem at its fixed value without being listed here.
+    stray_light : bool
+        Fit the rig's stray light (``stray_light``, :mod:`gonio.fitting.rig_errors`); a
+        value in ``fixed`` includes it at that value.
 
     Raises
     ------
@@ -230,6 +261,8 @@ class FitProblem:
         fixed: Mapping[str, Any] | None = None,
         options: Mapping[str, Any] | None = None,
         jitter: bool | str = False,
+        alignment: str | Sequence[str] | None = None,
+        stray_light: bool = False,
     ) -> None:
         #: The registered model the user asked for.
         self.base_model = models.get(model) if isinstance(model, str) else model
@@ -251,6 +284,14 @@ class FitProblem:
             specs.append(Param("jitter", "arb. units" if dataset.unit.startswith("arb") else dataset.unit, 0.0, (0.0, upper), _JITTER_DESCRIPTION))
         elif self.jitter == "relative":
             specs.append(Param("rel_jitter", "-", 0.0, (0.0, 10.0), _REL_JITTER_DESCRIPTION))
+        included = set(parse_alignment(alignment)) | {name for name in (fixed or {}) if name in ALIGNMENT_NAMES}
+        #: The alignment parameters of the problem, free or fixed (gonio.fitting.rig_errors).
+        self.alignment: tuple[str, ...] = tuple(name for name in ALIGNMENT_NAMES if name in included)
+        specs.extend(p for p in ALIGNMENT_PARAMETERS if p.name in included)
+        #: Whether the rig's stray light is a parameter (free or fixed).
+        self.stray_light = bool(stray_light) or STRAY_LIGHT.name in (fixed or {})
+        if self.stray_light:
+            specs.append(STRAY_LIGHT)
         self.specs: tuple[Param, ...] = tuple(specs)
         self._spec = {p.name: p for p in self.specs}
         self.fixed: dict[str, float] = {}
@@ -265,6 +306,9 @@ class FitProblem:
         if not self.free:
             raise ValueError(f"every parameter of {self.model.name!r} is fixed; nothing to fit")
         _, self.options = self.model.resolve(self.options)
+        self._rig_errors = tuple(self.alignment) + ((STRAY_LIGHT.name,) if self.stray_light else ())
+        self._rig = (RigPrediction(self.model, dataset.quantity, dataset.geometry, self.options, dataset.metadata)
+                     if self._rig_errors else None)
         self._fast = self.model.at(*dataset.geometry, **self.options)
         self._normal_index = None
         if dataset.quantity == "normalised_radiance":
@@ -287,8 +331,8 @@ class FitProblem:
         """(linear form, :class:`QuadraticChiSquare`) when the prediction is linear in the
         form's coefficients at every measurement for every parameter value (BRDF or
         radiance data, no free extra noise, a model with an exact LinearForm there), else
-        None."""
-        if self.jitter or self.dataset.quantity not in ("brdf", "radiance"):
+        None. Not with rig errors that change the prediction."""
+        if self.jitter or self.dataset.quantity not in ("brdf", "radiance") or self.has_rig_errors:
             return None
         form = self._fast.linear_form()
         if form is None or not np.all(form.exact) or not np.all(np.isfinite(form.terms)):
@@ -298,11 +342,28 @@ class FitProblem:
         return form, QuadraticChiSquare(whitened, self.whiten(np.asarray(self.dataset.value, float))[0])
 
     @property
+    def has_rig_errors(self) -> bool:
+        """Whether a rig error (alignment, stray light) is free or fixed away from 0: the
+        prediction is then that of :class:`~gonio.fitting.rig_errors.RigPrediction`."""
+        return any(name in self.free or self.fixed[name] != 0.0 for name in self._rig_errors)
+
+    @property
     def vectorised(self) -> bool:
         """Whether :meth:`log_likelihood_batch` evaluates all walkers in one model call
-        (a linear model's sufficient statistics, or a model that broadcasts its
-        parameters) rather than one combination at a time."""
+        at a cost that hardly grows with their number (a linear model's sufficient
+        statistics, or a model that broadcasts its parameters, at fixed geometry) rather
+        than one combination at a time. Free alignment parameters give every walker its
+        own geometry: the cost then grows with the walkers, and this is False."""
+        if any(name in self.free for name in self.alignment):
+            return False
         return self._linear is not None or self.base_model.broadcasts_params
+
+    def priors_with_defaults(self, priors: Mapping[str, Prior] | None = None) -> dict[str, Prior]:
+        """``priors`` plus the default normal prior of every free alignment parameter not
+        given there (:func:`gonio.fitting.rig_errors.alignment_prior`)."""
+        out: dict[str, Prior] = {name: alignment_prior(name) for name in self.alignment if name in self.free}
+        out.update(priors or {})
+        return out
 
     @property
     def n_informative(self) -> int:
@@ -352,6 +413,8 @@ class FitProblem:
     def _predict_checked(self, values: Mapping[str, Any], params: dict[str, float]) -> np.ndarray:
         """:meth:`predict` for complete, validated model parameters ``params``."""
         self.evaluations += 1
+        if self._rig is not None and not is_identity({name: values[name] for name in self._rig_errors}):
+            return self._rig.of_values({**values, **params})
         brdf = self._fast.unchecked(**params)
         normal = None
         if self._normal_index is not None:

@@ -35,6 +35,7 @@ from .dataset import Dataset
 from .least_squares import LeastSquaresResult, _with_unit
 from .mcmc import LogPosterior, McmcResult
 from .priors import Prior, prior_from_dict
+from .rig_errors import RIG_ERROR_NAMES, RigPrediction
 from .problem import FitProblem, combine_prediction, evaluated_model, jitter_mode, predict_quantity
 from .selection import information_criteria
 
@@ -129,6 +130,10 @@ class FitResult:
     adequacy : Adequacy or None
         The goodness-of-fit verdict (:mod:`gonio.fitting.adequacy`): chi-square and
         posterior predictive p-values, extra noise relative to the stated uncertainties.
+    alignment : tuple of str
+        The alignment parameters of the fit, free or fixed (:mod:`gonio.fitting.rig_errors`).
+    stray_light : bool
+        Whether the rig's stray light is a parameter of the fit.
     """
 
     model: str
@@ -145,6 +150,8 @@ class FitResult:
     created: str = ""
     gonio_version: str = ""
     adequacy: Adequacy | None = None
+    alignment: tuple[str, ...] = ()
+    stray_light: bool = False
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -166,6 +173,8 @@ class FitResult:
             mcmc=mcmc,
             priors=dict(priors or {}),
             jitter=problem.jitter,
+            alignment=problem.alignment,
+            stray_light=problem.stray_light,
             created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             gonio_version=gonio.__version__,
         )
@@ -200,7 +209,8 @@ class FitResult:
 
     def problem(self) -> FitProblem:
         """Rebuild the :class:`FitProblem` of this fit."""
-        return FitProblem(self.model, self.dataset, self.fixed, self.options, self.jitter)
+        return FitProblem(self.model, self.dataset, self.fixed, self.options, self.jitter, self.alignment,
+                          self.stray_light)
 
     @property
     def converged(self) -> bool | None:
@@ -224,7 +234,8 @@ class FitResult:
         """The fitted quantity at arbitrary geometries [deg] (best values by default)."""
         values = dict(self.best_values() if values is None else values)
         model = evaluated_model(self.model, self.dataset)  # through the apertures, as fitted
-        return predict_quantity(model, self.dataset.quantity, theta_i, phi_i, theta_r, phi_r, values, self.options)
+        return predict_quantity(model, self.dataset.quantity, theta_i, phi_i, theta_r, phi_r, values, self.options,
+                                self.dataset.metadata)
 
     def posterior_predictive(
         self, theta_i, phi_i, theta_r, phi_r, n_draws: int = 200, seed: int = 0, percentiles=(2.5, 16, 50, 84, 97.5)
@@ -257,6 +268,8 @@ class FitResult:
         """
         model = evaluated_model(self.model, self.dataset)
         ti, pi_, tr, pr = geometry
+        if any(name in self.free or self.fixed.get(name, 0.0) != 0.0 for name in RIG_ERROR_NAMES):
+            return self._predict_rig_draws(model, draws, geometry)
         at_views = model.at(ti, pi_, tr, pr, **self.options)
         at_normal = model.at(ti, pi_, np.zeros_like(tr), pi_, **self.options) \
             if self.dataset.quantity == "normalised_radiance" else None
@@ -274,6 +287,18 @@ class FitResult:
             scale = np.asarray(values.get("scale", 1.0), float)
             out[start:start + chunk] = combine_prediction(self.dataset.quantity, brdf, normal, np.cos(np.radians(ti)),
                                                           scale)
+        return out
+
+    def _predict_rig_draws(self, model, draws: np.ndarray, geometry: list[np.ndarray]) -> np.ndarray:
+        """:meth:`_predict_draws` of a fit with rig errors (alignment, stray light): the draws
+        as columns of one prediction of that rig per chunk (RigPrediction, as predict_quantity)."""
+        chunk = max(1, _PREDICTIVE_ELEMENTS // max(geometry[0].size * 49, 1))  # 49 aperture sub-rays
+        rig = RigPrediction(model, self.dataset.quantity, geometry, self.options, self.dataset.metadata)
+        base = dict(self.least_squares.values)
+        out = np.empty((draws.shape[0], geometry[0].size))
+        for start in range(0, draws.shape[0], chunk):
+            block = draws[start:start + chunk]
+            out[start:start + chunk] = rig.of_values(dict(base, **{name: block[:, [k]] for k, name in enumerate(self.free)}))
         return out
 
     def information(self) -> dict[str, float]:
@@ -306,6 +331,8 @@ class FitResult:
             "free": list(self.free),
             "options": self.options,
             "jitter": self.jitter,
+            "alignment": list(self.alignment),
+            "stray_light": self.stray_light,
             "priors": {name: prior.to_dict() for name, prior in self.priors.items()},
             "least_squares": self.least_squares.to_dict(),
             "information_criteria": self.information(),
@@ -475,6 +502,8 @@ class FitResult:
             mcmc=mcmc,
             priors={k: prior_from_dict(v) for k, v in data["priors"].items()},
             jitter=jitter_mode(data["jitter"]),
+            alignment=tuple(data.get("alignment", ())),
+            stray_light=bool(data.get("stray_light", False)),
             posterior=posterior,
             flags=list(data["flags"]),
             created=data.get("created", ""),

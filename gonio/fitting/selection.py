@@ -155,6 +155,8 @@ def compare_models(
     n_starts: int = 6,
     priors: Mapping[str, Any] | None = None,
     jitter: bool | str = False,
+    alignment: str | Sequence[str] | None = None,
+    stray_light: bool = False,
 ) -> ModelComparison:
     """Fit several models by least squares and choose the simplest adequate one (module docstring).
 
@@ -176,6 +178,11 @@ def compare_models(
         :func:`gonio.fitting.fit`.
     jitter : bool or {"absolute", "relative"}
         The extra-noise term of every candidate, as in :func:`gonio.fitting.fit`.
+    alignment : str or sequence of str, optional
+        The alignment parameters of every candidate, with their default priors, as in
+        :func:`gonio.fitting.fit`.
+    stray_light : bool
+        The stray-light parameter of every candidate, as in :func:`gonio.fitting.fit`.
 
     Returns
     -------
@@ -201,8 +208,8 @@ def compare_models(
     fits = {}
     for candidate in candidates:
         name, fixed = (candidate, {}) if isinstance(candidate, str) else (candidate[0], dict(candidate[1]))
-        problem = FitProblem(name, dataset, fixed, jitter=jitter)
-        given = {k: v for k, v in (priors or {}).items() if k in problem.free}
+        problem = FitProblem(name, dataset, fixed, jitter=jitter, alignment=alignment, stray_light=stray_light)
+        given = {k: v for k, v in problem.priors_with_defaults(priors).items() if k in problem.free}
         ls = fit_least_squares(problem, n_starts=n_starts, priors=given)
         candidate_priors = resolve_priors(problem, ls.values, given)
         label = candidate_label(name, fixed)

@@ -1,7 +1,7 @@
 """One call from data to a complete fit result: :func:`fit`."""
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 from gonio.models import Model
 
@@ -30,6 +30,8 @@ def fit(
     rhat_limit: float = 1.01,
     seed: int | None = 0,
     progress: Callable[[int, int, float], None] | None = None,
+    alignment: str | Sequence[str] | None = None,
+    stray_light: bool = False,
 ) -> FitResult:
     """Fit a registered model to a dataset: least squares, then (optionally) MCMC.
 
@@ -54,6 +56,12 @@ def fit(
         Least-squares starting values.
     n_walkers, max_steps, tau_multiple, rhat_limit, seed, progress
         Passed to :func:`gonio.fitting.mcmc.sample_posterior`.
+    alignment : str or sequence of str, optional
+        Alignment nuisance parameters to fit (``"all"`` or names such as
+        ``"view_offset"``, ``"tilt_y"``; :mod:`gonio.fitting.rig_errors`), with their
+        default normal priors unless ``priors`` overrides them.
+    stray_light : bool
+        Fit the rig's stray light (``stray_light``, :mod:`gonio.fitting.rig_errors`).
 
     Returns
     -------
@@ -68,7 +76,8 @@ def fit(
     >>> round(result.best_values()["rho"], 3)
     0.5
     """
-    problem = FitProblem(model, dataset, fixed, options, jitter)
+    problem = FitProblem(model, dataset, fixed, options, jitter, alignment, stray_light)
+    priors = problem.priors_with_defaults(priors)
     least_squares = fit_least_squares(problem, start=start, seed=seed, priors=priors)
     if not mcmc:
         return FitResult.build(problem, least_squares, None, resolve_priors(problem, least_squares.values, priors))

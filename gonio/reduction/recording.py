@@ -16,12 +16,16 @@ from .result import LOW_SIGNAL_SIGMAS, Reduced
 
 __all__ = ["reduce_recording", "combine_reduced"]
 
-def _reference(rows: Readings, protocol, aperture) -> tuple[float | None, float | None, dict[str, float], dict]:
-    """E_0 from the reference standard, reduced like the sample, with its budget (relative)."""
+def _reference(rows: Readings, protocol, aperture) -> tuple[float | None, float | None, dict[str, float], dict, dict]:
+    """E_0 from the reference standard, reduced like the sample, with its budget (relative),
+    the consistency of its readings and, as ``{"geometry", "weights", "reflectance"}``, the
+    read-back geometry (theta_i, phi_i, theta_r, phi_r) [deg] of every reading, its weight
+    in E_0 and the standard's reflectance (what a fit of the rig's errors needs,
+    gonio.fitting.rig_errors)."""
     p = rows.points
     ref = rows.index[p["block"][rows.index] == REFERENCE_BLOCK]
     if ref.size == 0 or protocol is None or protocol.reference is None:
-        return None, None, {}, {}
+        return None, None, {}, {}, {}
     from ..instrument import aperture_averaged
 
     standard = protocol.reference
@@ -30,18 +34,21 @@ def _reference(rows: Readings, protocol, aperture) -> tuple[float | None, float 
     phi_i = readback_or_plan(p, "stage_lamp_phi", "phi_i")[ref]
     view = readback_or_plan(p, "stage_camera", "view")[ref]
     model = aperture_averaged("lambert", lamp_sr, camera_sr)
-    expected = model(theta_i, phi_i, np.abs(view), np.where(view >= 0, phi_i * 0, 180.0),
-                     rho=standard.reflectance) * np.cos(np.radians(theta_i))
+    theta_r, phi_r = np.abs(view), np.where(view >= 0, phi_i * 0, 180.0)
+    expected = model(theta_i, phi_i, theta_r, phi_r, rho=standard.reflectance) * np.cos(np.radians(theta_i))
     e0 = rows.value[ref] / expected
     components = {n: c[ref] / expected for n, c in rows.budget.items()}
     shared = {n: labels[ref] for n, labels in rows.shared.items() if n != "prnu"}  # a window per geometry
-    mean, parts, chi2, _ = combine(np.arange(ref.size), e0, components, shared)
+    mean, parts, chi2, varying = combine(np.arange(ref.size), e0, components, shared)
+    weights = 1.0 / varying**2 if np.all(varying > 0) else np.ones(ref.size)  # as combine weights them
+    record = {"geometry": np.column_stack([theta_i, phi_i, theta_r, phi_r]).tolist(),
+              "weights": (weights / weights.sum()).tolist(), "reflectance": [float(standard.reflectance)] * ref.size}
     relative = {f"reference {n}": v / mean for n, v in parts.items() if v > 0}
     relative["certificate"] = standard.reflectance_uncertainty
     relative["angular behaviour"] = standard.angular_uncertainty
     consistency = {"reference_reduced_chi2": chi2 / (ref.size - 1)} if ref.size > 1 else {}
     total = mean * math.sqrt(sum(v**2 for v in relative.values()))
-    return float(mean), float(total), {k: float(v) for k, v in relative.items()}, consistency
+    return float(mean), float(total), {k: float(v) for k, v in relative.items()}, consistency, record
 
 
 def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
@@ -84,7 +91,7 @@ def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
     protocol = loads(protocol_text, source=str(folder / "metadata.json")) if protocol_text else None
     aperture = _aperture(meta, protocol)
     rows = readings_of(meta, points, lamp)
-    reference, reference_sigma, calibration, ref_consistency = _reference(rows, protocol, aperture)
+    reference, reference_sigma, calibration, ref_consistency, ref_record = _reference(rows, protocol, aperture)
     sample = rows.index[(points["block"][rows.index] != REFERENCE_BLOCK) & (points["block"][rows.index] != CHECK_BLOCK)]
     if sample.size == 0:
         raise ValueError(f"{folder}: the recording holds no successfully measured, unsaturated sample points")
@@ -115,7 +122,8 @@ def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
         label=label,
         metadata={"recording": str(folder), "protocol": meta.get("protocol", {}).get("name"),
                   "planned_view": [k[2] for k in keys],
-                  **({"aperture_sr": [float(a) for a in aperture]} if aperture else {})},
+                  **({"aperture_sr": [float(a) for a in aperture]} if aperture else {}),
+                  **({"reference_standard": ref_record} if ref_record else {})},
         budget=budget, calibration=calibration, flags=flags, excluded=excluded,
         warnings=tuple(rows.warnings), consistency=consistency, unit=rows.unit, repeat_statistics=tuple(repeat_stats),
         window=window,
@@ -158,7 +166,7 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
     names = sorted({n for p in parts for n in p.budget})
     budget = {n: np.concatenate([p.budget.get(n, np.zeros(len(p.radiance))) for p in parts]) for n in names}
     refs = [p for p in parts if p.reference_irradiance is not None]
-    irradiance = sigma = None
+    irradiance = sigma = reference_record = None
     calibration: dict[str, float] = {}
     if refs:
         common = ("certificate", "angular behaviour")
@@ -166,6 +174,7 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
                        for p in refs]
         weights = np.array([1.0 / max(s, 1e-300) ** 2 for s in statistical])
         irradiance = float(np.sum(weights * np.array([p.reference_irradiance for p in refs])) / np.sum(weights))
+        reference_record = _combined_reference_record(refs, weights / np.sum(weights))
         calibration["reference (combined)"] = float(1.0 / math.sqrt(np.sum(weights)) / irradiance)
         for key in common:
             calibration[key] = max(p.calibration.get(key, 0.0) for p in refs)
@@ -178,7 +187,8 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
         label=label or parts[0].label,
         metadata={"recordings": [p.metadata.get("recording") for p in parts],
                   "planned_view": [v for p in parts for v in p.metadata.get("planned_view", list(p.view))],
-                  **({"aperture_sr": parts[0].metadata["aperture_sr"]} if "aperture_sr" in parts[0].metadata else {})},
+                  **({"aperture_sr": parts[0].metadata["aperture_sr"]} if "aperture_sr" in parts[0].metadata else {}),
+                  **({"reference_standard": reference_record} if reference_record else {})},
         budget=budget, calibration=calibration,
         flags=np.concatenate([p.flags if p.flags is not None else np.full(len(p.radiance), "", object) for p in parts]),
         excluded={k: sum(p.excluded.get(k, 0) for p in parts) for k in {k for p in parts for k in p.excluded}},
@@ -186,3 +196,14 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
         unit=parts[0].unit,
         window=None if any(p.window is None for p in parts) else np.concatenate([p.window for p in parts]),
     )
+
+
+def _combined_reference_record(refs: "list[Reduced]", weights: np.ndarray) -> dict[str, list] | None:
+    """The reference readings of joined recordings with their weights in the joint E_0: each
+    recording's own weights times the recording's weight (None when a part lacks them)."""
+    records = [p.metadata.get("reference_standard") for p in refs]
+    if any(not r for r in records):
+        return None
+    geometry = [g for r in records for g in r["geometry"]]
+    joint = [float(w * v) for w, r in zip(weights, records) for v in r["weights"]]
+    return {"geometry": geometry, "weights": joint, "reflectance": [v for r in records for v in r["reflectance"]]}

@@ -1,0 +1,318 @@
+"""What each systematic error of the rig does to the fitted sigma and rho, ignored and modelled.
+
+The emulated rig measures the Oren & Nayar Fig 16 (plane of incidence, theta_i = 30, 45,
+60 deg) and Fig 19 (off-plane, theta_i = 60 and 75 deg) protocols as shipped, each with
+its diffuse reflectance standard, on a sample of the fitted model's own family
+(``oren-nayar``, sigma = 30 deg, rho = 0.9, ir_weight = 1), so that what a fit gets
+wrong is the systematic's doing.  Each condition switches on one systematic error of
+the ``lab`` preset (docs/emulator.md, "Systematic errors") with its seeded magnitude, or
+all of them (``lab``), or none (``ideal``); the two recordings are reduced and joined,
+and ``oren-nayar`` (ir_weight fixed at 1) is fitted twice with the dataset and
+calibration prior of ``Reduced.fit_inputs()``:
+
+- **ignored**: the plain fit, as ``gonio fit RECORDING`` does it;
+- **modelled**: what gonio can do about that systematic (:data:`CONDITIONS`): the
+  alignment parameters for zero offsets and sample tilt, the stray-light parameter for
+  stray light, a relative extra-noise term (``rel_jitter``) for the camera's
+  non-linearity (which gonio does not model: the term only makes the intervals honest
+  about the scatter it adds), normalised radiance for the beam profile (each
+  incidence's level divided out), all of these together for ``lab``.
+
+Both fits are least squares with the Laplace (Gaussian) interval of the posterior mode,
+value +- 1.96 standard errors, unless ``--mcmc``; by default the ``offsets`` modelled fit
+of the first seed is also sampled with MCMC (emcee, gonio's convergence rule) to compare
+its 95 % intervals with the Laplace ones.
+Recorded per fit: value, standard error, z = (value - truth) / error, whether the 95 %
+interval holds the truth, reduced chi-square and the goodness-of-fit verdict, the fitted
+rig errors against the truth.  The speed of the alignment parameters is measured as the
+time of one likelihood evaluation of 32 walkers with free alignment against the plain
+fixed-geometry path, on the same dataset in the same run.
+
+Writes docs/benchmarks/systematics.json and systematics.png.
+Run: ``python benchmarks/bench_systematics.py`` (about ten minutes of CPU on one core);
+``--seeds N`` (default 3), ``--mcmc`` (every fit with MCMC: hours).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from _common import OUT, machine, write_json  # noqa: E402
+
+SAMPLE = "oren-nayar:sigma=30,rho=0.9,ir_weight=1"
+TRUTH = {"sigma": 30.0, "rho": 0.9}
+MODEL, FIXED = "oren-nayar", {"ir_weight": 1.0}
+PROTOCOLS = ("oren-nayar-fig16-plaster.toml", "oren-nayar-fig19-off-plane.toml")
+#: z of a two-sided 95 % interval.
+Z95 = 1.959963984540054
+ANGULAR = ("view_offset", "theta_i_offset", "phi_i_offset", "tilt_x", "tilt_y")
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One condition: which systematics are on, and what the modelled fit does about them."""
+
+    key: str
+    label: str
+    switched_on: tuple[str, ...]
+    modelled: str
+    alignment: tuple[str, ...] = ()
+    stray_light: bool = False
+    jitter: str | None = None
+    quantity: str | None = None  # None: the fit_inputs() dataset
+
+    def realism(self, seed: int):
+        """The rig's systematics: the lab preset of ``seed`` with only these switched on."""
+        from drivers.emulator.systematics import realism
+
+        lab = realism("lab", seed)
+        return lab.only(*self.switched_on) if self.switched_on else realism("ideal", seed)
+
+    def fit_options(self) -> dict[str, Any]:
+        return {"alignment": self.alignment, "stray_light": self.stray_light, "jitter": self.jitter or False}
+
+
+CONDITIONS = (
+    Condition("ideal", "ideal rig", (), "all rig errors as parameters (the price of modelling them)", ANGULAR, True),
+    Condition("offsets", "axis zero offsets", ANGULAR[:3], "view_offset, theta_i_offset, phi_i_offset", ANGULAR[:3]),
+    Condition("tilt", "sample tilt", ANGULAR[3:], "tilt_x, tilt_y", ANGULAR[3:]),
+    Condition("stray", "stray light", ("stray_light",), "stray_light", stray_light=True),
+    Condition("nonlinearity", "camera non-linearity", ("nonlinearity",),
+              "not modelled; relative extra noise (rel_jitter) for its scatter", jitter="relative"),
+    Condition("beam", "lamp beam profile", ("beam_falloff",),
+              "not modelled; normalised radiance divides each incidence's level out", quantity="normalised_radiance"),
+    Condition("lab", "lab preset (all)", ANGULAR + ("stray_light", "nonlinearity", "beam_falloff"),
+              "alignment and stray_light parameters, rel_jitter, normalised radiance", ANGULAR, True, "relative",
+              "normalised_radiance"),
+)
+
+
+# --------------------------------------------------------------------------- measuring
+def measure(condition: Condition, seed: int, scratch: Path):
+    """Record both protocols on one emulated rig with the condition's systematics; reduced."""
+    from gonio import acquisition, protocols
+    from gonio.cli.realism import realism_metadata
+    from gonio.cli.run import emulated_rig
+
+    systematics = condition.realism(seed)
+    spec = "ideal:" + ",".join(f"{k}={v!r}" for k, v in systematics.to_dict().items())
+    folders = []
+    with emulated_rig(SAMPLE, seed, name=f"systematics-{condition.key}-{seed}", realism=spec) as (
+            rig, emulator, change_sample, metadata):
+        assert metadata["rig"]["realism"] == realism_metadata(spec, systematics)
+        for name in PROTOCOLS:
+            protocol = protocols.load(ROOT / "protocols" / name)
+            folder = scratch / f"{condition.key}-{seed}" / protocol.name
+            reflectance = protocol.reference.reflectance
+            acquisition.run_protocol(protocol, rig, folder, metadata=metadata, clock=emulator.control.now,
+                                     change_sample=lambda which, r=reflectance: change_sample(which, r))
+            folders.append(folder)
+    reduced = acquisition.combine_reduced([acquisition.reduce_recording(f) for f in folders])
+    shutil.rmtree(scratch / f"{condition.key}-{seed}", ignore_errors=True)
+    return reduced, systematics
+
+
+# --------------------------------------------------------------------------- fitting
+def dataset_of(reduced, quantity: str | None):
+    """The dataset and priors of a fit: fit_inputs(), or another quantity without priors."""
+    if quantity is None:
+        return reduced.fit_inputs()
+    return {"normalised_radiance": reduced.normalised_radiance, "brdf": reduced.brdf}[quantity](), {}
+
+
+def summarise(result, systematics, seconds: float) -> dict[str, Any]:
+    """The numbers of one fit against the truth (module docstring)."""
+    ls = result.least_squares
+    post = result.posterior
+    out: dict[str, Any] = {"method": "mcmc" if post else "laplace", "seconds": seconds, "redchi": ls.redchi,
+                           "chi2_p": result.adequacy.chi2_p, "adequate": bool(result.adequacy.adequate),
+                           "n_data": result.dataset.n, "quantity": result.dataset.quantity, "free": list(result.free),
+                           "params": {}, "rig_errors": {}}
+    truth = dict(TRUTH, **systematics.to_dict())
+    for name in result.free:
+        if name not in truth:
+            continue
+        if post:
+            value, low, high = post["median"][name], post["p2_5"][name], post["p97_5"][name]
+            error = 0.5 * (post["p84"][name] - post["p16"][name])
+        else:
+            value, error = ls.values[name], ls.stderr[name]
+            low, high = value - Z95 * error, value + Z95 * error
+        row = {"value": value, "error": error, "low95": low, "high95": high, "truth": truth[name],
+               "z": (value - truth[name]) / error if error > 0 else math.nan,
+               "inside95": bool(low <= truth[name] <= high)}
+        out["params" if name in TRUTH else "rig_errors"][name] = row
+    if post:
+        out["converged"] = bool(result.converged)
+        out["mcmc_steps"] = int(result.mcmc.n_steps)
+        out["laplace"] = {name: {"value": ls.values[name], "error": ls.stderr[name],
+                                 "low95": ls.values[name] - Z95 * ls.stderr[name],
+                                 "high95": ls.values[name] + Z95 * ls.stderr[name]} for name in result.free}
+    return out
+
+
+def fit_both(condition: Condition, reduced, systematics, seed: int, mcmc_modelled: bool, mcmc_all: bool):
+    """The ignored and the modelled fit of one recording."""
+    from gonio.fitting import ConvergenceWarning, fit
+
+    dataset, priors = reduced.fit_inputs()
+    out = {}
+    arms = (("ignored", dataset, priors, {}, mcmc_all),
+            ("modelled", *dataset_of(reduced, condition.quantity), condition.fit_options(), mcmc_all or mcmc_modelled))
+    for arm, data, arm_priors, options, mcmc in arms:
+        start = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)  # recorded: "converged"
+            result = fit(data, MODEL, FIXED, priors=arm_priors, mcmc=mcmc, seed=seed, **options)
+        out[arm] = summarise(result, systematics, time.perf_counter() - start)
+    return out
+
+
+# --------------------------------------------------------------------------- speed
+def likelihood_speed(reduced, repeats: int = 5) -> dict[str, Any]:
+    """One likelihood evaluation of 32 walkers: free alignment against the plain path."""
+    from _common import best_time
+    from gonio.fitting import FitProblem
+
+    dataset, _ = reduced.fit_inputs()
+    plain = FitProblem(MODEL, dataset, FIXED)
+    aligned = FitProblem(MODEL, dataset, FIXED, alignment="all")
+    rng = np.random.default_rng(0)
+    centre = [0.9, 30.0, reduced.reference_irradiance]
+    walkers = np.array([centre] * 32) * (1 + 1e-4 * rng.standard_normal((32, 3)))
+    with_offsets = np.column_stack([walkers, rng.normal(0.0, 0.2, (32, 5))])
+    t_plain = best_time(lambda: plain.log_likelihood_batch(walkers), repeats)
+    t_aligned = best_time(lambda: aligned.log_likelihood_batch(with_offsets), repeats)
+    return {"walkers": 32, "n_data": dataset.n, "plain_seconds": t_plain, "aligned_seconds": t_aligned,
+            "ratio_aligned_over_plain": t_aligned / t_plain}
+
+
+# --------------------------------------------------------------------------- summary
+def coverage(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per condition, arm and parameter: the truth inside the 95 % interval (k of n), and z."""
+    table: dict[str, Any] = {}
+    for condition in CONDITIONS:
+        runs = [r for r in records if r["condition"] == condition.key]
+        table[condition.key] = {}
+        for arm in ("ignored", "modelled"):
+            table[condition.key][arm] = {}
+            for name in TRUTH:
+                rows = [r[arm]["params"][name] for r in runs if name in r[arm]["params"]]
+                table[condition.key][arm][name] = {
+                    "inside95": sum(row["inside95"] for row in rows), "n": len(rows),
+                    "z": [row["z"] for row in rows], "bias": [row["value"] - row["truth"] for row in rows],
+                    "adequate": sum(r[arm]["adequate"] for r in runs)}
+    return table
+
+
+def chart(records: list[dict[str, Any]], path: Path) -> None:
+    """Per condition, ignored and modelled: z of sigma and rho with the 95 % band (top), and
+    their standard errors relative to the ideal rig's plain fit of the same seed (bottom)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(11, 7.2))
+    axes = figure.subplots(2, 2, sharex=True)
+    keys = [c.key for c in CONDITIONS]
+    reference = {(r["seed"], name): r["ignored"]["params"][name]["error"]
+                 for r in records if r["condition"] == "ideal" for name in TRUTH}
+    for column, name in enumerate(TRUTH):
+        top, bottom = axes[0, column], axes[1, column]
+        for offset, arm, colour in ((-0.15, "ignored", "tab:red"), (0.15, "modelled", "tab:blue")):
+            for k, key in enumerate(keys):
+                rows = [(r["seed"], r[arm]["params"][name]) for r in records
+                        if r["condition"] == key and name in r[arm]["params"]]
+                x = np.full(len(rows), k + offset)
+                top.plot(x, [row["z"] for _, row in rows], "o", color=colour, ms=5, alpha=0.8,
+                         label=arm if k == 0 else None)
+                ratio = [row["error"] / reference[(seed, name)] for seed, row in rows if (seed, name) in reference]
+                bottom.plot(x[:len(ratio)], ratio, "o", color=colour, ms=5, alpha=0.8)
+        top.axhspan(-Z95, Z95, color="0.85", zorder=0, label="the 95 % interval holds the truth")
+        top.set_yscale("symlog", linthresh=2.0)
+        top.set_title(f"{name}: (fitted - truth) / standard error")
+        bottom.set_yscale("log")
+        bottom.axhline(1.0, color="0.5", lw=0.8)
+        bottom.set_title(f"{name}: standard error / the ideal rig's plain fit")
+        bottom.set_xticks(range(len(keys)), [c.label for c in CONDITIONS], rotation=30, ha="right")
+        for ax in (top, bottom):
+            ax.grid(axis="y", alpha=0.3)
+    axes[0, 0].set_ylabel("z (symmetric log scale)")
+    axes[1, 0].set_ylabel("error ratio")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc="upper center", ncol=3, fontsize=9, frameon=False)
+    figure.subplots_adjust(left=0.08, right=0.99, bottom=0.17, top=0.9, wspace=0.18, hspace=0.2)
+    figure.savefig(path, dpi=110)
+
+
+# --------------------------------------------------------------------------- main
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=3, help="emulator seeds per condition (default 3)")
+    parser.add_argument("--mcmc", action="store_true", help="sample every fit with MCMC (hours)")
+    parser.add_argument("--no-mcmc", action="store_true", help="no MCMC at all (Laplace intervals only)")
+    parser.add_argument("--chart-only", action="store_true", help="redraw the chart from the JSON of the last run")
+    args = parser.parse_args(argv)
+    if args.chart_only:
+        import json
+
+        chart(json.loads((OUT / "systematics.json").read_text())["records"], OUT / "systematics.png")
+        return 0
+    warnings.simplefilter("ignore", RuntimeWarning)
+    began, cpu_began, load_before = time.perf_counter(), time.process_time(), os.getloadavg()[0]
+    scratch = Path(tempfile.mkdtemp(prefix="gonio-systematics-"))
+    records: list[dict[str, Any]] = []
+    speed = None
+    try:
+        for condition in CONDITIONS:
+            for seed in range(args.seeds):
+                start = time.perf_counter()
+                reduced, systematics = measure(condition, seed, scratch)
+                mcmc_modelled = condition.key == "offsets" and seed == 0 and not args.no_mcmc
+                fits = fit_both(condition, reduced, systematics, seed, mcmc_modelled, args.mcmc)
+                records.append({"condition": condition.key, "seed": seed, "systematics": systematics.to_dict(),
+                                **fits, "seconds": time.perf_counter() - start})
+                line = ", ".join(f"{arm} sigma z={fits[arm]['params']['sigma']['z']:+.2g}" for arm in fits
+                                 if "sigma" in fits[arm]["params"])
+                print(f"{condition.key:<13} seed {seed}: {line} ({time.perf_counter() - start:.0f} s)", flush=True)
+                if condition.key == "lab" and seed == 0:
+                    speed = likelihood_speed(reduced)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    OUT.mkdir(parents=True, exist_ok=True)
+    chart(records, OUT / "systematics.png")
+    payload = {
+        "benchmark": "bench_systematics", "command": "python benchmarks/" + Path(__file__).name + " "
+        + " ".join(argv if argv is not None else sys.argv[1:]),
+        "sample": SAMPLE, "fitted_model": MODEL, "fixed": FIXED, "truth": TRUTH, "protocols": list(PROTOCOLS),
+        "seeds": args.seeds,
+        "conditions": [{"key": c.key, "label": c.label, "switched_on": list(c.switched_on), "modelled": c.modelled}
+                       for c in CONDITIONS],
+        "coverage": coverage(records), "likelihood_speed": speed, "records": records,
+        "wall_seconds": time.perf_counter() - began, "cpu_seconds": time.process_time() - cpu_began,
+        "load_average_before_after": [load_before, os.getloadavg()[0]], "machine": machine(),
+    }
+    path = write_json("systematics", payload)
+    print(f"wrote {path} and {OUT / 'systematics.png'} ({payload['wall_seconds']:.0f} s wall, "
+          f"{payload['cpu_seconds']:.0f} s CPU)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,255 @@
+"""The rig's systematic errors as fit parameters: its alignment and its stray light.
+
+A rig is never perfectly aligned: each axis reads back ``x`` while its true angle is
+``x + offset``, and the sample's normal is tipped by a fraction of a degree.  A fit can
+estimate these as nuisance parameters (``FitProblem(..., alignment=...)``,
+``gonio fit --alignment``); they change the geometry the model is evaluated at:
+
+=================  =====  ===================================================================
+name               unit   meaning
+=================  =====  ===================================================================
+``view_offset``    deg    zero offset of the camera arm (axis 1): true swing = readback + offset
+``theta_i_offset`` deg    zero offset of the lamp's polar axis (axis 2)
+``phi_i_offset``   deg    zero offset of the lamp's azimuth axis (axis 3)
+``tilt_x``         deg    tilt of the sample's normal toward +x (in the camera's swing plane)
+``tilt_y``         deg    tilt of the sample's normal toward +y (along the swing axis)
+``stray_light``    -      stray radiance over the image, as a fraction of the radiance
+                          ``E_0 / pi`` of a white Lambertian sample at normal incidence
+=================  =====  ===================================================================
+
+The geometry is :func:`drivers.rig_geometry.misaligned_angles`, the function the emulator
+places its lamp and camera with, and ``stray_light`` means what the emulator's switch of
+the same name means (``drivers.emulator.systematics``), so a fit and the emulated rig
+agree on every parameter.  The dataset's angles must be in the rig's frame (azimuth 0 =
+the side of positive camera swings), as the recordings of ``gonio run`` are.
+
+What the rig reports (:class:`RigPrediction`): the camera measures the radiance per unit
+on-axis lamp irradiance ``R = f(true geometry) cos(theta_i,true) + stray_light / pi``
+(times ``E_0``); the reduction divided each value by the ``E_0`` the reference standard
+gave at its *recorded* geometry and, for absolute BRDF, by the recorded
+``cos(theta_i)``.  The prediction is therefore ``scale c R`` (relative radiance),
+``c R / cos(theta_i,recorded)`` (absolute BRDF) or ``R / R(normal view)`` (normalised
+radiance), with ``c = 1 / sum_k w_k r_k``, ``r_k`` the ratio of the reference standard's
+true signal (the same misalignment and stray light act on it) to the one the reduction
+assumed at its ``k``-th reading, and ``w_k`` the weights that combined the readings into
+``E_0`` (``dataset.metadata["reference_standard"]``).  ``scale`` keeps its meaning, the
+lamp irradiance as the reference measured it, so its calibration prior stays the
+reference's measurement itself.
+
+Default priors: normal, N(0, 0.5 deg) within the +/-5 deg range, for the alignment
+(:data:`DEFAULT_PRIOR_SD`).  A rig aligned by eye and an alignment laser is off by a few
+tenths of a degree (docs/emulator.md, "Systematic errors": the ``lab`` preset draws 0.1
+to 0.3 deg); 0.5 deg leaves room for a worse alignment while keeping a parameter the data
+do not constrain (``phi_i_offset`` from in-plane data) from wandering over degrees.
+``stray_light`` is uniform on [0, 0.05]: positive (light only adds), and 5 % of a white
+sample's radiance would be a rig without baffles (the ``lab`` preset has 0.2 %).
+"""
+from __future__ import annotations
+
+import json
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from drivers.rig_geometry import ALIGNMENT_ERRORS, misaligned_angles
+from gonio.models import Model, Param
+
+from .priors import Normal
+
+__all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG", "STRAY_LIGHT",
+           "RIG_ERROR_NAMES", "parse_alignment", "alignment_prior", "reference_calibration", "RigPrediction",
+           "is_identity"]
+
+#: Range of every alignment parameter [deg]: beyond it the rig is not misaligned but mis-built.
+ALIGNMENT_BOUND_DEG = 5.0
+_DESCRIPTIONS = {
+    "view_offset": "zero offset of the camera arm (axis 1): true swing = readback + offset",
+    "theta_i_offset": "zero offset of the lamp's polar axis (axis 2): true angle = readback + offset",
+    "phi_i_offset": "zero offset of the lamp's azimuth axis (axis 3): true angle = readback + offset",
+    "tilt_x": "tilt of the sample's normal toward +x (in the camera's swing plane)",
+    "tilt_y": "tilt of the sample's normal toward +y (along the camera's swing axis)",
+}
+#: The alignment parameters, in :func:`drivers.rig_geometry.misaligned_angles` order.
+ALIGNMENT_PARAMETERS = tuple(
+    Param(name, "deg", 0.0, (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG), _DESCRIPTIONS[name])
+    for name in ALIGNMENT_ERRORS)
+ALIGNMENT_NAMES = tuple(p.name for p in ALIGNMENT_PARAMETERS)
+#: Standard deviation of each parameter's default normal prior [deg] (module docstring).
+DEFAULT_PRIOR_SD = {name: 0.5 for name in ALIGNMENT_NAMES}
+#: The stray-light parameter (module docstring); its default prior is uniform over its range.
+STRAY_LIGHT = Param("stray_light", "-", 0.0, (0.0, 0.05),
+                    "stray radiance over the image as a fraction of E_0 / pi (a white Lambertian at normal incidence)")
+#: Every rig-error parameter.
+RIG_ERROR_NAMES = ALIGNMENT_NAMES + (STRAY_LIGHT.name,)
+
+
+def parse_alignment(names: str | Iterable[str] | None) -> tuple[str, ...]:
+    """Alignment parameter names from ``"all"``, a comma-separated string or a sequence.
+
+    Returns them in the canonical order of :data:`ALIGNMENT_NAMES`, without repeats.
+
+    Raises
+    ------
+    ValueError
+        An unknown name (the message lists the valid ones).
+
+    Examples
+    --------
+    >>> parse_alignment("tilt_y, view_offset")
+    ('view_offset', 'tilt_y')
+    >>> parse_alignment("all") == ALIGNMENT_NAMES
+    True
+    """
+    if names is None:
+        return ()
+    items = [n.strip() for n in names.split(",")] if isinstance(names, str) else [str(n).strip() for n in names]
+    items = [n for n in items if n]
+    if "all" in items:
+        return ALIGNMENT_NAMES
+    unknown = [n for n in items if n not in ALIGNMENT_NAMES]
+    if unknown:
+        raise ValueError(f"unknown alignment parameter {unknown[0]!r}; expected 'all' or names from "
+                         f"{list(ALIGNMENT_NAMES)}")
+    return tuple(n for n in ALIGNMENT_NAMES if n in items)
+
+
+def alignment_prior(name: str) -> Normal:
+    """The default prior of an alignment parameter: N(0, 0.5 deg) within +/-5 deg."""
+    return Normal(0.0, DEFAULT_PRIOR_SD[name], -ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
+
+
+def reference_calibration(metadata: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The reference standard's recorded geometries (K, 4) [deg], combination weights (K,)
+    and reflectances (K,) from ``metadata["reference_standard"]`` (written by
+    :mod:`gonio.reduction`), or None.
+
+    Raises
+    ------
+    ValueError
+        A record that is not ``{"geometry": [[theta_i, phi_i, theta_r, phi_r], ...],
+        "weights": [...], "reflectance": [...]}`` with one non-negative weight and one
+        reflectance in (0, 1] per geometry.
+    """
+    record = metadata.get("reference_standard") if metadata else None
+    if record is None:
+        return None
+    if isinstance(record, str):  # read back from a CSV header line
+        try:
+            record = json.loads(record)
+        except json.JSONDecodeError:
+            record = None
+    try:
+        geometry = np.asarray(record["geometry"], float).reshape(-1, 4)
+        weights = np.asarray(record["weights"], float).reshape(-1)
+        reflectance = np.asarray(record["reflectance"], float).reshape(-1)
+    except (TypeError, KeyError, ValueError):
+        raise ValueError(f"dataset metadata reference_standard = {metadata.get('reference_standard')!r:.200}: "
+                         "expected {'geometry': [[theta_i, phi_i, theta_r, phi_r], ...], 'weights': [...], "
+                         "'reflectance': [...]}") from None
+    k = geometry.shape[0]
+    if (weights.size != k or reflectance.size != k or k == 0 or np.any(weights < 0)
+            or not np.all(np.isfinite(geometry)) or not np.all((reflectance > 0) & (reflectance <= 1))):
+        raise ValueError(f"dataset metadata reference_standard: {k} geometries, {weights.size} weights and "
+                         f"{reflectance.size} reflectances; expected one finite geometry, one non-negative weight and "
+                         "one reflectance in (0, 1] per reference reading")
+    return geometry, weights / weights.sum(), reflectance
+
+
+class RigPrediction:
+    """The measured quantity of a misaligned rig with stray light at recorded geometries
+    (module docstring).
+
+    Parameters
+    ----------
+    model : Model
+        The model as the fit evaluates it (with the rig's apertures when the data have
+        them, :func:`gonio.fitting.problem.evaluated_model`).
+    quantity : {'brdf', 'normalised_radiance', 'radiance'}
+        What the values are.
+    geometry : tuple of array_like
+        The recorded (read-back) geometries (theta_i, phi_i, theta_r, phi_r) [deg], 1-D.
+    options : mapping
+        Model options.
+    metadata : mapping
+        The dataset's metadata (``reference_standard``, ``aperture_sr``).
+    """
+
+    def __init__(self, model: Model, quantity: str, geometry, options: Mapping[str, Any],
+                 metadata: Mapping[str, Any]) -> None:
+        from .problem import combine_prediction, evaluated_model  # problem imports this module
+        from .dataset import Dataset
+
+        self.model = model
+        self.quantity = quantity
+        self.options = dict(options)
+        self._combine = combine_prediction
+        self.geometry = tuple(np.asarray(g, float).reshape(-1) for g in np.broadcast_arrays(*geometry))
+        self.cos_recorded = np.cos(np.radians(self.geometry[0]))
+        ti, pi_ = self.geometry[0], self.geometry[1]
+        self.normal_geometry = (ti, pi_, np.zeros_like(ti), pi_)  # the normal view of each incidence
+        self._fixed: dict[str, Any] = {}  # the model at the recorded geometry, built on first use
+        self.reference = None
+        if quantity in ("brdf", "radiance"):
+            calibration = reference_calibration(metadata)
+            if calibration is not None:
+                geometry_k, weights, reflectance = calibration
+                probe = Dataset(*geometry_k.T, np.ones(len(weights)), 1.0, metadata=dict(metadata))
+                lambert = evaluated_model("lambert", probe)  # the reduction's model of the standard
+                recorded = reflectance * self._signal(lambert, tuple(geometry_k.T))
+                self.reference = (lambert, tuple(geometry_k.T), weights, reflectance, recorded)
+
+    @staticmethod
+    def _signal(lambert: Model, geometry) -> np.ndarray:
+        """A white Lambertian standard's signal per unit irradiance, <f cos theta_i> [1/sr]."""
+        return lambert(*geometry, rho=1.0) * np.cos(np.radians(geometry[0]))
+
+    def calibration_factor(self, alignment: Mapping[str, Any], stray_light: Any = 0.0) -> np.ndarray | float:
+        """``c = 1 / sum_k w_k r_k``: what misalignment and stray light did to ``E_0`` (1
+        without a reference standard); shape (W, 1) for parameter columns of shape (W, 1)."""
+        if self.reference is None:
+            return 1.0
+        lambert, geometry, weights, reflectance, recorded = self.reference
+        moved = geometry if is_identity(alignment) else misaligned_angles(*geometry, **alignment)
+        true = reflectance * self._signal(lambert, moved) + np.asarray(stray_light) / np.pi
+        return 1.0 / np.sum(weights * true / recorded, axis=-1, keepdims=True)
+
+    def _model_at(self, which: str, params: Mapping[str, Any], alignment: Mapping[str, Any]) -> np.ndarray:
+        """``f cos(theta_i)`` at the true geometry of the recorded ``which`` ('data' or
+        'normal' view) geometries [1/sr]; the fixed-geometry path when nothing moves."""
+        recorded = self.geometry if which == "data" else self.normal_geometry
+        if is_identity(alignment):
+            if which not in self._fixed:
+                self._fixed[which] = self.model.at(*recorded, **self.options)
+            return self._fixed[which].unchecked(**params) * self.cos_recorded
+        true = misaligned_angles(*recorded, **alignment)
+        return self.model(*true, **params, **self.options) * np.clip(np.cos(np.radians(true[0])), 0.0, None)
+
+    def __call__(self, params: Mapping[str, Any], alignment: Mapping[str, Any], scale: Any = 1.0,
+                 stray_light: Any = 0.0) -> np.ndarray:
+        """The predicted measured values: shape (N,) or (W, N) for parameter columns (W, 1).
+
+        ``params`` are the model's (checked), ``alignment`` the five alignment values (or
+        some of them) [deg], ``scale`` and ``stray_light`` as in the module docstring.
+        """
+        stray = np.asarray(stray_light, float) / np.pi
+        radiance = self._model_at("data", params, alignment) + stray
+        if self.quantity == "normalised_radiance":
+            normal = self._model_at("normal", params, alignment) + stray
+            return self._combine(self.quantity, radiance, normal, self.cos_recorded, scale)
+        apparent = np.divide(radiance, self.cos_recorded, out=np.zeros(np.shape(radiance)),
+                             where=self.cos_recorded > 0) * self.calibration_factor(alignment, stray_light)
+        return self._combine(self.quantity, apparent, None, self.cos_recorded, scale)
+
+    def of_values(self, values: Mapping[str, Any]) -> np.ndarray:
+        """:meth:`__call__` for a mapping of every value of a fit (model parameters, rig
+        errors, ``scale``; others such as ``jitter`` ignored); model parameters must be
+        valid (they are not checked here), missing ones take their defaults."""
+        params = {p.name: values.get(p.name, p.default) for p in self.model.params}
+        alignment = {name: values[name] for name in ALIGNMENT_NAMES if name in values}
+        return self(params, alignment, values.get("scale", 1.0), values.get(STRAY_LIGHT.name, 0.0))
+
+
+def is_identity(alignment: Mapping[str, Any]) -> bool:
+    """Whether every alignment value is the scalar 0 (the recorded geometry is the true one)."""
+    return all(np.ndim(v) == 0 and float(v) == 0.0 for v in alignment.values())
+
