@@ -1,0 +1,93 @@
+"""The compiled plain calls of the closed forms equal their numpy reference path.
+
+A model with a compiled path (``Model.compiled``, :mod:`gonio.models._compiled`) uses it
+for plain calls of at least ``COMPILED_MIN`` geometries; below that, and for the
+fixed-geometry path of fitting, the numpy formula runs.  DESIGN: one implementation per
+formula, a faster path tested equal to the reference.  The compiled loops repeat the
+numpy operations in the same order and take their tangents from the same ``numpy.tan``,
+so the values are expected bit for bit equal; the assertion allows 4 ulp (rtol 1e-15) in
+case a compiler contracts a multiply-add, far below the 1e-12 the closed forms are held
+to against the C loops of benchmarks/closed_form_speed.py.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import gonio
+from gonio.models._core import COMPILED_MIN, _as_angles
+
+#: (model, parameters and options) of every compiled path, with its parameter extremes.
+CASES = [
+    ("oren-nayar", {"rho": 0.9, "sigma": 30.0, "ir_weight": 1.0}),
+    ("oren-nayar", {"rho": 0.2, "sigma": 90.0, "ir_weight": 0.0}),   # the floor at 0 acts
+    ("oren-nayar", {"rho": 1.0, "sigma": 0.0, "ir_weight": 0.5}),    # Lambert
+    ("oren-nayar-qualitative", {"rho": 0.9, "sigma": 30.0}),
+    ("oren-nayar-qualitative", {"rho": 0.5, "sigma": 60.0, "variant": "footnote11"}),
+]
+
+
+def _geometries(n: int = COMPILED_MIN + 1234) -> tuple[np.ndarray, ...]:
+    """Random geometries with the special cases in blocks: NaN in each angle, the horizon
+    exactly and beyond, the normal, theta_i = theta_r, and the azimuths where cos(dphi)
+    is 0 or -1 (where C2 switches branch and |cos dphi| folds)."""
+    rng = np.random.default_rng(11)
+    ti, tr = rng.uniform(0.0, 95.0, n), rng.uniform(0.0, 95.0, n)
+    pi_, pr = rng.uniform(-180.0, 180.0, n), rng.uniform(-540.0, 540.0, n)
+    ti[0:40], pi_[40:80], tr[80:120], pr[120:160] = np.nan, np.nan, np.nan, np.nan
+    tr[160:200], ti[200:240] = 90.0, 90.0
+    ti[240:280] = tr[240:280] = 90.0
+    ti[280:320] = 0.0
+    ti[320:360] = tr[320:360] = 0.0
+    tr[360:400] = ti[360:400]
+    pr[400:440] = pi_[400:440] + 90.0
+    pr[440:480] = pi_[440:480] - 180.0
+    pr[480:520] = pi_[480:520]
+    return ti, pi_, tr, pr
+
+
+def _compiled_models() -> list[str]:
+    return [name for name in gonio.models.available() if gonio.models.get(name).compiled is not None]
+
+
+def test_every_compiled_model_is_tested_here():
+    assert sorted(_compiled_models()) == sorted({name for name, _ in CASES})
+
+
+@pytest.mark.parametrize(("name", "values"), CASES)
+def test_compiled_plain_call_equals_the_numpy_path(name, values):
+    model = gonio.models.get(name)
+    geometry = _geometries()
+    params, options = model.resolve(values)
+    reference = model._call_in_chunks(*_as_angles(*geometry), params, options)
+    fast = model(*geometry, **values)   # COMPILED_MIN geometries or more: the compiled path
+    np.testing.assert_array_equal(np.isnan(fast), np.isnan(reference))
+    np.testing.assert_array_equal(fast == 0.0, reference == 0.0)
+    np.testing.assert_allclose(fast, reference, rtol=1e-15, atol=0.0, equal_nan=True)
+
+
+def test_compiled_path_keeps_the_shape_and_broadcasts():
+    model = gonio.models.get("oren-nayar")
+    theta = np.linspace(0.0, 90.0, 181)
+    phi = np.linspace(-180.0, 180.0, 361)
+    out = model(theta[:, None], 0.0, 45.0, phi[None, :], rho=0.8, sigma=20.0)
+    assert out.shape == (181, 361) and out.size >= COMPILED_MIN
+    row = model(theta[[30]][:, None], 0.0, 45.0, phi[None, :], rho=0.8, sigma=20.0)  # numpy path
+    np.testing.assert_allclose(out[30], row[0], rtol=1e-15, atol=0.0)
+
+
+def test_compiled_path_is_taken_for_large_calls_only(monkeypatch):
+    # The path must be able to fail: a compiled function that returns zeros is seen at
+    # COMPILED_MIN geometries and not below.
+    model = gonio.models.get("oren-nayar")
+    calls = []
+
+    def zeros(ti, pi_, tr, pr, params, options):
+        calls.append(ti.size)
+        return np.zeros(ti.size)
+
+    monkeypatch.setattr(type(model), "compiled", property(lambda self: (lambda: zeros)))
+    theta = np.full(COMPILED_MIN, 30.0)
+    assert np.all(model(theta, 0.0, 45.0, 180.0, rho=0.9, sigma=30.0) == 0.0)
+    assert np.all(model(theta[:-1], 0.0, 45.0, 180.0, rho=0.9, sigma=30.0) > 0.0)
+    assert calls == [COMPILED_MIN]
