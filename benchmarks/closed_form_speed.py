@@ -48,6 +48,11 @@ CASES = {
         "oren_nayar_qualitative", {"rho": 0.9, "sigma": 30.0},
         lambda p: [p["rho"], math.radians(p["sigma"]), 0.33],
     ),
+    "wolff": ("wolff", {"rho": 0.8, "n": 1.5}, lambda p: [p["rho"], p["n"]]),
+    "kvd": (
+        "kvd2", {"a_0_0_0": 1.6, "a_1_1_1": 0.1, "a_2_0_0": -0.2, "a_2_2_0": 0.05, "a_2_2_2": 0.03},
+        lambda p: [p["a_0_0_0"], p["a_1_1_1"], p["a_2_0_0"], p["a_2_2_0"], p["a_2_2_2"]],
+    ),
 }
 
 

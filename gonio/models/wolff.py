@@ -56,6 +56,7 @@ __all__ = [
     "internal_reflection_integral",
     "physical_scale",
     "transmission_product",
+    "scale_factor",
     "wolff_brdf",
     "wolff_oren_nayar_brdf",
     "WOLFF",
@@ -418,19 +419,32 @@ def wolff_brdf(
     return scale * transmission_product(theta_i, theta_r, n, fresnel)
 
 
+def scale_factor(params, scale: str = "albedo") -> float:
+    """The factor in front of eq 7 [1/sr] for the ``wolff`` model's parameter values:
+    rho/pi (``scale="albedo"``) or :func:`physical_scale` at normal incidence and viewing
+    from ``n`` and ``omega`` (``scale="physical"``)."""
+    if scale == "albedo":
+        return params["rho"] / np.pi
+    return _physical_scale_normal(params["n"], params["omega"], DEFAULT_ORDER)
+
+
 def _prepare(ti, pi_, tr, pr, scale: str = "albedo", fresnel: str = "exact") -> Callable[..., np.ndarray]:
     """Fixed-geometry evaluator of the ``wolff`` model (angles [rad])."""
     cos_i, cos_r = cos_from_half_tangent(ti), cos_from_half_tangent(tr)
     theta_i, theta_r = np.asarray(ti, float), np.asarray(tr, float)
 
     def evaluate(rho: float, n: float, omega: float) -> np.ndarray:
-        if scale == "albedo":
-            factor = rho / np.pi
-        else:
-            factor = _physical_scale_normal(n, omega, DEFAULT_ORDER)
+        factor = scale_factor({"rho": rho, "n": n, "omega": omega}, scale)
         return factor * _transmission_product(theta_i, theta_r, cos_i, cos_r, n, fresnel)
 
     return evaluate
+
+
+def _compiled_wolff():
+    """The compiled plain call of ``wolff`` (numba loads here, on first use)."""
+    from .wolff_compiled import wolff_plain
+
+    return wolff_plain
 
 
 WOLFF = register(
@@ -449,6 +463,7 @@ WOLFF = register(
         energy_conserving=True,
         reciprocal=True,
         isotropic=True,
+        compiled=_compiled_wolff,
     )
 )
 
