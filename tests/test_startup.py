@@ -62,3 +62,11 @@ def test_lazily_imported_functions_still_work_in_a_fresh_interpreter():
             "from gonio.models.chandrasekhar import h_function\n"
             "assert 1.0 < float(h_function(0.5, 0.9)) < 3.0\n")
     assert _loaded_after(code) == ["scipy"]
+
+
+def test_reading_and_reporting_a_fit_loads_no_sampler():
+    # `gonio report` reads a saved fit and draws it: neither emcee (which loads
+    # scipy.stats) nor scipy.optimize, numba or ArviZ is needed for that.
+    loaded = _loaded_after("import gonio.fitting.results, gonio.report.fit_report, gonio.cli.report\n"
+                           "import sys\nassert 'scipy.optimize' not in sys.modules, 'scipy.optimize'")
+    assert loaded == ["matplotlib"]

@@ -31,7 +31,6 @@ import warnings
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
-import emcee
 import numpy as np
 
 from .diagnostics import RHAT_LIMIT, convergence_diagnostics
@@ -66,45 +65,14 @@ class ConvergenceWarning(UserWarning):
     """The chain reached its step limit before the autocorrelation criterion was met."""
 
 
-class VectorisedStretchMove(emcee.moves.StretchMove):
-    """emcee's stretch move (Goodman & Weare 2010) with each half-ensemble's proposals
-    evaluated and accepted in one vectorised step.
+def __getattr__(name: str):
+    """:class:`~gonio.fitting.moves.VectorisedStretchMove`, still importable from here
+    (PEP 562: loading it imports emcee, which reading results does not need)."""
+    if name == "VectorisedStretchMove":
+        from .moves import VectorisedStretchMove
 
-    Identical in distribution to :class:`emcee.moves.StretchMove`: the same proposal
-    (``get_proposal`` is emcee's), the same acceptance probability
-    min(1, z^(d-1) p(y)/p(x)), the same red-blue split.  Two loops over walkers that cost
-    more than the model once the model itself is vectorised are done by numpy instead:
-    the log posterior of the proposals comes straight from ``log_prob_batch`` (not through
-    emcee's per-walker conversion of the results) and the acceptance test draws all its
-    uniform numbers at once.
-
-    Parameters
-    ----------
-    log_prob_batch : callable
-        ``log_prob_batch(coords) -> ndarray``: log posterior of every row of ``coords``.
-    a : float
-        Stretch scale (emcee's default 2).
-    """
-
-    def __init__(self, log_prob_batch: Callable[[np.ndarray], np.ndarray], a: float = 2.0) -> None:
-        super().__init__(a=a)
-        self.log_prob_batch = log_prob_batch
-
-    def propose(self, model, state):
-        """One update of both halves of the ensemble; returns the new state and acceptances."""
-        nwalkers = state.coords.shape[0]
-        accepted = np.zeros(nwalkers, dtype=bool)
-        halves = np.arange(nwalkers) % self.nsplits
-        if self.randomize_split:
-            model.random.shuffle(halves)
-        for split in range(self.nsplits):
-            moving = halves == split
-            proposal, factors = self.get_proposal(state.coords[moving], [state.coords[~moving]], model.random)
-            log_prob = np.asarray(self.log_prob_batch(proposal), float)
-            gain = factors + log_prob - state.log_prob[moving]
-            accepted[moving] = gain > np.log(model.random.rand(int(moving.sum())))
-            state = self.update(state, emcee.State(proposal, log_prob=log_prob), accepted, moving)
-        return state, accepted
+        return VectorisedStretchMove
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def resolve_priors(
@@ -384,6 +352,10 @@ def sample_posterior(
         lo, hi = problem.spec(name).bounds
         centre[problem.free.index(name)] = min(max(value, lo + spread[-1]), hi - spread[-1]) if math.isfinite(hi - lo) else value
     walkers = _initial_walkers(posterior, centre, np.array(spread), n_walkers, rng)
+
+    import emcee  # loads scipy.stats: imported where the sampler runs, not with the results
+
+    from .moves import VectorisedStretchMove
 
     # every walker of a half-ensemble in one model evaluation (numpy broadcasting over
     # parameter arrays, gonio.models.Model.at)

@@ -35,7 +35,6 @@ from matplotlib.colors import Normalize, to_rgba_array
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
-from scipy import ndimage
 
 from gonio.fitting.dataset import QUANTITY_LABELS, Dataset
 from gonio.fitting.results import FitResult
@@ -671,6 +670,8 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
             else:
                 hist, xe, ye = np.histogram2d(samples[:, j], samples[:, i], bins=bins, range=[ranges[j], ranges[i]])
                 # One-bin Gaussian smoothing removes the histogram's shot noise from the contours.
+                from scipy import ndimage  # loaded by the corner plot only
+
                 hist = ndimage.gaussian_filter(hist, 1.0)
                 ax.plot(samples[::max(1, samples.shape[0] // 2000), j], samples[::max(1, samples.shape[0] // 2000), i],
                         ",", color="0.6", alpha=0.5)
