@@ -1,8 +1,9 @@
 """The compiled plain calls of the closed forms equal their numpy reference path.
 
 A model with a compiled path (``Model.compiled``, :mod:`gonio.models._compiled`) uses it
-for plain calls of at least ``COMPILED_MIN`` geometries; below that, and for the
-fixed-geometry path of fitting, the numpy formula runs.  DESIGN: one implementation per
+for plain calls of at least ``COMPILED_MIN`` geometries once a process has evaluated
+``COMPILED_AFTER`` geometries with numpy; below that, and for the fixed-geometry path of
+fitting, the numpy formula runs.  DESIGN: one implementation per
 formula, a faster path tested equal to the reference.  The compiled loops repeat the
 numpy operations in the same order and take their tangents from the same ``numpy.tan``,
 so the values are expected bit for bit equal; the assertion allows 4 ulp (rtol 1e-15) in
@@ -48,6 +49,15 @@ def _geometries(n: int = COMPILED_MIN + 1234) -> tuple[np.ndarray, ...]:
     pr[440:480] = pi_[440:480] - 180.0
     pr[480:520] = pi_[480:520]
     return ti, pi_, tr, pr
+
+
+@pytest.fixture(autouse=True)
+def compiled_paths_due(monkeypatch):
+    """The compiled paths at once (a process normally takes them only after
+    COMPILED_AFTER geometries evaluated with numpy)."""
+    import gonio.models._core as core
+
+    monkeypatch.setattr(core, "COMPILED_AFTER", 0)
 
 
 def _compiled_models() -> list[str]:
@@ -100,3 +110,20 @@ def test_compiled_path_is_taken_for_large_calls_only(monkeypatch):
     assert np.all(model(theta, 0.0, 45.0, 180.0, rho=0.9, sigma=30.0) == 0.0)
     assert np.all(model(theta[:-1], 0.0, 45.0, 180.0, rho=0.9, sigma=30.0) > 0.0)
     assert calls == [COMPILED_MIN]
+
+
+def test_compiled_path_waits_until_numpy_has_cost_as_much(monkeypatch):
+    # The rent-or-buy rule: the first COMPILED_AFTER geometries of a process go through
+    # numpy (no numba load for a few moderate calls), the calls after that compiled.
+    import gonio.models._core as core
+
+    model = gonio.models.get("oren-nayar")
+    calls = []
+    monkeypatch.setattr(type(model), "compiled", property(lambda self: (lambda: lambda *a: calls.append(1) or
+                                                                          np.zeros(a[0].size))))
+    monkeypatch.setattr(core, "COMPILED_AFTER", 3 * COMPILED_MIN)
+    monkeypatch.setattr(core, "_numpy_geometries", 0)
+    theta = np.full(COMPILED_MIN, 30.0)
+    values = [float(model(theta, 0.0, 45.0, 180.0, rho=0.9, sigma=30.0)[0]) for _ in range(5)]
+    assert values[:3] == [values[0]] * 3 and values[0] > 0.0 and values[3:] == [0.0, 0.0]
+    assert len(calls) == 2
