@@ -25,17 +25,50 @@ machine compiles them.
 """
 from __future__ import annotations
 
+import math
 from typing import Callable, Sequence
 
 import numpy as np
+from numba import njit
 
 from . import _core
 
-__all__ = ["JIT_OPTIONS", "evaluate_in_chunks"]
+__all__ = ["JIT_OPTIONS", "evaluate_in_chunks", "half_angles"]
 
 #: numba options of every compiled loop: cached on disk, no GIL held, numpy's error model
 #: (a division by zero gives inf or NaN as numpy does, no exception).
 JIT_OPTIONS = dict(cache=True, nogil=True, error_model="numpy")
+
+_DEGREE = math.pi / 180.0
+_RIGHT_ANGLE = 90.0
+
+
+@njit(**JIT_OPTIONS, inline="always")
+def domain(ti: float, pi_: float, tr: float, pr: float) -> tuple[bool, float]:
+    """(whether the formula applies, the BRDF where it does not): NaN where an angle is
+    NaN, 0 below the horizon (the rules of gonio.models._core._domain)."""
+    if math.isnan(ti) or math.isnan(pi_) or math.isnan(tr) or math.isnan(pr):
+        return False, math.nan
+    if ti > _RIGHT_ANGLE or tr > _RIGHT_ANGLE:
+        return False, 0.0
+    return True, 0.0
+
+
+@njit(**JIT_OPTIONS)
+def half_angles(theta_i, phi_i, theta_r, phi_r, buffer):
+    """Tangent arguments [rad] of the cosines of theta_i and theta_r (rows 0 and 1:
+    theta/2) and, for a buffer of three rows, of the azimuth difference (row 2:
+    (phi_r - phi_i)/2); 0 where :func:`domain` does not apply."""
+    rows = buffer.shape[0]
+    for k in range(theta_i.size):
+        if not domain(theta_i[k], phi_i[k], theta_r[k], phi_r[k])[0]:
+            for row in range(rows):
+                buffer[row, k] = 0.0
+            continue
+        buffer[0, k] = 0.5 * (theta_i[k] * _DEGREE)
+        buffer[1, k] = 0.5 * (theta_r[k] * _DEGREE)
+        if rows > 2:
+            buffer[2, k] = 0.5 * (phi_r[k] * _DEGREE - phi_i[k] * _DEGREE)
 
 
 def evaluate_in_chunks(arguments: Callable, combine: Callable, tangents: int,

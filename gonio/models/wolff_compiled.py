@@ -22,26 +22,14 @@ import math
 import numpy as np
 from numba import njit
 
-from ._compiled import JIT_OPTIONS, evaluate_in_chunks
+from ._compiled import JIT_OPTIONS, evaluate_in_chunks, half_angles
+from ._compiled import domain as _domain
 from .fresnel import polynomial_epsilon
-from .oren_nayar.compiled import _domain
 
 __all__ = ["wolff_plain"]
 
 _DEGREE = math.pi / 180.0
 _TWO_OVER_PI = 2.0 / math.pi
-
-
-@njit(**JIT_OPTIONS)
-def _arguments(theta_i, phi_i, theta_r, phi_r, buffer):
-    """Tangent arguments [rad]: theta_i/2 and theta_r/2 (for the cosines)."""
-    for k in range(theta_i.size):
-        if not _domain(theta_i[k], phi_i[k], theta_r[k], phi_r[k])[0]:
-            buffer[0, k] = 0.0
-            buffer[1, k] = 0.0
-            continue
-        buffer[0, k] = 0.5 * (theta_i[k] * _DEGREE)
-        buffer[1, k] = 0.5 * (theta_r[k] * _DEGREE)
 
 
 @njit(**JIT_OPTIONS, inline="always")
@@ -104,7 +92,7 @@ def wolff_plain(theta_i, phi_i, theta_r, phi_r, params, options) -> np.ndarray:
     index = np.asarray(params["n"], float)
     angles = (theta_i, phi_i, theta_r, phi_r)
     if options["fresnel"] == "polynomial":
-        return evaluate_in_chunks(_arguments, _combine_polynomial, 2, angles,
+        return evaluate_in_chunks(half_angles, _combine_polynomial, 2, angles,
                                   (scale, float(polynomial_epsilon(index))))
-    return evaluate_in_chunks(_arguments, _combine_exact, 2, angles,
+    return evaluate_in_chunks(half_angles, _combine_exact, 2, angles,
                               (scale, float(index), float(index**2), float(1.0 / index)))

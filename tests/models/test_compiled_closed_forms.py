@@ -29,7 +29,17 @@ CASES = [
     ("wolff", {"rho": 0.3, "n": 1.0001}),                            # nearly no interface
     ("wolff", {"n": 2.4, "omega": 0.7, "scale": "physical"}),
     ("wolff", {"rho": 0.8, "n": 1.33, "fresnel": "polynomial"}),
+    ("kvd", {"a_0_0_0": 1.6, "a_1_1_1": 0.1, "a_2_0_0": -0.2, "a_2_2_0": 0.05, "a_2_2_2": 0.03}),
+    ("kvd", {}),                                                     # Lambert 0.8
 ]
+
+#: The KvD paths take their cosines from different functions (numpy's cos there, the
+#: half-angle tangent here), which differ by an ulp; sqrt(1 - cos theta) of the radial
+#: polynomials amplifies that near the normal (d sqrt(q) = dq / 2 sqrt(q)) to some 1e-14
+#: absolute for an order-2 series of values up to 0.4. Each path is as close to the exact
+#: value (test_kvd_paths_against_extended_precision), so the paths are held to each other
+#: at 5e-14 relative to the largest value.
+KVD_TOLERANCE = 5e-14
 
 
 def _geometries(n: int = COMPILED_MIN + 1234) -> tuple[np.ndarray, ...]:
@@ -82,7 +92,50 @@ def test_compiled_plain_call_equals_the_numpy_path(name, values):
     # (2 theta/pi)^5 <= 1, which 1 - F exposes near grazing as relative error: 1e-15
     # absolute there (5 ulp of 1; the BRDF is at most rho/pi).
     atol = 1e-15 if values.get("fresnel") == "polynomial" else 0.0
+    if name == "kvd":
+        atol = KVD_TOLERANCE * np.nanmax(np.abs(reference))
     np.testing.assert_allclose(fast, reference, rtol=1e-15, atol=atol, equal_nan=True)
+
+
+def test_kvd_paths_against_extended_precision():
+    """Both paths of the order-2 series within 1e-14 absolute (values up to 0.4) of the same
+    closed form in long double (x87 extended, 64-bit mantissa): the closed form of
+    benchmarks/c/closed_forms.c, written out from KvD eq 26-27."""
+    values = {"a_0_0_0": 1.6, "a_1_1_1": 0.1, "a_2_0_0": -0.2, "a_2_2_0": 0.05, "a_2_2_2": 0.03}
+    model = gonio.models.get("kvd")
+    geometry = _geometries()
+    ti, pi_, tr, pr = (np.asarray(a, float) for a in geometry)
+    ok = np.isfinite(ti + pi_ + tr + pr) & (ti <= 90.0) & (tr <= 90.0)
+    wide = np.longdouble
+    degree = wide(np.pi) / wide(180.0)
+    ci, cr = np.cos(ti[ok].astype(wide) * degree), np.cos(tr[ok].astype(wide) * degree)
+    cd = np.cos((pr[ok].astype(wide) - pi_[ok].astype(wide)) * degree)
+    s, qi, qr, zi, zr = 1.0 / (2.0 * wide(np.pi)), 1.0 - ci, 1.0 - cr, 1.0 - 2.0 * ci, 1.0 - 2.0 * cr
+    exact = s * (wide(1.6) + wide(0.1) * 2.0 * np.sqrt(wide(2.0)) * np.sqrt(qi * qr) * cd
+                 - wide(0.2) * np.sqrt(wide(1.5)) * (zi + zr) + wide(0.05) * 3.0 * zi * zr
+                 + wide(0.03) * 2.0 * np.sqrt(wide(4.5)) * qi * qr * (2.0 * cd * cd - 1.0))
+    params, options = model.resolve(values)
+    for path in (model._call_in_chunks(*_as_angles(*geometry), params, options), model(*geometry, **values)):
+        assert np.max(np.abs(path[ok] - exact)) < 1e-14
+
+
+def test_kvd_series_of_high_order_equals_its_numpy_path():
+    """A series of order 8 (55 modes, random amplitudes): the recurrence of the radial
+    polynomials repeats numpy's; the values agree to 1e-12 of the largest (the radial
+    polynomials of order 8 reach amplitudes of ~10, amplifying the cosines' ulp)."""
+    from gonio.models.kvd import KvdCoefficients, series_model
+    from gonio.models.kvd.basis import isotropic_indices
+
+    modes = tuple(isotropic_indices(8))
+    amplitudes = np.random.default_rng(5).normal(size=len(modes)) * 0.1
+    amplitudes[0] = 1.6
+    model = series_model(KvdCoefficients(modes, amplitudes))
+    geometry = _geometries()
+    params, options = model.resolve({})
+    reference = model._call_in_chunks(*_as_angles(*geometry), params, options)
+    fast = model(*geometry)
+    np.testing.assert_array_equal(np.isnan(fast), np.isnan(reference))
+    np.testing.assert_allclose(fast, reference, rtol=0.0, atol=1e-12 * np.nanmax(np.abs(reference)), equal_nan=True)
 
 
 def test_compiled_path_keeps_the_shape_and_broadcasts():

@@ -32,6 +32,7 @@ import numpy as np
 from numba import njit
 
 from .._compiled import JIT_OPTIONS, evaluate_in_chunks
+from .._compiled import domain as _domain
 from .functional import C2_AMPLITUDE, C3_AMPLITUDE, _oren_nayar_coefficients, _qualitative_coefficients
 
 __all__ = ["oren_nayar_plain", "qualitative_plain"]
@@ -39,18 +40,6 @@ __all__ = ["oren_nayar_plain", "qualitative_plain"]
 _DEGREE = math.pi / 180.0
 _TWO_OVER_PI = 2.0 / math.pi
 _FOUR_OVER_PI_SQ = 4.0 / math.pi**2
-_RIGHT_ANGLE = 90.0
-
-
-@njit(**JIT_OPTIONS, inline="always")
-def _domain(ti: float, pi_: float, tr: float, pr: float) -> tuple[bool, float]:
-    """(whether the formula applies, the BRDF where it does not): NaN where an angle is
-    NaN, 0 below the horizon (the rules of gonio.models._core._domain)."""
-    if math.isnan(ti) or math.isnan(pi_) or math.isnan(tr) or math.isnan(pr):
-        return False, math.nan
-    if ti > _RIGHT_ANGLE or tr > _RIGHT_ANGLE:
-        return False, 0.0
-    return True, 0.0
 
 
 @njit(**JIT_OPTIONS)
