@@ -384,6 +384,10 @@ class FitResult:
         """
         from .diagnostics import inference_data
 
+        return inference_data(*self._inference_arrays())
+
+    def _inference_arrays(self) -> tuple:
+        """The arguments of :func:`~gonio.fitting.diagnostics.inference_data` for this fit."""
         if self.mcmc is None:
             raise ValueError("no posterior: the fit ran without MCMC")
         m = self.mcmc
@@ -393,19 +397,15 @@ class FitResult:
         problem = self.problem()
         pointwise = problem.pointwise_log_likelihood_batch(chain.reshape(-1, len(self.free))).reshape(
             chain.shape[:2] + (self.dataset.n,))
-        return inference_data(chain, m.log_prob[m.burn_in :: thin], self.free, pointwise, self.dataset.value,
-                              {"model": self.model, "quantity": self.dataset.quantity, "gonio_version": self.gonio_version})
+        return (chain, m.log_prob[m.burn_in :: thin], self.free, pointwise, self.dataset.value,
+                {"model": self.model, "quantity": self.dataset.quantity, "gonio_version": self.gonio_version})
 
     def _write_inference_data(self, path: Path) -> None:
-        import tempfile
+        # written with h5netcdf, read back by arviz.from_netcdf equal to inference_data()
+        # (importing ArviZ for the file would cost 1-3 s: gonio.fitting.inference_file)
+        from .inference_file import write_inference_data
 
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
-        os.close(fd)
-        try:
-            self.inference_data().to_netcdf(tmp)
-            write_atomic(path, Path(tmp).read_bytes())
-        finally:
-            Path(tmp).unlink(missing_ok=True)
+        write_atomic(path, write_inference_data(*self._inference_arrays()))
 
     def loo(self):
         """PSIS-LOO of the fit (ArviZ ``loo``): expected log predictive density, its error
