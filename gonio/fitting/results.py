@@ -326,6 +326,7 @@ class FitResult:
                 "acceptance_fraction": m.acceptance_fraction.tolist(),
                 "tau_multiple": m.tau_multiple,
                 "rhat_limit": m.rhat_limit,
+                "moves": m.moves,
                 "tau_rtol": m.tau_rtol,
                 "max_steps": m.max_steps,
                 "wall_seconds": m.wall_seconds,
@@ -454,6 +455,7 @@ class FitResult:
                 warnings=list(m["warnings"]),
                 diagnostics={k: {kk: _nan(vv) for kk, vv in v.items()} for k, v in m.get("diagnostics", {}).items()},
                 rhat_limit=float(m.get("rhat_limit", RHAT_LIMIT)),
+                moves=str(m.get("moves", "stretch")),  # results written before the moves were recorded
             )
         posterior = data["posterior"]
         for key, value in list(posterior.items()):
@@ -667,7 +669,7 @@ def _summary_text(result: FitResult) -> str:
             else "!!! NOT CONVERGED: step limit reached, numbers unreliable !!!"
         )
         lines += [
-            f"[[Posterior]] (emcee: {m.n_walkers} walkers x {m.n_steps} steps, burn-in {m.burn_in}, thin {m.thin}; {status})",
+            f"[[Posterior]] (emcee, {m.moves} move: {m.n_walkers} walkers x {m.n_steps} steps, burn-in {m.burn_in}, thin {m.thin}; {status})",
             f"    mean acceptance fraction = {result.posterior['acceptance_fraction']:.3f}; "
             f"samples kept = {result.posterior['n_samples']}",
             f"    {'name':<{width}} {'median':>10} {'-1sig':>9} {'+1sig':>9} {'2.5%':>10} {'97.5%':>10} {'MAP':>10} "
