@@ -35,6 +35,7 @@ from matplotlib.colors import Normalize, to_rgba_array
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
+from matplotlib.ticker import MaxNLocator
 
 from gonio.fitting.dataset import QUANTITY_LABELS, Dataset
 from gonio.fitting.results import FitResult
@@ -84,6 +85,13 @@ DENSE_POINTS = 1000
 #: Steps drawn per walker in the trace figure at most (more than the axes have pixel
 #: columns; longer chains are drawn every k-th step).
 MAX_TRACE_POINTS = 1000
+#: Ticks of the data panels: a panel's cost is mostly its axes' ticks and their labels
+#: (about 2 ms each to make and draw), so a few well-placed ones [deg], and at most this
+#: many intervals on the value axis (none at the right edge, where the next panel's first
+#: label would touch it).
+_IN_PLANE_TICKS = (-60, -30, 0, 30, 60)
+_POLAR_TICKS = (0, 15, 30, 45, 60, 75)
+_PANEL_Y_BINS = 5
 #: Walkers drawn in the trace figure at most (:func:`_shown_walkers` picks them).
 MAX_TRACE_WALKERS = 32
 _LOWEST_WALKERS = 4
@@ -390,6 +398,7 @@ def _draw_in_plane_panel(ax: Axes, data: Dataset, panel: _Panel, series: _Series
                 capsize=2, lw=1)
     ax.axvline(panel.theta_i, color="0.6", ls=":", lw=1)
     ax.set_xlim(-90, 90)
+    ax.set_xticks(_IN_PLANE_TICKS)
     ax.set_xlabel("signed viewing angle theta_r [deg] (+ source side)")
 
 
@@ -445,7 +454,13 @@ def _draw_off_plane_panel(ax: Axes, data: Dataset, series: list[_Series], bands:
         ax.errorbar(data.theta_r[pick], data.value[pick], data.sigma[pick], fmt="o", ms=4, color=one.colour,
                     mec="k", mew=0.5, capsize=2, lw=1, label=one.label)
     ax.set_xlim(0, 90)
+    ax.set_xticks(_POLAR_TICKS)
     ax.set_xlabel("viewing angle theta_r [deg]")
+    if len(series) == 1 and n_offsets == 1:
+        # one azimuth: said on the plot, without a legend (which costs as much to draw as
+        # the rest of the panel: image data of many incidences has one azimuth each)
+        ax.text(0.98, 0.97, series[0].label, transform=ax.transAxes, ha="right", va="top", fontsize=7.5)
+        return
     omitted = f"{len(series)} of {n_offsets} azimuths" if n_offsets > len(series) else None
     ax.legend(fontsize=7.5, title=omitted, title_fontsize=7.5)
 
@@ -549,6 +564,7 @@ def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
         else:
             _draw_off_plane_panel(ax, data, panel_series, panel_bands, n_offsets)
         ax.set_ylim(shared_ylim or _data_range(data.value[panel.selection], data.sigma[panel.selection]))
+        ax.yaxis.set_major_locator(MaxNLocator(nbins=_PANEL_Y_BINS))
         # y given: no automatic title placement, which measures every tick label again
         ax.set_title(panel.title, fontsize=10, y=1.0, pad=_TITLE_PAD_PT)
         ax.grid(alpha=0.3)
@@ -646,7 +662,9 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
         ax.text(0.5, 0.5, "no posterior samples (fit run without MCMC)", ha="center", va="center")
         ax.set_axis_off()
         return fig
-    axes = grid.subplots(squeeze=False)
+    # the lower triangle only: an axes costs about as much to make as to draw, so the
+    # hidden upper triangle is not made at all
+    axes = {(i, j): fig.add_subplot(grid[i, j]) for i in range(n) for j in range(i + 1)}
     ranges = []
     for j in range(n):
         lo, hi = np.percentile(samples[:, j], [0.2, 99.8])
@@ -654,11 +672,8 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
             lo, hi = lo - 0.5 * max(abs(lo), 1e-9), hi + 0.5 * max(abs(hi), 1e-9)
         ranges.append((lo, hi))
     for i in range(n):
-        for j in range(n):
+        for j in range(i + 1):
             ax = axes[i, j]
-            if j > i:
-                ax.set_axis_off()
-                continue
             if i == j:
                 ax.hist(samples[:, j], bins=bins, range=ranges[j], color="C0", histtype="stepfilled", alpha=0.6)
                 q = np.percentile(samples[:, j], [16, 50, 84])
