@@ -199,8 +199,17 @@ class FitResult:
         return {p.name: p for p in problem.specs}
 
     def problem(self) -> FitProblem:
-        """Rebuild the :class:`FitProblem` of this fit."""
-        return FitProblem(self.model, self.dataset, self.fixed, self.options, self.jitter)
+        """The :class:`FitProblem` of this fit, rebuilt once and kept while the model, the
+        dataset, the fixed values, the options and the extra noise stay the same (building
+        one prepares the model's geometry terms: a report would otherwise build it a dozen
+        times)."""
+        key = (self.model, id(self.dataset), tuple(sorted(self.fixed.items())),
+               tuple(sorted(self.options.items())), self.jitter)
+        cached = self.__dict__.get("_problem")
+        if cached is None or cached[0] != key:
+            cached = (key, FitProblem(self.model, self.dataset, self.fixed, self.options, self.jitter))
+            self.__dict__["_problem"] = cached
+        return cached[1]
 
     @property
     def converged(self) -> bool | None:
