@@ -72,8 +72,11 @@ class _Margins:
     gap_y: float = 0.0
 
 
-#: At most this many incidences are drawn in the data figure (evenly chosen).
-MAX_INCIDENCE_PANELS = 12
+#: At most this many incidences are drawn in the data figure (evenly chosen): every
+#: incidence of the shipped protocols (at most 5 in one recording), a sample of image-based
+#: data (CUReT, one incidence per value), where a panel holds a value or two and costs
+#: about 50 ms to draw (12 panels made most of a 10,000-point report's 2 s).
+MAX_INCIDENCE_PANELS = 8
 #: At most this many azimuth differences get a series of their own in an off-plane panel
 #: (those with the most measurements); the legend says how many were left out.
 MAX_AZIMUTH_SERIES = 6

@@ -216,7 +216,7 @@ def test_data_figure_bands_come_from_one_draw_set_equal_to_per_series_bands(samp
     # The reference path: each series' band on its own, with the same draws (same seed).
     panels = [panel for group in fit_figures._data_panels(result) for panel in group]
     series = [one for panel in panels for one in fit_figures._off_plane_series(result.dataset, panel)[0]]
-    assert len(series) == len(fig.axes) == 12
+    assert len(series) == len(fig.axes) == fit_figures.MAX_INCIDENCE_PANELS  # 12 incidences, 8 drawn
     for ax, one in zip(fig.axes, series):
         alone = original(result, *one.geometry, n_draws=50)
         np.testing.assert_allclose(ax.lines[0].get_ydata(), alone[2], rtol=1e-12, atol=0)  # the median line
