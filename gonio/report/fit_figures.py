@@ -95,6 +95,8 @@ MAX_TRACE_POINTS = 1000
 _IN_PLANE_TICKS = (-60, -30, 0, 30, 60)
 _POLAR_TICKS = (0, 15, 30, 45, 60, 75)
 _PANEL_Y_BINS = 5
+#: At most this many tick intervals on the axes of the corner plot and the traces.
+_CORNER_BINS = 4
 #: Walkers drawn in the trace figure at most (:func:`_shown_walkers` picks them).
 MAX_TRACE_WALKERS = 32
 _LOWEST_WALKERS = 4
@@ -703,16 +705,19 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
                         ax.contour(centres_x, centres_y, hist.T, levels=levels, colors="k", linewidths=0.7)
                 ax.set_ylim(ranges[i])
             ax.set_xlim(ranges[j])
+            ax.xaxis.set_major_locator(MaxNLocator(nbins=_CORNER_BINS))
+            if i != j:
+                ax.yaxis.set_major_locator(MaxNLocator(nbins=_CORNER_BINS))
             if i == n - 1:
                 ax.set_xlabel(_param_label(result, names[j]))
                 ax.tick_params(axis="x", labelrotation=45, labelsize=8)
             else:
-                ax.set_xticklabels([])
+                ax.tick_params(axis="x", labelbottom=False)
             if j == 0 and i > 0:
                 ax.set_ylabel(_param_label(result, names[i]))
                 ax.tick_params(axis="y", labelsize=8)
             elif i != j:
-                ax.set_yticklabels([])
+                ax.tick_params(axis="y", labelleft=False)
     fig.suptitle(f"Posterior of {len(samples)} samples: 68 % and 95 % regions", fontsize=10)
     return fig
 
@@ -787,6 +792,7 @@ def trace_figure(result: FitResult) -> Figure:
         if limits is not None:
             ax.set_ylim(*limits)
         ax.set_ylabel(_param_label(result, names[j]), fontsize=9)
+        ax.yaxis.set_major_locator(MaxNLocator(nbins=_CORNER_BINS))
     log_prob = m.log_prob[::stride, shown]
     finite = log_prob[np.isfinite(log_prob)]
     _walker_lines(axes[-1], steps[::stride], log_prob, "C3")
