@@ -27,6 +27,11 @@ the largest error of a 95 % interval endpoint, in reference sd. Requirements for
 default: median within 0.5 sd, sd within 20 %, interval error no worse than the stretch
 move's at the same ensemble size.
 
+Also the cost of the loop itself: 1000 DE steps of the Fig 16 posterior with 32 walkers
+driven by ``emcee.EnsembleSampler`` (in pieces of 100 steps, as between convergence
+checks) and by gonio's ``EnsembleChain``, which gives the same chain bit for bit
+(``--loop-only`` measures only that).
+
 Writes docs/benchmarks/moves.json and moves.png. Run: ``python benchmarks/bench_moves.py``
 (about 25 minutes on 2 cores shared with other jobs); ``--moves a,b`` re-measures those
 move sets only and replaces their rows in the existing moves.json (same references).
@@ -116,6 +121,43 @@ def runs(name: str, problem, start, priors, ref: np.ndarray, moves, walkers, see
     return rows
 
 
+def loop_overhead(problem, start, priors, steps: int = 1000, walkers: int = 32, repeats: int = 3) -> dict:
+    """CPU time [s] of ``steps`` DE steps of the Fig 16 posterior driven by
+    ``emcee.EnsembleSampler`` (run in pieces of 100 steps, as between convergence checks)
+    and by gonio's :class:`~gonio.fitting.ensemble.EnsembleChain` (the same chain, bit for
+    bit), least of ``repeats``, and the time of the log posterior alone in the latter."""
+    import emcee
+
+    from gonio.fitting.ensemble import EnsembleChain
+    from gonio.fitting.mcmc import LogPosterior, resolve_priors
+    from gonio.fitting.moves import VectorisedDEMove
+
+    posterior = LogPosterior(problem, resolve_priors(problem, start.values, priors))
+    centre = np.array([start.values[n] for n in problem.free])
+    spread = np.array([0.1 * start.stderr[n] for n in problem.free])
+    coords = centre + spread * np.random.default_rng(0).standard_normal((walkers, centre.size))
+    emcee_s, gonio_s, model_s = [], [], []
+    for _ in range(repeats):
+        sampler = emcee.EnsembleSampler(walkers, centre.size, posterior.batch, vectorize=True,
+                                        moves=VectorisedDEMove(), )
+        sampler._moves[0].log_prob_batch = posterior.batch  # the vectorised acceptance, as gonio
+        state = emcee.State(coords, random_state=np.random.RandomState(1).get_state())
+        began = time.process_time()
+        for _ in range(steps // 100):
+            state = sampler.run_mcmc(state, 100, progress=False)
+        emcee_s.append(time.process_time() - began)
+        posterior.model_seconds = 0.0
+        chain = EnsembleChain(posterior.batch, [(VectorisedDEMove(), 1.0)], coords, np.random.RandomState(1))
+        began = time.process_time()
+        for _ in range(steps // 100):
+            chain.run(100)
+        gonio_s.append(time.process_time() - began)
+        model_s.append(posterior.model_seconds)
+    return {"steps": steps, "walkers": walkers, "emcee_sampler_cpu_s": min(emcee_s),
+            "gonio_loop_cpu_s": min(gonio_s), "likelihood_wall_s_in_gonio_loop": min(model_s),
+            "ratio_emcee_over_gonio": min(emcee_s) / min(gonio_s)}
+
+
 def summarise(rows: list[dict]) -> list[dict]:
     """Medians over seeds of every (problem, moves, walkers), and the worst posterior errors."""
     out = []
@@ -170,11 +212,27 @@ def main() -> int:
     parser.add_argument("--moves", default=",".join(MOVES))
     parser.add_argument("--walkers", default=",".join(map(str, WALKERS)))
     parser.add_argument("--chart-only", action="store_true", help="redraw moves.png from moves.json")
+    parser.add_argument("--loop-only", action="store_true",
+                        help="measure the loop overhead only and store it in moves.json")
     args = parser.parse_args()
     if args.chart_only:
         import json
 
         chart(json.loads((OUT / "moves.json").read_text())["summary"], OUT / "moves.png")
+        return 0
+    if args.loop_only:
+        import json
+
+        from gonio.fitting import fit_least_squares
+
+        with tempfile.TemporaryDirectory(prefix="gonio-moves-") as scratch:
+            problem, priors = fig16_problem(Path(scratch))
+            loop = loop_overhead(problem, fit_least_squares(problem, seed=0, priors=priors), priors)
+        loop["load_average"] = os.getloadavg()[0]
+        payload = json.loads((OUT / "moves.json").read_text())
+        payload["loop"] = loop
+        write_json("moves", payload)
+        print(loop)
         return 0
     from fit_time_accuracy import problems as accuracy_problems
 
@@ -206,6 +264,9 @@ def main() -> int:
         rows = [r for r in kept["runs"] if r["moves"] not in moves] + rows
         loads = kept["load_average_before_after"] + loads
     summary = summarise(rows)
+    with tempfile.TemporaryDirectory(prefix="gonio-moves-") as scratch:
+        problem, priors = fig16_problem(Path(scratch))
+        loop = loop_overhead(problem, fit_least_squares(problem, seed=0, priors=priors), priors)
     path = write_json("moves", {
         "load_average_before_after": loads,
         "benchmark": "moves",
@@ -214,6 +275,7 @@ def main() -> int:
         "reference": {"moves": "stretch", "walkers": REFERENCE_WALKERS, "steps": REFERENCE_STEPS,
                       "burn_in": REFERENCE_BURN, "problems": references},
         "summary": summary,
+        "loop": loop,
         "runs": rows,
     })
     chart(summary, OUT / "moves.png")
