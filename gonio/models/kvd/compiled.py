@@ -39,16 +39,16 @@ def _cosine(t: float) -> float:
     return (1.0 - t) / (1.0 + t)
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_OPTIONS, inline="always")
 def _radial(c: float, order: int, table) -> None:
     """R_n^l(cos theta) into ``table[n, l]`` for n - l even, n <= order: the recurrence
     of :func:`gonio.zernike.zernike_radial_table`, operation for operation."""
     x = 2.0 * c - 1.0
-    rho_squared = max(1.0 - c, 0.0)
+    rho = math.sqrt(max(1.0 - c, 0.0))
     rho_power = 1.0
     for l in range(order + 1):
         if l:
-            rho_power = rho_power * math.sqrt(rho_squared)
+            rho_power = rho_power * rho
         previous, current = 0.0, 1.0
         for k in range((order - l) // 2 + 1):
             if k == 1:
