@@ -51,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="fit the rig's stray light as a nuisance parameter: stray_light, the stray radiance as a "
                              "fraction of a white Lambertian's at normal incidence (uniform prior on [0, 0.05])")
     parser.add_argument("--walkers", type=int, default=None,
-                        help="number of emcee walkers (default 256 where all walkers are evaluated at once, else 32: gonio.fitting.mcmc.default_walkers, chosen by measurement)")
+                        help="number of emcee walkers (default 32, for every model: gonio.fitting.mcmc.default_walkers, chosen by measurement)")
     parser.add_argument("--max-steps", type=int, default=20000, help="step limit of the chain (default 20000)")
     parser.add_argument("--rhat-limit", type=float, default=1.01,
                         help="largest rank-normalised split R-hat accepted for convergence (default 1.01)")
