@@ -75,14 +75,15 @@ from .spec import SurfaceSpec
 
 __all__ = ["THETA_MAX", "FLOOR", "TABLE_FORMAT", "SurfaceGrid", "DEFAULT_GRID", "table_coordinates",
            "node_geometries", "SurfaceTable", "GRIDS", "EXACT_GRIDS", "grid_for", "table_key", "table_path",
-           "node_values", "render_table", "TabulatedSurface", "cached_tables", "NAME_PREFIX"]
+           "COMMON_RANDOM_NUMBERS", "node_values", "render_table", "TabulatedSurface", "cached_tables",
+           "NAME_PREFIX"]
 
 #: Largest polar angle of the table [deg] (module notes).
 THETA_MAX = 89.0
 #: Added to the BRDF before the logarithm [1/sr].
 FLOOR = 1e-4 / math.pi
 #: Version of the table layout and its node estimator (part of the key): 2 = exact low
-#: orders plus sampled rest, common random numbers (:func:`node_values`).
+#: orders plus sampled rest, common random numbers for the V-groove field (:func:`node_values`).
 TABLE_FORMAT = 2
 #: File names of surface tables start with this.
 NAME_PREFIX = "surface-"
@@ -234,8 +235,17 @@ def table_path(spec: SurfaceSpec, grid: SurfaceGrid | None = None, directory: Pa
     return Path(directory or cache_dir()) / f"{NAME_PREFIX}{spec.surface.kind}-{digest}.npz"
 
 
+#: Kinds whose table nodes share one stream (common random numbers), chosen by
+#: measurement (benchmarks/surfaces_tables.py, docs/surfaces.md "Tables"): for the
+#: V-groove field the shared paths make the node error three times less jagged and halve
+#: what a fit cannot absorb of it; for the single-slope groove they make the error larger
+#: and the fitted parameters scatter more, for the height field larger and no smoother
+#: (its nodes' paths see different facets): those keep one stream per node.
+COMMON_RANDOM_NUMBERS = {"vgrooves": True, "vgroove": False, "heightfield": False, "pits": False}
+
+
 def node_values(spec: SurfaceSpec, theta_i: np.ndarray, theta_r: np.ndarray, delta_phi: np.ndarray,
-                common_random_numbers: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                common_random_numbers: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A table's estimate of the all-bounce (or truncated) BRDF at geometries [1/sr].
 
     Parameters
@@ -244,8 +254,9 @@ def node_values(spec: SurfaceSpec, theta_i: np.ndarray, theta_r: np.ndarray, del
         The surface, paths, seed and bounce limit.
     theta_i, theta_r, delta_phi : numpy.ndarray
         Source and viewing polar angles and phi_r - phi_i [deg] (1-D, equal length).
-    common_random_numbers : bool
-        Render every geometry with the same paths (default; :func:`~.estimator.render`).
+    common_random_numbers : bool, optional
+        Render every geometry with the same paths (:func:`~.estimator.render`); default:
+        the kind's entry of :data:`COMMON_RANDOM_NUMBERS`.
 
     Returns
     -------
@@ -267,6 +278,8 @@ def node_values(spec: SurfaceSpec, theta_i: np.ndarray, theta_r: np.ndarray, del
     known = known_orders(spec.surface, theta_i, 0.0, theta_r, delta_phi, spec.bounces)
     if known is not None and known.orders is None:
         return np.asarray(known.value, float), np.zeros(np.shape(theta_i))
+    if common_random_numbers is None:
+        common_random_numbers = COMMON_RANDOM_NUMBERS[spec.surface.kind]
     rendered = render(spec.surface, theta_i, 0.0, theta_r, delta_phi, paths=spec.paths, seed=spec.seed,
                       bounces=spec.bounces, common_random_numbers=common_random_numbers, expected_bounces=True)
     if known is None:

@@ -187,6 +187,17 @@ def test_tables_clear_removes_surface_tables_and_keeps_look_alikes(cache, capsys
     assert not surface.path.exists() and look_alike.exists()
 
 
+def test_tables_info_says_which_tables_sample_nothing(cache, capsys, monkeypatch):
+    monkeypatch.setitem(EXACT_GRIDS, "pits", SMALL)
+    TabulatedSurface(parse_surface_spec("kind=pits,psi=60,coverage=0.5,rho=0.7")).load()
+    TabulatedSurface(parse_surface_spec("kind=vgrooves,sigma=10,rho=0.5,paths=100"), SMALL, workers=1).load()
+    assert main(["tables", "info"]) == 0
+    out = capsys.readouterr().out
+    assert "surface:kind=pits,psi=60,coverage=0.5,rho=0.7,paths=20000,seed=0,bounces=all\n" \
+           f"        {SMALL.y * SMALL.zeta * SMALL.t} nodes, every order exact, nothing sampled" in out
+    assert "180 nodes, Monte Carlo error per node median" in out
+
+
 def test_tables_build_renders_a_surface_once(cache, capsys, monkeypatch):
     monkeypatch.setitem(GRIDS, "vgrooves", SMALL)
     assert main(["tables", "build", "surface:kind=vgrooves,sigma=10,rho=0.5,paths=100", "--workers", "1"]) == 0
