@@ -60,7 +60,7 @@ def test_common_random_numbers_make_the_error_of_nearby_geometries_nearly_equal(
     # 30 seeds, two geometries 2 deg apart: with common random numbers the difference of
     # the two values scatters far less than each value (the error is a smooth function of
     # the angles); with independent streams it scatters sqrt(2) times as much.  Bound:
-    # below a third of the values' scatter (measured: ~0.1 for both kinds)
+    # below a third of the values' scatter (measured: 0.18 and 0.19)
     geometry = ([50.0, 52.0], 0.0, [30.0, 30.0], 150.0)
     common, independent = [], []
     for seed in range(30):
@@ -133,9 +133,9 @@ def test_expected_bounces_reproduce_the_two_bounce_papers(surface):
 def test_expected_bounces_agree_with_traced_bounces(surface, bounces):
     # the third and later orders, integrated over the facets, against plain path tracing
     # (Russian roulette for all bounces); at equal paths the integrated estimate is more
-    # precise (measured 2.2-2.7x for the field, 5x for the steep groove: bound 1.5x, the
-    # slope and azimuth draws stay random).  Resolution: 2 % of the
-    # traced later orders (a bias of 9 % of them, 0.5 % of the BRDF, fails)
+    # precise (measured 2.2-8.8x for the fields, 3.1-12.5x for the steep groove: bound
+    # 1.5x; the slope and azimuth draws stay random).  Resolution: 2 % of the traced later
+    # orders (a bias of 9 % of them fails)
     ti, tr, dphi = GEOMETRIES
     traced = render(surface, ti, 0.0, tr, dphi, paths=100_000, seed=2, bounces=bounces)
     integrated = render(surface, ti, 0.0, tr, dphi, paths=50_000, seed=3, bounces=bounces, expected_bounces=True)
