@@ -272,9 +272,10 @@ def render(surface: Surface, theta_i: ArrayLike, phi_i: ArrayLike, theta_r: Arra
     it sees v).  The other facet is lit uniformly on [m^s/w, 1] (eq 21), so the next
     vertex's direct light is added as its expectation, w_k rho * rho (n'.s)+ F(u -> lit
     strip), and the path moves to a point of the other facet drawn with sin phi uniform
-    (weight times rho F(u -> facet)); the first vertex keeps its shadow ray.  Unbiased
-    (the conditional expectation of the traced estimate); the per-path variance of the
-    second and later orders falls (:mod:`.kernel`, ``_groove_expected_path``).
+    (weight times rho F(u -> facet)); the first vertex keeps its exact 0-or-1 shadow test
+    (is it on its facet's lit strip).  Unbiased (the conditional expectation of the
+    traced estimate); the per-path variance of the second and later orders falls
+    (:mod:`.kernel`, ``_groove_expected_path``).
 
     Random numbers: SplitMix64, path k of a stream starting a fixed 2^20 draws after path
     k - 1 (:mod:`.kernel`).  By default the stream of a geometry is keyed by the seed, the

@@ -417,9 +417,10 @@ def _groove_expected_path(params, shape, source, view, max_bounces: int, state: 
     w rho * rho (n'.s)+ F(u -> [v_lit, 1]), which is added in place of its traced 0-or-1
     sample; the path then moves to a point of the other facet drawn with sin phi uniform
     over the whole facet, with weight times rho F(u -> [0, 1]), and so on.  The first
-    vertex (the camera ray's hit) keeps the exact shadow test.  With all bounces, a
-    weight below 1e-4 goes on with probability weight/1e-4 at weight 1e-4 (Russian
-    roulette, unbiased).  Returns 1 if the path was cut at BOUNCE_CAP.
+    vertex (the camera ray's hit) keeps its exact 0-or-1 shadow test (is it on its
+    facet's lit strip).  With all bounces, a weight below 1e-4 goes on with probability
+    weight/1e-4 at weight 1e-4 (Russian roulette, unbiased).  Returns 1 if the path was
+    cut at BOUNCE_CAP.
     """
     rho = params[0]
     azimuth = _path_frame(VGROOVE, params, shape, state)
