@@ -78,7 +78,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _common import OUT, machine, write_json  # noqa: E402
+from _common import OUT, machine, mcmc_design, write_json  # noqa: E402
 
 # --------------------------------------------------------------------------- design
 #: Albedo of the emulated reference standard (the certificate of the Fig 16 protocol).
@@ -915,20 +915,6 @@ def draw_charts(payload: Mapping[str, Any], suffix: str) -> None:
     chart_ranks(payload, OUT / f"calibration_ranks{suffix}.png")
     chart_zscores(payload, payload["coverage_records"], OUT / f"calibration_zscores{suffix}.png")
     chart_confusion(payload, OUT / f"calibration_confusion{suffix}.png")
-
-
-def mcmc_design() -> str:
-    """The MCMC the coverage fits ran with: ``gonio.fitting.fit``'s defaults, read from the code."""
-    import inspect
-
-    from gonio.fitting.mcmc import DEFAULT_WALKERS, sample_posterior
-    from gonio.fitting.moves import MOVES
-
-    defaults = {name: p.default for name, p in inspect.signature(sample_posterior).parameters.items()}
-    return (f"gonio.fitting.fit defaults: moves '{defaults['moves']}' ({MOVES[defaults['moves']]}), "
-            f"{DEFAULT_WALKERS} walkers, chain >= {defaults['tau_multiple']:g} tau with tau stable to "
-            f"{defaults['tau_rtol']:.0%}, R-hat < {defaults['rhat_limit']:g}, max {defaults['max_steps']} steps; "
-            "burn-in 2 max(tau), thinning min(tau)/2")
 
 
 def git_state() -> dict[str, Any]:
