@@ -32,6 +32,21 @@ def machine() -> dict:
     return info
 
 
+def mcmc_design() -> str:
+    """The MCMC ``gonio.fitting.fit`` runs by default, read from the code (move, walkers,
+    stopping rule), for a benchmark's JSON and prose."""
+    import inspect
+
+    from gonio.fitting.mcmc import DEFAULT_WALKERS, sample_posterior
+    from gonio.fitting.moves import MOVES
+
+    defaults = {name: p.default for name, p in inspect.signature(sample_posterior).parameters.items()}
+    return (f"gonio.fitting.fit defaults: moves '{defaults['moves']}' ({MOVES[defaults['moves']]}), "
+            f"{DEFAULT_WALKERS} walkers, chain >= {defaults['tau_multiple']:g} tau with tau stable to "
+            f"{defaults['tau_rtol']:.0%}, R-hat < {defaults['rhat_limit']:g}, max {defaults['max_steps']} steps; "
+            "burn-in 2 max(tau), thinning min(tau)/2")
+
+
 def best_time(function: Callable[[], object], repeats: int = 5, min_time: float = 0.05) -> float:
     """Best wall time of ``function()`` over ``repeats`` runs [s] (each run repeated until
     it lasts ``min_time`` to beat timer resolution)."""

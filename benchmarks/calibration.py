@@ -11,8 +11,8 @@ and apertures as built), each run measured with a shortened protocol, reduced wi
    For every seed the truth (rho, sigma) is drawn from the prior ``rho ~ U(0.5, 0.95)``,
    ``sigma ~ U(5, 45) deg``; the sample is that model on the emulated rig; the fit is
    ``gonio.fitting.fit`` with exactly that prior for rho and sigma (plus the calibration
-   prior on ``scale``) and gonio's default MCMC (32 walkers, chain 50 tau long with a
-   stable tau and R-hat < 1.01). Recorded per seed and parameter: whether the 68 %
+   prior on ``scale``) and gonio's default MCMC (emcee's differential-evolution move, 32
+   walkers, chain 50 tau long with a stable tau and R-hat < 1.01; :func:`mcmc_design`). Recorded per seed and parameter: whether the 68 %
    (p16-p84) and 95 % (p2.5-p97.5) posterior intervals contain the truth; the SBC rank
    of the truth among ``SBC_DRAWS`` posterior draws picked at random (without
    replacement) from ``result.samples()``; the least-squares intervals (value +- 1 and
@@ -44,7 +44,7 @@ Writes docs/benchmarks/calibration.json and calibration_coverage.png,
 calibration_ranks.png, calibration_zscores.png, calibration_confusion.png (``--quick``:
 the same names with ``_quick``). Exits 0 whether or not the targets are met.
 
-Run: ``python benchmarks/calibration.py`` (about an hour on two cores);
+Run: ``python benchmarks/calibration.py`` (35-60 minutes on two cores);
 ``python benchmarks/calibration.py --quick`` for a smoke run of a few minutes.
 """
 from __future__ import annotations
@@ -78,7 +78,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _common import OUT, machine, write_json  # noqa: E402
+from _common import OUT, machine, mcmc_design, write_json  # noqa: E402
 
 # --------------------------------------------------------------------------- design
 #: Albedo of the emulated reference standard (the certificate of the Fig 16 protocol).
@@ -996,8 +996,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                      "lamp flicker and drift on, lamp monitor on, lamp already warm",
             "reference_reflectance": REFERENCE_REFLECTANCE,
             "prior": {k: list(v) for k, v in PRIOR.items()},
-            "mcmc": "gonio.fitting.fit defaults: 32 walkers, chain >= 50 tau with tau stable to 5 %, R-hat < 1.01, "
-                    "max 20000 steps; burn-in 2 max(tau), thinning min(tau)/2",
+            "mcmc": mcmc_design(),
             "sbc_draws": SBC_DRAWS, "rank_bins": RANK_BINS, "rank_band": RANK_BAND,
             "coverage_targets": {k: list(v) for k, v in COVERAGE_TARGETS.items()},
             "selection_target": SELECTION_TARGET,

@@ -14,7 +14,8 @@ oren-nayar+torrance-sparrow, eq 38, kd = 1, unity Fresnel):
 * the model comparison under the fits' likelihood, the noise model plus a fitted jitter
   (chi-square, reduced chi-square, goodness of fit, AIC, BIC, Laplace evidence;
   gonio.fitting.compare_models);
-* MCMC (emcee, gonio's default walkers, run to 50 autocorrelation times) with a fitted jitter, giving
+* MCMC (gonio's default: emcee's moves in gonio's ensemble loop, run to 50 autocorrelation
+  times; ``_common.mcmc_design``) with a fitted jitter, giving
   posterior medians and 95 % intervals;
 * how well each model fits: relative rms of data/model - 1, and where the misfit sits
   (by the angle between lamp and camera);
@@ -39,7 +40,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import ROOT, machine, write_json  # noqa: E402
+from _common import ROOT, machine, mcmc_design, write_json  # noqa: E402
 
 from gonio.cli.curet import CREDIT, candidate_label, candidate_slug, curet_dataset, load_curet  # noqa: E402
 from gonio.fitting import ConvergenceWarning, FitResult, compare_models, fit  # noqa: E402
@@ -334,7 +335,8 @@ def markdown(studies: list[dict], figures: dict[int, list[Path]], timing: dict) 
         "",
         "One likelihood evaluation (205 geometries, fixed-geometry path) costs "
         + ", ".join(f"{k} {v * 1e6:.0f} us" for k, v in timing.items())
-        + " (medians over the four samples). A full MCMC fit (least squares, then emcee to 50 tau) takes "
+        + " (medians over the four samples). A full MCMC fit (least squares, then MCMC with "
+        f"{mcmc_design()}) takes "
         f"{min(f['seconds'] for s in studies for f in s['fits']):.1f}-"
         f"{max(f['seconds'] for s in studies for f in s['fits']):.1f} s. "
         "Machine and per-fit numbers: docs/benchmarks/curet_fits.json; chart: docs/benchmarks/curet_fits.png.",
@@ -475,6 +477,7 @@ def main() -> int:
         "command": "python benchmarks/curet_fits.py",
         "machine": machine(),
         "credit": CREDIT,
+        "mcmc": mcmc_design(),
         "samples": {s["dataset"].label: {"noise_relative": s["noise"].relative,
                                          "chosen_paper_model": best_fit(s)["label"],
                                          "chosen_overall": best_fit(s, paper_only=False)["label"]} for s in studies},
