@@ -83,3 +83,20 @@ def test_a_fit_with_mcmc_and_its_files_loads_neither_arviz_nor_xarray():
             "result = fit(data, 'lambert', n_walkers=8, max_steps=300, tau_multiple=5.0, rhat_limit=1.2)\n"
             "result.save(tempfile.mkdtemp())\n")
     assert _loaded_after(code) == ["emcee", "scipy"]
+
+
+@pytest.mark.parametrize("processes, loaded", [("2", ["emcee", "scipy"]), ("1", ["emcee", "matplotlib", "scipy"])])
+def test_fit_with_report_leaves_matplotlib_to_the_report_workers(tmp_path, monkeypatch, processes, loaded):
+    # `gonio fit --report`: worker processes import matplotlib and draw the report while
+    # this process fits (gonio.report.workers); with one process it is drawn here.
+    monkeypatch.setenv("GONIO_REPORT_PROCESSES", processes)
+    code = ("import numpy as np\n"
+            "from gonio.cli import main\n"
+            "from gonio.fitting import Dataset\n"
+            "theta = np.arange(0.0, 80.0, 5.0)\n"
+            "data = Dataset(30.0, 0.0, theta, 0.0, 0.16 + 0.001 * np.cos(np.radians(theta)), 0.002)\n"
+            f"csv = data.to_csv({str(tmp_path / 'd.csv')!r})\n"
+            "main(['fit', str(csv), '--model', 'lambert', '--walkers', '8', '--max-steps', '300', '--report',\n"
+            "      '--quiet', '--rhat-limit', '1.2'])\n")
+    assert _loaded_after(code) == loaded
+    assert (tmp_path / "d.fit-lambert" / "report.html").stat().st_size > 10_000
