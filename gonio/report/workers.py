@@ -36,6 +36,7 @@ calling process), else 2 on a machine with more than one core (:func:`report_pro
 from __future__ import annotations
 
 import atexit
+import copy
 import multiprocessing
 import multiprocessing.util  # noqa: F401 - its exit hook must be registered before ours
 import os
@@ -451,7 +452,7 @@ def write_report_shared(result, out: Path, workers: ReportWorkers | int | None,
         for k, share in enumerate(shares[1:]):
             if share:
                 try:
-                    pool.submit(k, ("figures", result, out, share))
+                    pool.submit(k, ("figures", _portable(result), out, share))
                     submitted.append((k, share))
                 except ReportWorkerError as error:
                     _drawn_here(error, result, out, share)
@@ -465,6 +466,15 @@ def write_report_shared(result, out: Path, workers: ReportWorkers | int | None,
         if pool is not None and pool is not workers:
             pool.close()
     return write_html(result, out, pngs)
+
+
+def _portable(result):
+    """``result`` without what a process rebuilds on demand and cannot pickle (the cached
+    FitProblem of :meth:`gonio.fitting.FitResult.problem`, which holds the model's
+    prepared functions): a shallow copy, the result itself is left as it is."""
+    clone = copy.copy(result)
+    clone.__dict__.pop("_problem", None)
+    return clone
 
 
 def _drawn_here(error: ReportWorkerError, result, out: Path, share: tuple[str, ...]) -> dict[str, bytes]:

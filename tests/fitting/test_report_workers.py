@@ -73,6 +73,18 @@ def test_two_processes_write_the_same_files_as_one(saved_fit, in_process, tmp_pa
     assert _contents(tmp_path) == in_process
 
 
+def test_a_result_in_memory_is_sent_to_the_worker(tmp_path):
+    # A fresh result caches its FitProblem (the model's prepared functions, which do not
+    # pickle); the worker gets the result without it and rebuilds it.
+    data = synthetic_dataset("lambert", dict(rho=0.5), 0.005)
+    result = fit(data, "lambert", n_walkers=8, tau_multiple=10.0, rhat_limit=1.05, seed=0)
+    result.problem()
+    write_report(result, tmp_path / "one", processes=1)
+    write_report(result, tmp_path / "two", processes=2)
+    assert _contents(tmp_path / "two") == _contents(tmp_path / "one")
+    assert "_problem" in result.__dict__  # the caller's result keeps its cache
+
+
 def test_command_workers_write_the_same_files_and_keep_the_result(saved_fit, in_process, tmp_path):
     # gonio fit --report: one worker and its helper draw the report of the saved result.
     before = _digests(saved_fit)
