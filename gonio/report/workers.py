@@ -40,6 +40,7 @@ import copy
 import multiprocessing
 import multiprocessing.util  # noqa: F401 - its exit hook must be registered before ours
 import os
+import signal
 import sys
 import traceback
 import warnings
@@ -170,6 +171,9 @@ def _serve(connection, inherited=None, helpers: int = 0, method: str = START_MET
     parent goes away. Every reply is ``("done", value)`` or ``("error", traceback text)``."""
     if inherited is not None:  # the parent's end of the pipe, inherited through fork
         inherited.close()
+    # Ctrl-C in a terminal reaches the whole process group: the command handles it and
+    # stops its workers, which would otherwise each print a KeyboardInterrupt traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     pool, preload_error, notes = None, None, []
     try:
         _preload()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import signal
 
 import pytest
 
@@ -168,3 +169,16 @@ def test_one_process_starts_no_worker():
     assert start_report_workers(1) is None
     with pytest.raises(ValueError, match="processes = 0"):
         write_report("unused", processes=0)
+
+
+def test_ctrl_c_is_left_to_the_command(saved_fit, in_process, tmp_path):
+    # Ctrl-C reaches every process of the terminal's group: the command stops its workers;
+    # a worker itself ignores it (no traceback of its own) and goes on answering.
+    with ReportWorkers(1) as pool:
+        process, _ = pool._workers[0]
+        pool.submit(0, ("figures", saved_fit, tmp_path, ("fit-residuals.png",)))
+        pool.wait(0)  # the worker is in its loop
+        os.kill(process.pid, signal.SIGINT)
+        pool.submit(0, ("figures", saved_fit, tmp_path, ("fit-geometry.png",)))
+        assert pool.wait(0) == ("fit-geometry.png",)
+    assert (tmp_path / "fit-geometry.png").read_bytes() == in_process["fit-geometry.png"]
