@@ -73,6 +73,17 @@ def test_reading_and_reporting_a_fit_loads_no_sampler():
     assert loaded == ["matplotlib"]
 
 
+def test_a_least_squares_fit_loads_no_scipy_stats():
+    # Its goodness-of-fit p-value comes from scipy.special (gonio.fitting.adequacy).
+    code = ("import sys, numpy as np\n"
+            "from gonio.fitting import Dataset, fit\n"
+            "theta = np.arange(0.0, 80.0, 5.0)\n"
+            "data = Dataset(30.0, 0.0, theta, 0.0, 0.16 + 0.001 * np.cos(np.radians(theta)), 0.002)\n"
+            "assert fit(data, 'lambert', mcmc=False).adequacy.chi2_p > 0\n"
+            "assert 'scipy.stats' not in sys.modules, 'scipy.stats'\n")
+    assert _loaded_after(code) == ["scipy"]
+
+
 def test_a_fit_with_mcmc_and_its_files_loads_neither_arviz_nor_xarray():
     # R-hat and ESS come from ArviZ's numpy core and posterior.nc is written with h5netcdf:
     # `gonio fit` does not pay for arviz, xarray, pandas or numba (1 to 3 s of start-up).
