@@ -73,6 +73,17 @@ def test_reading_and_reporting_a_fit_loads_no_sampler():
     assert loaded == ["matplotlib"]
 
 
+def test_a_least_squares_fit_loads_no_scipy_stats():
+    # Its goodness-of-fit p-value comes from scipy.special (gonio.fitting.adequacy).
+    code = ("import sys, numpy as np\n"
+            "from gonio.fitting import Dataset, fit\n"
+            "theta = np.arange(0.0, 80.0, 5.0)\n"
+            "data = Dataset(30.0, 0.0, theta, 0.0, 0.16 + 0.001 * np.cos(np.radians(theta)), 0.002)\n"
+            "assert fit(data, 'lambert', mcmc=False).adequacy.chi2_p > 0\n"
+            "assert 'scipy.stats' not in sys.modules, 'scipy.stats'\n")
+    assert _loaded_after(code) == ["scipy"]
+
+
 def test_a_fit_with_mcmc_and_its_files_loads_neither_arviz_nor_xarray():
     # R-hat and ESS come from ArviZ's numpy core and posterior.nc is written with h5netcdf:
     # `gonio fit` does not pay for arviz, xarray, pandas or numba (1 to 3 s of start-up).
@@ -83,3 +94,20 @@ def test_a_fit_with_mcmc_and_its_files_loads_neither_arviz_nor_xarray():
             "result = fit(data, 'lambert', n_walkers=8, max_steps=300, tau_multiple=5.0, rhat_limit=1.2)\n"
             "result.save(tempfile.mkdtemp())\n")
     assert _loaded_after(code) == ["emcee", "scipy"]
+
+
+@pytest.mark.parametrize("processes, loaded", [("2", ["emcee", "scipy"]), ("1", ["emcee", "matplotlib", "scipy"])])
+def test_fit_with_report_leaves_matplotlib_to_the_report_workers(tmp_path, monkeypatch, processes, loaded):
+    # `gonio fit --report`: worker processes import matplotlib and draw the report while
+    # this process fits (gonio.report.workers); with one process it is drawn here.
+    monkeypatch.setenv("GONIO_REPORT_PROCESSES", processes)
+    code = ("import numpy as np\n"
+            "from gonio.cli import main\n"
+            "from gonio.fitting import Dataset\n"
+            "theta = np.arange(0.0, 80.0, 5.0)\n"
+            "data = Dataset(30.0, 0.0, theta, 0.0, 0.16 + 0.001 * np.cos(np.radians(theta)), 0.002)\n"
+            f"csv = data.to_csv({str(tmp_path / 'd.csv')!r})\n"
+            "main(['fit', str(csv), '--model', 'lambert', '--walkers', '8', '--max-steps', '300', '--report',\n"
+            "      '--quiet', '--rhat-limit', '1.2'])\n")
+    assert _loaded_after(code) == loaded
+    assert (tmp_path / "d.fit-lambert" / "report.html").stat().st_size > 10_000

@@ -237,6 +237,9 @@ def _alignment(items: list[str]) -> tuple[str, ...]:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from gonio.report.workers import finish_report, start_report_workers
+
+    workers = start_report_workers() if args.report and len(args.model) == 1 else None  # import while we fit
     from gonio import models
     from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
     from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
@@ -281,9 +284,7 @@ def _run(args: argparse.Namespace) -> int:
     path = result.save(out)
     print(result.summary())
     if args.report:
-        from gonio.report.fit_report import write_report
-
-        print(f"report: {write_report(out)}")
+        print(f"report: {finish_report(workers, out)}")
     if replacing:
         remove_stale_results(out, written_names(result, args.report))
     print(f"result: {path}")

@@ -26,7 +26,7 @@ from gonio.models import get as get_model
 
 from . import fit_figures
 
-__all__ = ["write_report", "FIGURES", "REPORT_FILE", "REPORT_FILES"]
+__all__ = ["write_report", "write_figures", "write_html", "load_source", "FIGURES", "REPORT_FILE", "REPORT_FILES"]
 
 #: The HTML file :func:`write_report` writes.
 REPORT_FILE = "report.html"
@@ -239,8 +239,8 @@ def _correlation_table(result: FitResult) -> str:
     return f"<table>{head}{body}</table>"
 
 
-def write_report(source: str | Path | FitResult, out: str | Path | None = None) -> Path:
-    """Write ``report.html`` and the PNG figures of a fit.
+def load_source(source: str | Path | FitResult, out: str | Path | None = None) -> tuple[FitResult, Path]:
+    """The fit result a report is drawn from and the folder it goes into (created).
 
     Parameters
     ----------
@@ -251,13 +251,13 @@ def write_report(source: str | Path | FitResult, out: str | Path | None = None) 
 
     Returns
     -------
-    pathlib.Path
-        The HTML file.
+    tuple of (FitResult, pathlib.Path)
+        The result and the output folder.
 
     Raises
     ------
     FileNotFoundError, ValueError
-        The result cannot be read.
+        The result cannot be read, or an in-memory result has no output folder.
     """
     if isinstance(source, FitResult):
         if out is None:
@@ -270,11 +270,56 @@ def write_report(source: str | Path | FitResult, out: str | Path | None = None) 
             out = source if source.is_dir() else source.parent
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    return result, out
+
+
+def write_figures(result: FitResult, out: Path, filenames: tuple[str, ...] | None = None) -> dict[str, bytes]:
+    """Draw figures of :data:`FIGURES` and write them as PNG files into ``out``.
+
+    Parameters
+    ----------
+    result : FitResult
+        The fit drawn.
+    out : pathlib.Path
+        Existing output folder.
+    filenames : tuple of str, optional
+        File names of the figures to draw (default: all, in report order).
+
+    Returns
+    -------
+    dict of str to bytes
+        The PNG file contents by file name.
+    """
+    makers = {filename: make for filename, _, make, _ in FIGURES}
+    unknown = sorted(set(filenames or ()) - set(makers))
+    if unknown:
+        raise ValueError(f"write_figures: unknown figure file(s) {unknown}; expected names of {list(makers)}")
+    return {filename: _png(makers[filename](result), out / filename) for filename in (filenames or tuple(makers))}
+
+
+def write_html(result: FitResult, out: Path, pngs: dict[str, bytes] | None = None) -> Path:
+    """Write ``report.html`` with every figure embedded.
+
+    Parameters
+    ----------
+    result : FitResult
+        The fit reported.
+    out : pathlib.Path
+        Output folder; the figures' PNG files are read from it unless given.
+    pngs : dict of str to bytes, optional
+        PNG contents by file name (:func:`write_figures`); missing ones are read from ``out``.
+
+    Returns
+    -------
+    pathlib.Path
+        The HTML file.
+    """
+    pngs = dict(pngs or {})
     model = get_model(result.model)
     data = result.dataset
     sections = []
-    for filename, title, make, caption in FIGURES:
-        png = _png(make(result), out / filename)
+    for filename, title, _, caption in FIGURES:
+        png = pngs[filename] if filename in pngs else (out / filename).read_bytes()
         encoded = base64.b64encode(png).decode("ascii")
         sections.append(
             (title, f"<figure><img alt='{html.escape(title)}' src='data:image/png;base64,{encoded}'>"
@@ -315,3 +360,39 @@ density found.</p>
     path = out / REPORT_FILE
     write_atomic(path, body)
     return path
+
+
+def write_report(source: str | Path | FitResult, out: str | Path | None = None, *, processes: int = 1) -> Path:
+    """Write ``report.html`` and the PNG figures of a fit.
+
+    Parameters
+    ----------
+    source : path or FitResult
+        A result folder (or its ``result.json``), or a result in memory.
+    out : path, optional
+        Output folder (default: the result folder; required for an in-memory result).
+    processes : int
+        Processes drawing the figures: 1 draws them all here; more start
+        ``processes - 1`` worker processes (:mod:`gonio.report.workers`) that draw their
+        share while this process draws its own. The files are the same either way; if a
+        worker fails, a :class:`gonio.report.workers.ReportWorkerWarning` says why and its
+        figures are drawn here.
+
+    Returns
+    -------
+    pathlib.Path
+        The HTML file.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        The result cannot be read; ``processes`` is below 1.
+    """
+    if processes < 1:
+        raise ValueError(f"write_report: processes = {processes}; expected 1 or more")
+    result, out = load_source(source, out)
+    if processes == 1:
+        return write_html(result, out, write_figures(result, out))
+    from .workers import write_report_shared
+
+    return write_report_shared(result, out, processes)
