@@ -58,8 +58,8 @@ from gonio.models import Model, Param
 from .priors import Normal
 
 __all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG", "STRAY_LIGHT",
-           "RIG_ERROR_NAMES", "COMPILED_MODELS", "parse_alignment", "alignment_prior", "reference_calibration",
-           "RigPrediction", "is_identity"]
+           "RIG_ERROR_NAMES", "COMPILED_MODELS", "INCIDENCE_TOLERANCE_DEG", "parse_alignment", "alignment_prior",
+           "reference_calibration", "incidence_weights", "RigPrediction", "is_identity"]
 
 #: Range of every alignment parameter [deg]: beyond it the rig is not misaligned but mis-built.
 ALIGNMENT_BOUND_DEG = 5.0
@@ -158,6 +158,56 @@ def reference_calibration(metadata: Mapping[str, Any]) -> tuple[np.ndarray, np.n
     return geometry, weights / weights.sum(), reflectance
 
 
+#: Largest difference between a value's recorded lamp polar angle and the planned angle of
+#: the reference readings that calibrate it [deg]: five times the stage's readback
+#: tolerance (0.01 deg, drivers.rig.Rig).
+INCIDENCE_TOLERANCE_DEG = 0.05
+
+
+def incidence_weights(theta_i: np.ndarray, metadata: Mapping[str, Any]) -> np.ndarray:
+    """Each value's weights of the reference readings under a calibration per incidence.
+
+    ``metadata["reference_standard"]`` holds, per reading, its planned lamp polar angle
+    (``incidence``) and its weight in that angle's irradiance (``incidence_weights``,
+    written by :mod:`gonio.reduction`); a value takes the readings whose angle is within
+    :data:`INCIDENCE_TOLERANCE_DEG` of its recorded ``theta_i`` [deg].
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (N, K), each row summing to 1.
+
+    Raises
+    ------
+    ValueError
+        A record without the per-reading angles and weights, or a value whose polar angle
+        no reading shares (naming it).
+
+    Examples
+    --------
+    >>> record = {"geometry": [[30, 0, 10, 180], [60, 0, 10, 180], [60, 0, 10, 180]], "weights": [1, 1, 1],
+    ...           "reflectance": [0.99] * 3, "incidence": [30, 60, 60], "incidence_weights": [1, 0.4, 0.6]}
+    >>> incidence_weights(np.array([60.002, 29.999]), {"reference_standard": record}).tolist()
+    [[0.0, 0.4, 0.6], [1.0, 0.0, 0.0]]
+    """
+    record = metadata.get("reference_standard")
+    if isinstance(record, str):
+        record = json.loads(record)
+    try:
+        angle = np.asarray(record["incidence"], float).reshape(-1)
+        within = np.asarray(record["incidence_weights"], float).reshape(-1)
+    except (TypeError, KeyError, ValueError):
+        raise ValueError("dataset metadata reference_standard: a calibration per incidence needs each reading's "
+                         "'incidence' (planned theta_i [deg]) and 'incidence_weights'") from None
+    theta = np.asarray(theta_i, float).reshape(-1)
+    nearest = angle[np.argmin(np.abs(theta[:, None] - angle[None, :]), axis=1)]
+    far = np.abs(nearest - theta) > INCIDENCE_TOLERANCE_DEG
+    if far.any():
+        raise ValueError(f"calibration per incidence: no reference reading at theta_i = {theta[far][0]:g} deg "
+                         f"(the readings are at {sorted(set(angle.tolist()))} deg)")
+    return np.where(nearest[:, None] == angle[None, :], within[None, :], 0.0)
+
+
 class RigPrediction:
     """The measured quantity of a misaligned rig with stray light at recorded geometries
     (module docstring).
@@ -208,6 +258,11 @@ class RigPrediction:
                 lambert = evaluated_model("lambert", probe)  # the reduction's model of the standard
                 recorded = reflectance * self._signal(lambert, tuple(geometry_k.T))
                 self.reference = (lambert, tuple(geometry_k.T), weights, reflectance, recorded)
+        #: With a calibration per incidence (``metadata["calibration"]``), each value's
+        #: weights of the reference readings, (N, K): those of its lamp polar angle.
+        self.value_weights = None
+        if self.reference is not None and metadata.get("calibration") == "per-incidence":
+            self.value_weights = incidence_weights(self.geometry[0], metadata)
 
     @staticmethod
     def _signal(lambert: Model, geometry) -> np.ndarray:
@@ -216,7 +271,9 @@ class RigPrediction:
 
     def calibration_factor(self, alignment: Mapping[str, Any], stray_light: Any = 0.0) -> np.ndarray | float:
         """``c = 1 / sum_k w_k r_k``: what misalignment and stray light did to ``E_0`` (1
-        without a reference standard); shape (W, 1) for parameter columns of shape (W, 1)."""
+        without a reference standard); shape (W, 1) for parameter columns of shape (W, 1).
+        With a calibration per incidence, each value's ``c`` from the readings at its lamp
+        polar angle (:attr:`value_weights`): shape (N,) or (W, N)."""
         if self.reference is None:
             return 1.0
         lambert, geometry, weights, reflectance, recorded = self.reference
@@ -227,6 +284,8 @@ class RigPrediction:
         else:
             signal = self._signal(lambert, misaligned_angles(*geometry, **alignment))
         true = reflectance * signal + np.asarray(stray_light) / np.pi
+        if self.value_weights is not None:
+            return 1.0 / ((true / recorded) @ self.value_weights.T)
         return 1.0 / np.sum(weights * true / recorded, axis=-1, keepdims=True)
 
     def _compiled_radiance(self, which: str, alignment: Mapping[str, Any], params: Mapping[str, Any]) -> np.ndarray:

@@ -77,7 +77,8 @@ def combine(members: np.ndarray, value: np.ndarray, budget: Mapping[str, np.ndar
     return mean, out, chi2, varying
 
 
-def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarray, resolution: Mapping[int, float]):
+def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarray, resolution: Mapping[int, float],
+                   carried: np.ndarray | None = None):
     """Combine the readings of each planned geometry at their mean readback geometry.
 
     Repeats of a geometry sit at slightly different real angles (the stage's
@@ -88,9 +89,13 @@ def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarra
     What remains of the angles is the readback's quantisation, which enters every
     reading's budget as ``angle = |slope| * resolution / sqrt(12)`` per axis.
 
+    ``carried`` (rows, m), e.g. the readings' sensitivity to the linearity correction, is
+    averaged with the weights of the values.
+
     Returns
     -------
-    geometry, values, budget, counts, repeat_statistics
+    geometry, values, budget, counts, repeat_statistics, carried
+        ``carried`` per value, shape (groups, m) (None when not given).
     """
     geometry = np.array([readback[m].mean(axis=0) for m in groups])
     counts = np.array([len(m) for m in groups], int)
@@ -112,4 +117,7 @@ def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarra
                           "observed_std": float(np.std(corrected[members], ddof=1)),
                           "stated_std": float(np.sqrt(np.mean(varying**2)))})
     combined = {name: np.array([p[name] for p in parts]) for name in budget}
-    return geometry, np.array(values), combined, counts, stats
+    means = None if carried is None else np.array(
+        [[combine(members, column, budget, rows.shared)[0] for column in np.asarray(carried, float).T]
+         for members in groups])
+    return geometry, np.array(values), combined, counts, stats, means

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -12,20 +13,34 @@ from ..protocols import loads
 from .combining import combine, combine_groups
 from .geometry import planned_groups, readback_geometry, readback_or_plan
 from .readings import CHECK_BLOCK, REFERENCE_BLOCK, Readings, readings_of
-from .result import LOW_SIGNAL_SIGMAS, Reduced
+from .result import COMMON_CALIBRATION, INCONSISTENT_INCIDENCES, LOW_SIGNAL_SIGMAS, IncidenceCalibration, Reduced
 
 __all__ = ["reduce_recording", "combine_reduced"]
 
-def _reference(rows: Readings, protocol, aperture) -> tuple[float | None, float | None, dict[str, float], dict, dict]:
+@dataclass(frozen=True)
+class _Reference:
+    """The reference standard reduced like the sample (:func:`_reference`)."""
+
+    irradiance: float
+    sigma: float
+    calibration: dict[str, float]
+    consistency: dict[str, float]
+    record: dict[str, list]
+    incidences: tuple[IncidenceCalibration, ...]
+    linearity: np.ndarray | None
+
+
+def _reference(rows: Readings, protocol, aperture) -> _Reference | None:
     """E_0 from the reference standard, reduced like the sample, with its budget (relative),
-    the consistency of its readings and, as ``{"geometry", "weights", "reflectance"}``, the
+    the consistency of its readings, the irradiance at each lamp polar angle it was read at
+    and, as ``{"geometry", "weights", "reflectance", "incidence", "incidence_weights"}``, the
     read-back geometry (theta_i, phi_i, theta_r, phi_r) [deg] of every reading, its weight
-    in E_0 and the standard's reflectance (what a fit of the rig's errors needs,
-    gonio.fitting.rig_errors)."""
+    in E_0, the standard's reflectance, its planned polar angle and its weight in that
+    angle's irradiance (what a fit of the rig's errors needs, gonio.fitting.rig_errors)."""
     p = rows.points
     ref = rows.index[p["block"][rows.index] == REFERENCE_BLOCK]
     if ref.size == 0 or protocol is None or protocol.reference is None:
-        return None, None, {}, {}, {}
+        return None
     from ..instrument import aperture_averaged
 
     standard = protocol.reference
@@ -39,19 +54,80 @@ def _reference(rows: Readings, protocol, aperture) -> tuple[float | None, float 
     e0 = rows.value[ref] / expected
     components = {n: c[ref] / expected for n, c in rows.budget.items()}
     shared = {n: labels[ref] for n, labels in rows.shared.items() if n != "prnu"}  # a window per geometry
+    jacobian = None if rows.linearity_jacobian is None else rows.linearity_jacobian[ref]
+    readings = _ReferenceReadings(e0, components, shared, jacobian)
     mean, parts, chi2, varying = combine(np.arange(ref.size), e0, components, shared)
     weights = 1.0 / varying**2 if np.all(varying > 0) else np.ones(ref.size)  # as combine weights them
+    weights = weights / weights.sum()
+    planned = np.round(np.asarray(p["theta_i"], float)[ref], 6)
+    incidences = tuple(readings.at(np.flatnonzero(planned == t), float(t), weights) for t in np.unique(planned))
+    within = np.zeros(ref.size)
+    for incidence in incidences:
+        within[list(incidence.readings)] = incidence.reading_weights
     record = {"geometry": np.column_stack([theta_i, phi_i, theta_r, phi_r]).tolist(),
-              "weights": (weights / weights.sum()).tolist(), "reflectance": [float(standard.reflectance)] * ref.size}
+              "weights": weights.tolist(), "reflectance": [float(standard.reflectance)] * ref.size,
+              "incidence": planned.tolist(), "incidence_weights": within.tolist()}
     relative = {f"reference {n}": v / mean for n, v in parts.items() if v > 0}
     relative["certificate"] = standard.reflectance_uncertainty
     relative["angular behaviour"] = standard.angular_uncertainty
     consistency = {"reference_reduced_chi2": chi2 / (ref.size - 1)} if ref.size > 1 else {}
+    if len(incidences) > 1:
+        _check_incidences(incidences, rows.warnings)
     total = mean * math.sqrt(sum(v**2 for v in relative.values()))
-    return float(mean), float(total), {k: float(v) for k, v in relative.items()}, consistency, record
+    return _Reference(float(mean), float(total), {k: float(v) for k, v in relative.items()}, consistency, record,
+                      incidences, readings.linearity(np.arange(ref.size)))
 
 
-def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
+#: Below this chi-square p-value the reference's irradiances at different lamp polar angles
+#: are called inconsistent (the threshold of the fits' goodness-of-fit test).
+INCIDENCE_CONSISTENCY_ALPHA = 1e-3
+
+
+def _check_incidences(incidences: tuple[IncidenceCalibration, ...], warnings: list[str]) -> None:
+    """Warn when the standard's irradiance differs between lamp polar angles beyond its
+    readings' noise: a beam that is not uniform (or a misaligned rig) that one common E_0
+    does not calibrate."""
+    from scipy.special import gammaincc
+
+    e = np.array([c.irradiance for c in incidences])
+    inverse = 1.0 / np.array([c.irradiance * c.sigma for c in incidences]) ** 2
+    mean = np.sum(inverse * e) / np.sum(inverse)
+    chi2 = float(np.sum(inverse * (e - mean) ** 2))
+    p = float(gammaincc(0.5 * (len(e) - 1), 0.5 * chi2))
+    if p < INCIDENCE_CONSISTENCY_ALPHA:
+        spread = ", ".join(f"{c.theta_i:g} deg {c.irradiance / mean - 1:+.1e}" for c in incidences)
+        warnings.append(f"{INCONSISTENT_INCIDENCES} beyond its noise "
+                        f"(chi-square {chi2:.3g} for {len(e) - 1} degrees of freedom, p = {p:.1e}; {spread}): a lamp "
+                        "beam that is not uniform, or a misaligned rig. Calibrate per incidence "
+                        "(gonio fit --calibration per-incidence) or fit the alignment (--alignment)")
+
+
+@dataclass(frozen=True)
+class _ReferenceReadings:
+    """The reference readings' E_0 estimates, their budget (by component, shared labels) and
+    their sensitivity to the linearity correction, for combining any subset of them."""
+
+    e0: np.ndarray
+    components: dict[str, np.ndarray]
+    shared: dict[str, np.ndarray]
+    jacobian: np.ndarray | None
+
+    def linearity(self, members: np.ndarray) -> np.ndarray | None:
+        """The combined readings' sensitivity to the linearity coefficients (their weights)."""
+        if self.jacobian is None:
+            return None
+        return np.array([combine(members, column, self.components, self.shared)[0] for column in self.jacobian.T])
+
+    def at(self, members: np.ndarray, theta_i: float, weights: np.ndarray) -> IncidenceCalibration:
+        """The irradiance from the readings ``members`` (those at one lamp polar angle)."""
+        mean, parts, _, varying = combine(members, self.e0, self.components, self.shared)
+        own = 1.0 / varying**2 if np.all(varying > 0) else np.ones(members.size)
+        return IncidenceCalibration(theta_i, float(mean), float(math.sqrt(sum(v**2 for v in parts.values())) / mean),
+                                    float(weights[members].sum()), tuple(int(m) for m in members),
+                                    tuple(float(w) for w in own / own.sum()), self.linearity(members))
+
+
+def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = True) -> Reduced:
     """Reduce a recording to radiance per geometry with an uncertainty budget.
 
     Parameters
@@ -60,6 +136,9 @@ def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
         Recording folder (:mod:`gonio.data`).
     lamp : str
         How the lamp's flicker and drift are handled (see :func:`read_readings`).
+    linearity : bool
+        Correct the readings by the camera's linearity series when the recording has one
+        (:func:`~gonio.reduction.readings.correct_linearity`); False leaves them as read.
 
     Returns
     -------
@@ -90,22 +169,25 @@ def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
     protocol_text = meta.get("protocol", {}).get("text")
     protocol = loads(protocol_text, source=str(folder / "metadata.json")) if protocol_text else None
     aperture = _aperture(meta, protocol)
-    rows = readings_of(meta, points, lamp)
-    reference, reference_sigma, calibration, ref_consistency, ref_record = _reference(rows, protocol, aperture)
+    rows = readings_of(meta, points, lamp, linearity)
+    reference = _reference(rows, protocol, aperture)
     sample = rows.index[(points["block"][rows.index] != REFERENCE_BLOCK) & (points["block"][rows.index] != CHECK_BLOCK)]
     if sample.size == 0:
         raise ValueError(f"{folder}: the recording holds no successfully measured, unsaturated sample points")
     groups = planned_groups(points, sample)
     keys = sorted(groups)
     resolution = {int(k): float(v) for k, v in meta.get("stage", {}).get("encoder_resolution_deg", {}).items()}
-    combined = combine_groups([np.array(groups[k]) for k in keys], rows, readback_geometry(points), resolution)
-    geometry, values, budget, counts, repeat_stats = combined
+    combined = combine_groups([np.array(groups[k]) for k in keys], rows, readback_geometry(points), resolution,
+                              carried=rows.linearity_jacobian)
+    geometry, values, budget, counts, repeat_stats, jacobian = combined
+    if jacobian is not None:
+        budget["linearity"] = _linearity_component(values, jacobian, rows.linearity.covariance_matrix, reference)
     pixels = np.array([points["roi_pixels"][groups[k][0]] for k in keys], float)
     window = np.clip(1.0 / pixels - 1.0 / float(np.max(points["roi_pixels"])), 0.0, None)  # as ccd_components
     total = np.sqrt(sum(b**2 for b in budget.values()))
     flags = np.where(values <= LOW_SIGNAL_SIGMAS * total, "low_signal", "").astype(object)
     consistency = dict(rows.consistency)
-    consistency.update(ref_consistency)
+    consistency.update(reference.consistency if reference else {})
     dof = sum(r["n"] - 1 for r in repeat_stats)
     if dof:
         consistency["repeats_reduced_chi2"] = sum(r["chi2"] for r in repeat_stats) / dof
@@ -118,16 +200,35 @@ def reduce_recording(folder: str | Path, lamp: str = "auto") -> Reduced:
     return Reduced(
         theta_i=ti, phi_i=pi_, theta_r=np.abs(view), phi_r=np.where(view >= 0, 0.0, 180.0), view=view,
         radiance=values, radiance_sigma=total,
-        repeats=np.array(counts, int), reference_irradiance=reference, reference_irradiance_sigma=reference_sigma,
-        label=label,
+        repeats=np.array(counts, int), reference_irradiance=reference.irradiance if reference else None,
+        reference_irradiance_sigma=reference.sigma if reference else None, label=label,
         metadata={"recording": str(folder), "protocol": meta.get("protocol", {}).get("name"),
                   "planned_view": [k[2] for k in keys],
                   **({"aperture_sr": [float(a) for a in aperture]} if aperture else {}),
-                  **({"reference_standard": ref_record} if ref_record else {})},
-        budget=budget, calibration=calibration, flags=flags, excluded=excluded,
+                  **({"reference_standard": reference.record} if reference else {})},
+        budget=budget, calibration=reference.calibration if reference else {}, flags=flags, excluded=excluded,
         warnings=tuple(rows.warnings), consistency=consistency, unit=rows.unit, repeat_statistics=tuple(repeat_stats),
-        window=window,
+        window=window, linearity_jacobian=jacobian,
+        linearity_covariance=None if jacobian is None else rows.linearity.covariance_matrix,
+        reference_linearity=reference.linearity if reference else None,
+        incidences=reference.incidences if reference else (),
+        incidence=_incidence_of(keys, reference.incidences if reference else ()),
     )
+
+
+def _linearity_component(values: np.ndarray, jacobian: np.ndarray, covariance: np.ndarray,
+                         reference: _Reference | None) -> np.ndarray:
+    """The budget's ``linearity`` component of each value: ``|x| sqrt(d C d^T)`` with ``d`` its
+    sensitivity to the correction's coefficients relative to the reference standard's."""
+    d = jacobian - (reference.linearity if reference is not None and reference.linearity is not None else 0.0)
+    return np.abs(values) * np.sqrt(np.einsum("ni,ij,nj->n", d, covariance, d))
+
+
+def _incidence_of(keys: list[tuple], incidences: tuple[IncidenceCalibration, ...]) -> np.ndarray:
+    """For each value (planned geometry ``keys``), its entry in ``incidences``: the reference
+    readings planned at the same lamp polar angle (-1 when there are none)."""
+    where = {round(c.theta_i, 6): k for k, c in enumerate(incidences)}
+    return np.array([where.get(round(float(key[0]), 6), -1) for key in keys], int)
 
 
 def _excluded(points) -> dict[str, int]:
@@ -168,17 +269,21 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
     refs = [p for p in parts if p.reference_irradiance is not None]
     irradiance = sigma = reference_record = None
     calibration: dict[str, float] = {}
+    weights = np.zeros(0)
     if refs:
-        common = ("certificate", "angular behaviour")
-        statistical = [p.reference_irradiance * math.sqrt(sum(v**2 for k, v in p.calibration.items() if k not in common))
-                       for p in refs]
+        statistical = [p.reference_irradiance * math.sqrt(sum(v**2 for k, v in p.calibration.items()
+                                                              if k not in COMMON_CALIBRATION)) for p in refs]
         weights = np.array([1.0 / max(s, 1e-300) ** 2 for s in statistical])
         irradiance = float(np.sum(weights * np.array([p.reference_irradiance for p in refs])) / np.sum(weights))
-        reference_record = _combined_reference_record(refs, weights / np.sum(weights))
-        calibration["reference (combined)"] = float(1.0 / math.sqrt(np.sum(weights)) / irradiance)
-        for key in common:
+        weights = weights / np.sum(weights)
+        calibration["reference (combined)"] = float(1.0 / math.sqrt(np.sum(1.0 / np.square(statistical))) / irradiance)
+        for key in COMMON_CALIBRATION:
             calibration[key] = max(p.calibration.get(key, 0.0) for p in refs)
         sigma = irradiance * math.sqrt(sum(v**2 for v in calibration.values()))
+    linearity = _joint_linearity(parts, refs, weights)
+    incidences, incidence = _joint_incidences(parts, refs, weights, linearity[3])
+    if refs:
+        reference_record = _combined_reference_record(refs, weights, incidences)
     consistency = {f"{k} ({p.metadata.get('protocol')})": v for p in parts for k, v in p.consistency.items()}
     return Reduced(
         theta_i=cat("theta_i"), phi_i=cat("phi_i"), theta_r=cat("theta_r"), phi_r=cat("phi_r"), view=cat("view"),
@@ -195,15 +300,79 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
         warnings=tuple(dict.fromkeys(w for p in parts for w in p.warnings)), consistency=consistency,
         unit=parts[0].unit,
         window=None if any(p.window is None for p in parts) else np.concatenate([p.window for p in parts]),
+        linearity_jacobian=linearity[0], linearity_covariance=linearity[1], reference_linearity=linearity[2],
+        incidences=incidences, incidence=incidence,
     )
 
 
-def _combined_reference_record(refs: "list[Reduced]", weights: np.ndarray) -> dict[str, list] | None:
+def _joint_linearity(parts: "list[Reduced]", refs: "list[Reduced]", weights: np.ndarray):
+    """The joined recordings' sensitivities to the coefficients of every recording's linearity
+    correction (two columns per corrected recording, the others' columns 0), their block-
+    diagonal covariance, the joint E_0's sensitivity (the recordings' by their weights in
+    it), and a function padding one recording's sensitivities to the joint columns."""
+    sizes = [0 if p.linearity_jacobian is None else p.linearity_jacobian.shape[1] for p in parts]
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+
+    def pad(part: "Reduced", vector: np.ndarray | None) -> np.ndarray:
+        out = np.zeros(np.shape(vector)[:-1] + (int(starts[-1]),)) if vector is not None else np.zeros(int(starts[-1]))
+        k = next(i for i, p in enumerate(parts) if p is part)
+        if vector is not None and sizes[k]:
+            out[..., starts[k]:starts[k + 1]] = vector
+        return out
+
+    if not starts[-1]:
+        return None, None, None, pad
+    jacobian = np.concatenate([pad(p, p.linearity_jacobian) if p.linearity_jacobian is not None
+                               else np.zeros((len(p.radiance), int(starts[-1]))) for p in parts])
+    covariance = np.zeros((int(starts[-1]),) * 2)
+    for k, p in enumerate(parts):
+        if sizes[k]:
+            covariance[starts[k]:starts[k + 1], starts[k]:starts[k + 1]] = p.linearity_covariance
+    reference = sum((w * pad(p, p.reference_linearity) for w, p in zip(weights, refs)), np.zeros(int(starts[-1])))
+    return jacobian, covariance, reference if refs else None, pad
+
+
+def _joint_incidences(parts: "list[Reduced]", refs: "list[Reduced]", weights: np.ndarray, pad):
+    """The irradiance at each lamp polar angle from the joined recordings' reference readings
+    (an angle read in several recordings: their inverse-variance mean), and each value's
+    entry in them."""
+    offsets = np.concatenate([[0], np.cumsum([len(p.metadata.get("reference_standard", {}).get("weights", []))
+                                              for p in refs])]).astype(int)
+    angles = sorted({c.theta_i for p in refs for c in p.incidences})
+    merged = []
+    for theta in angles:
+        here = [(k, p, c) for k, p in enumerate(refs) for c in p.incidences if c.theta_i == theta]
+        inverse = np.array([1.0 / (c.irradiance * c.sigma) ** 2 for _, _, c in here])
+        share = inverse / inverse.sum()
+        value = float(np.sum(share * [c.irradiance for _, _, c in here]))
+        linear = None if pad(refs[0], None).size == 0 else sum(
+            s * pad(p, c.linearity) for s, (_, p, c) in zip(share, here))
+        merged.append(IncidenceCalibration(
+            theta, value, float(1.0 / math.sqrt(inverse.sum()) / value),
+            float(sum(weights[k] * c.weight for k, _, c in here)),
+            tuple(int(offsets[k] + r) for k, _, c in here for r in c.readings),
+            tuple(float(s * w) for s, (_, _, c) in zip(share, here) for w in c.reading_weights), linear))
+    where = {c.theta_i: k for k, c in enumerate(merged)}
+    incidence = np.concatenate([
+        np.array([where[p.incidences[g].theta_i] if g >= 0 else -1 for g in p.incidence], int)
+        if p.incidence is not None else np.full(len(p.radiance), -1) for p in parts])
+    return tuple(merged), incidence
+
+
+def _combined_reference_record(refs: "list[Reduced]", weights: np.ndarray,
+                               incidences: tuple[IncidenceCalibration, ...]) -> dict[str, list] | None:
     """The reference readings of joined recordings with their weights in the joint E_0: each
-    recording's own weights times the recording's weight (None when a part lacks them)."""
+    recording's own weights times the recording's weight (None when a part lacks them), and
+    their weights in the joint irradiance at their lamp polar angle."""
     records = [p.metadata.get("reference_standard") for p in refs]
     if any(not r for r in records):
         return None
     geometry = [g for r in records for g in r["geometry"]]
     joint = [float(w * v) for w, r in zip(weights, records) for v in r["weights"]]
-    return {"geometry": geometry, "weights": joint, "reflectance": [v for r in records for v in r["reflectance"]]}
+    record = {"geometry": geometry, "weights": joint, "reflectance": [v for r in records for v in r["reflectance"]]}
+    if all("incidence" in r for r in records):
+        within = np.zeros(len(geometry))
+        for c in incidences:
+            within[list(c.readings)] = c.reading_weights
+        record.update(incidence=[v for r in records for v in r["incidence"]], incidence_weights=within.tolist())
+    return record
