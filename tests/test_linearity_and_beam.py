@@ -203,3 +203,40 @@ def test_the_rigs_prediction_calibrates_each_value_by_its_incidence(recordings):
     expected = 1.0 / ((rig.reference[3] * moved / per_reading) @ weights.T)
     np.testing.assert_allclose(factor, expected, rtol=1e-12)
     assert np.ptp(factor) > 1e-3  # 30 and 60 deg differ by tan: 0.3 deg x (tan 60 - tan 30) = 6e-3
+
+
+def test_the_incidence_deviations_are_the_covariance_they_claim():
+    """_incidence_deviations against a Monte Carlo of the readings' errors: the covariance of
+    E_k / E_0 - 1 between angles, and none with E_0's own error (the prior stays independent)."""
+    from gonio.reduction.result import IncidenceCalibration, Reduced
+
+    u = np.array([6e-5, 6e-5, 4e-5, 5e-5])
+    weight = u**-2 / np.sum(u**-2)  # E_0's inverse-variance weights
+    incidences = tuple(IncidenceCalibration(t, 1.0, s, w, (k,), (1.0,))
+                       for k, (t, s, w) in enumerate(zip((30.0, 45.0, 60.0, 75.0), u, weight)))
+    one = np.ones(1)
+    reduced = Reduced(one, one, one, one, one, one, one, one, 1.0, 1e-5, "x", incidences=incidences)
+    error = np.random.default_rng(0).standard_normal((200_000, 4)) * u
+    common = error @ weight
+    deviation = error - common[:, None]
+    # 2e5 draws: sampling error of a covariance ~ sqrt(2 / 2e5) = 0.3 % of its scale; 2 %
+    np.testing.assert_allclose(np.cov(deviation.T), reduced._incidence_deviations(), atol=0.02 * u.max() ** 2)
+    cross = [np.cov(deviation[:, k], common)[0, 1] for k in range(4)]
+    assert np.max(np.abs(cross)) < 0.01 * u.max() ** 2
+
+
+def test_the_command_line_chooses_the_calibration_and_the_correction(recordings, tmp_path, capsys):
+    from gonio.fitting import FitResult
+
+    out = tmp_path / "fit"
+    assert main(["fit", str(recordings["beam"]), "--model", "oren-nayar", "--fix", "ir_weight=1", "--calibration",
+                 "per-incidence", "--no-mcmc", "--quiet", "--out", str(out)]) == 0  # adequate: the bias is gone
+    assert FitResult.load(out).dataset.metadata["calibration"] == "per-incidence"
+    assert main(["reduce", str(recordings["nonlinear"]), "--no-linearity-correction", "--out",
+                 str(tmp_path / "raw")]) == 0
+    assert "linearity correction was left out on request" in capsys.readouterr().out
+    assert main(["reduce", str(recordings["nonlinear"]), "--out", str(tmp_path / "corrected")]) == 0
+    assert "linearity " in capsys.readouterr().out  # the budget's component
+    csv = tmp_path / "values.csv"
+    csv.write_text("theta_i,phi_i,theta_r,phi_r,value,sigma\n30,0,10,0,0.3,0.01\n30,0,20,0,0.3,0.01\n")
+    assert main(["fit", str(csv), "--model", "lambert", "--calibration", "per-incidence", "--no-mcmc"]) == 2

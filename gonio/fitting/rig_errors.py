@@ -34,7 +34,16 @@ true signal (the same misalignment and stray light act on it) to the one the red
 assumed at its ``k``-th reading, and ``w_k`` the weights that combined the readings into
 ``E_0`` (``dataset.metadata["reference_standard"]``).  ``scale`` keeps its meaning, the
 lamp irradiance as the reference measured it, so its calibration prior stays the
-reference's measurement itself.
+reference's measurement itself.  With a calibration per incidence
+(``metadata["calibration"] == "per-incidence"``, gonio.reduction) each value was divided
+by the irradiance of the readings at its own lamp polar angle, and its ``c`` sums over
+those readings only, with their weights in that angle's irradiance
+(:func:`incidence_weights`).
+
+A fit with free alignment parameters evaluates ``oren-nayar`` and ``lambert`` through the
+rig's apertures with the compiled loop of :mod:`gonio.fitting.compiled_rig` (the same
+values to rounding, tested); other models, and one-off predictions, take the numpy path
+(:func:`~drivers.rig_geometry.misaligned_angles`, then the aperture-averaged model).
 
 Default priors: normal, N(0, 0.5 deg) within the +/-5 deg range, for the alignment
 (:data:`DEFAULT_PRIOR_SD`).  A rig aligned by eye and an alignment laser is off by a few
