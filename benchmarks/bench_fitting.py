@@ -10,9 +10,10 @@ weight fixed at 1) fitted to 201 BRDF values in the plane of incidence at theta_
   walkers (``vectorize=True``), uniform priors, stopped by the emcee tutorial's rule
   (every 100 steps: chain > 50 tau and tau changed by < 5 %).  Its Oren-Nayar formula is
   written here from eq 33-35, independently of gonio's (their predictions are compared).
-* **gonio**: ``gonio.fitting.fit`` with its defaults (vectorised stretch move, every walker
-  of a half-ensemble in one model evaluation, 50 tau with a stable tau and R-hat < 1.01),
-  for several ensemble sizes, to choose the default by measurement.
+* **gonio**: ``gonio.fitting.fit`` with its defaults (emcee's differential-evolution move
+  in gonio's loop, every walker of a half-ensemble in one model evaluation, 50 tau with a
+  stable tau and R-hat < 1.01), for several ensemble sizes (benchmarks/bench_moves.py
+  compares the moves and chooses the default ensemble).
 
 For every run: MCMC wall time, effective samples of sigma per second (ESS computed the same
 way for both: ArviZ bulk ESS of the chain after a burn-in of 2 tau), the posterior median

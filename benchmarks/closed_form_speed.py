@@ -1,7 +1,10 @@
 """Throughput of gonio's closed-form models against the same formulas as scalar C loops.
 
 For each closed-form model: evaluations per second of ``gonio.brdf`` on 2e6 random
-geometries, of the fixed-geometry path (``Model.at``, used by fitting), and of a scalar
+geometries (for models with a compiled plain call, ``gonio.models._compiled``, both as a
+process runs it once its numpy work has paid for loading it, and through the numpy path
+of its first calls; the first call's cost in a fresh interpreter is recorded too), of
+the fixed-geometry path (``Model.at``, used by fitting), and of a scalar
 C loop of the same formula (benchmarks/c/closed_forms.c) compiled twice, with ``cc -O2``
 and with ``cc -O3 -march=native -ffast-math``, measured in the same run on the same
 inputs.  The C results double as an independent implementation: the largest relative
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -26,8 +30,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, best_time, machine, random_geometries, write_json  # noqa: E402
 
 import gonio  # noqa: E402
+import gonio.models._core as core  # noqa: E402
 
 N = 2_000_000
+#: The library's own rule for when a process loads the compiled paths (changed below).
+DEFAULT_AFTER = core.COMPILED_AFTER
 BUILD = ROOT / "benchmarks" / "_build"
 SOURCE = ROOT / "benchmarks" / "c" / "closed_forms.c"
 
@@ -47,6 +54,11 @@ CASES = {
     "oren-nayar-qualitative": (
         "oren_nayar_qualitative", {"rho": 0.9, "sigma": 30.0},
         lambda p: [p["rho"], math.radians(p["sigma"]), 0.33],
+    ),
+    "wolff": ("wolff", {"rho": 0.8, "n": 1.5}, lambda p: [p["rho"], p["n"]]),
+    "kvd": (
+        "kvd2", {"a_0_0_0": 1.6, "a_1_1_1": 0.1, "a_2_0_0": -0.2, "a_2_2_0": 0.05, "a_2_2_2": 0.03},
+        lambda p: [p["a_0_0_0"], p["a_1_1_1"], p["a_2_0_0"], p["a_2_2_0"], p["a_2_2_2"]],
     ),
 }
 
@@ -80,7 +92,41 @@ def c_caller(lib: ctypes.CDLL, function: str, radians: tuple[np.ndarray, ...], s
     return run
 
 
+FIRST_CALL = """
+import time, numpy as np
+start = time.perf_counter()
+import gonio
+import gonio.models._core as core
+core.COMPILED_AFTER = {after}
+imported = time.perf_counter()
+theta = np.linspace(0.0, 89.0, {n})
+gonio.brdf("oren-nayar", theta, 0.0, theta[::-1], 180.0, rho=0.9, sigma=30.0)
+first = time.perf_counter()
+gonio.brdf("oren-nayar", theta, 0.0, theta[::-1], 180.0, rho=0.9, sigma=30.0)
+print(imported - start, first - imported, time.perf_counter() - first)
+"""
+
+
+def first_call_seconds(compiled: bool, cold: bool = False) -> dict[str, float]:
+    """``import gonio`` and the first and second plain call of ``oren-nayar`` on
+    COMPILED_MIN geometries in a fresh interpreter [s]: through the numpy path (as a
+    process's first calls run), or through the compiled path with numba's on-disk cache
+    as it is or empty (``cold``: the compiled loops are compiled in that call)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="gonio-numba-") as cache:
+        env = dict(os.environ, **({"NUMBA_CACHE_DIR": cache} if cold else {}))
+        code = FIRST_CALL.format(n=core.COMPILED_MIN, after=0 if compiled else DEFAULT_AFTER)
+        done = subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True, text=True)
+    imported, first, second = (float(v) for v in done.stdout.split())
+    return {"import_gonio_s": imported, "first_call_s": first, "second_call_s": second}
+
+
 def main() -> dict:
+    load_before = os.getloadavg()[0]
+    # the plain call as a process makes it once its numpy work has paid for loading the
+    # compiled paths (gonio.models._core.COMPILED_AFTER); the numpy path is timed as well
+    core.COMPILED_AFTER = 0
     lib = compile_library("O2")
     fast_lib = compile_library("O3_native_fast_math")
     geometry = random_geometries(N)
@@ -99,10 +145,13 @@ def main() -> dict:
         finite = np.isfinite(reference) & np.isfinite(ours)
         max_rel = float(np.max(np.abs(ours[finite] - reference[finite]) / scale[finite]))
         fixed = model.at(*geometry)
-        t_c = best_time(run_c, repeats=3)
-        t_fast = best_time(run_fast, repeats=3)
-        t_gonio = best_time(lambda: model(*geometry, **params), repeats=3)
-        t_fixed = best_time(lambda: fixed(**params), repeats=3)
+        t_c = best_time(run_c, repeats=5)
+        t_fast = best_time(run_fast, repeats=5)
+        t_gonio = best_time(lambda: model(*geometry, **params), repeats=5)
+        t_fixed = best_time(lambda: fixed(**params), repeats=5)
+        core.COMPILED_AFTER = math.inf  # the numpy path, as the first calls of a process take it
+        t_numpy = best_time(lambda: model(*geometry, **params), repeats=5)
+        core.COMPILED_AFTER = 0
         record = {
             "family": "closed form",
             "model": name,
@@ -118,15 +167,20 @@ def main() -> dict:
             "c_fast_math_evaluations_per_second": N / t_fast,
             "ratio_vs_c_fast_math": t_fast / t_gonio,
             "fixed_geometry_ratio_vs_c_fast_math": t_fast / t_fixed,
+            "compiled_plain_call": model.compiled is not None,
+            "numpy_path_evaluations_per_second": N / t_numpy,
+            "numpy_path_ratio_vs_c": t_c / t_numpy,
             "notes": "ratio > 1 means gonio is faster than the C loop",
         }
         records.append(record)
         print(
             f"{name:<24} gonio {N / t_gonio:11.3e}/s  fixed {N / t_fixed:11.3e}/s  C {N / t_c:11.3e}/s"
             f"  ratio {t_c / t_gonio:5.2f} (fixed {t_c / t_fixed:5.2f}; vs -O3 fast-math {t_fast / t_gonio:5.2f}, "
-            f"fixed {t_fast / t_fixed:5.2f})  max rel diff {max_rel:.1e}"
+            f"fixed {t_fast / t_fixed:5.2f}; numpy path {t_c / t_numpy:5.2f})  max rel diff {max_rel:.1e}"
         )
     payload = {
+        # the machine is shared: 1-minute load averages before and after the run
+        "load_average_before_after": [load_before, os.getloadavg()[0]],
         "benchmark": "closed_forms",
         "command": "python benchmarks/closed_form_speed.py",
         "geometries": N,
@@ -135,6 +189,12 @@ def main() -> dict:
         "skipped_not_registered": skipped,
         "c_flags": {k: " ".join(v) for k, v in FLAGS.items()},
     }
+    # what a user sees of the compiled path: numba loads (and, with an empty cache, compiles)
+    # on the first call of COMPILED_MIN geometries or more
+    payload["oren_nayar_first_call"] = {"numpy_path": first_call_seconds(compiled=False),
+                                        "compiled_warm_cache": first_call_seconds(compiled=True),
+                                        "compiled_cold_cache": first_call_seconds(compiled=True, cold=True)}
+    print(f"oren-nayar first call of 16384 geometries: {payload['oren_nayar_first_call']}")
     on = next((r for r in records if r["model"] == "oren-nayar"), None)
     if on is not None:
         payload["targets"] = {

@@ -2,7 +2,8 @@
 
 For three problems, every method gives 95 % intervals of every free parameter; each is
 placed by its wall time against the error of its interval endpoints, relative to a very
-long reference chain (emcee, 256 walkers x 20000 steps, gonio's likelihood and priors):
+long reference chain (gonio's sampler, emcee's DE move, 256 walkers x 20000 steps, gonio's likelihood
+and priors):
 
     error = max over parameters and both endpoints |endpoint - reference| / reference sd
 

@@ -16,8 +16,7 @@ free; ``oren-nayar-tabulated`` stands for the exact model in the fits).  Also: w
 bounces beyond two add, by rho and sigma (directional-hemispherical reflectance split by
 scattering order, and per geometry); in-plane curves like the paper's Fig 10; the speed
 of the kernel per kind against the numpy Monte Carlo of Koenderink et al. section 4.1 in
-the same run, and the build time of each kind's table against ``oren-nayar-exact`` on the
-same nodes.
+the same run (table builds: benchmarks/surfaces_tables.py).
 
 Run:  python benchmarks/surfaces_study.py   (about 10 min of CPU on 2 cores)
 Writes docs/benchmarks/surfaces.json, surfaces_fig10.png, surfaces_pits.png,
@@ -28,7 +27,6 @@ from __future__ import annotations
 
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -222,13 +220,11 @@ def fig10_curves() -> dict:
 
 def speed() -> dict:
     """Paths per second of the kernel per kind (one thread) against the numpy Monte Carlo
-    of Koenderink et al. section 4.1 (single scattering, gonio.models.pitted.shallow), and
-    table build times against oren-nayar-exact at the same nodes, all in this run."""
+    of Koenderink et al. section 4.1 (single scattering, gonio.models.pitted.shallow), in
+    this run.  Table build times and errors: benchmarks/surfaces_tables.py."""
     from gonio.models.pitted.shallow import monte_carlo_brdf
-    from gonio.surfaces.spec import parse_surface_spec
-    from gonio.surfaces.table import GRIDS, TabulatedSurface, node_geometries
 
-    out = {"kernel_paths_per_second": {}, "table_build": {}}
+    out = {"kernel_paths_per_second": {}}
     start = time.perf_counter()
     monte_carlo_brdf(60.0, 45.0, 150.0, rho=RHO, psi=60.0, samples=1_000_000, seed=0)
     reference = 1_000_000 / (time.perf_counter() - start)
@@ -241,28 +237,6 @@ def speed() -> dict:
         rate = 1_000_000 / (time.perf_counter() - start)
         out["kernel_paths_per_second"][label] = {"paths_per_second": rate, "ratio_to_reference": rate / reference,
                                                  "rays_per_path": float(rendered.segments)}
-    exact_seconds = None
-    with tempfile.TemporaryDirectory() as folder:
-        os.environ["GONIO_TABLE_DIR"] = folder
-        for text in ("kind=vgrooves,sigma=30,rho=0.9", "kind=heightfield,sigma=30,rho=0.9",
-                     "kind=pits,psi=60,coverage=1,rho=0.9"):
-            spec = parse_surface_spec(text)
-            table = TabulatedSurface(spec, workers=WORKERS)
-            start, cpu = time.perf_counter(), time.process_time()
-            loaded = table.load()
-            seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
-            out["table_build"][spec.surface.kind] = {
-                "spec": "surface:" + spec.text(), "nodes": int(np.prod(table.grid.shape)), "seconds": seconds,
-                "cpu_seconds": cpu, "workers": WORKERS,
-                "node_relative_error_median": float(np.median(loaded.relative_error)),
-                "node_relative_error_max": float(np.max(loaded.relative_error))}
-        alpha, beta, dphi = (np.degrees(a) for a in node_geometries(GRIDS["vgrooves"]))
-        start = time.perf_counter()
-        gonio.brdf("oren-nayar-exact", beta, 0.0, alpha, dphi, rho=RHO, sigma=30.0, rtol=1e-5)
-        exact_seconds = time.perf_counter() - start
-    out["reference_exact_on_vgroove_nodes_seconds"] = exact_seconds
-    for entry in out["table_build"].values():
-        entry["ratio_to_exact_on_same_node_count"] = entry["seconds"] / (exact_seconds * entry["nodes"] / alpha.size)
     print(f"speed: {out['kernel_paths_per_second']}", flush=True)
     return out
 
@@ -402,14 +376,8 @@ def markdown(payload: dict) -> str:
     for kind, entry in s["kernel_paths_per_second"].items():
         lines.append(f"| {kind} | {entry['paths_per_second']:.3g} | {entry['ratio_to_reference']:.2f} | "
                      f"{entry['rays_per_path']:.1f} |")
-    lines += ["", f"Table builds at the default paths per node, {WORKERS} threads; reference: `oren-nayar-exact` "
-              f"(rtol 1e-5) on the V-groove grid's nodes, {s['reference_exact_on_vgroove_nodes_seconds']:.1f} s.", "",
-              "| table | nodes | wall time | CPU time | ratio to the exact model on as many nodes | node MC error median / max |",
-              "|---|---:|---:|---:|---:|---:|"]
-    for kind, entry in s["table_build"].items():
-        lines.append(f"| `{entry['spec']}` | {entry['nodes']} | {entry['seconds']:.0f} s | {entry['cpu_seconds']:.0f} s | "
-                     f"{entry['ratio_to_exact_on_same_node_count']:.1f} | "
-                     f"{_pct(entry['node_relative_error_median'])} / {_pct(entry['node_relative_error_max'])} |")
+    lines += ["", "Table builds, their node errors and what a fit sees of them: `python benchmarks/surfaces_tables.py` "
+              "(docs/surfaces.md, \"Tables\")."]
     lines += ["", f"Study total: {payload['seconds'] / 60:.1f} min wall, {payload['cpu_seconds'] / 60:.1f} min CPU.", ""]
     return "\n".join(lines)
 

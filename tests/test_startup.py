@@ -63,3 +63,23 @@ def test_lazily_imported_functions_still_work_in_a_fresh_interpreter():
             "from gonio.models.chandrasekhar import h_function\n"
             "assert 1.0 < float(h_function(0.5, 0.9)) < 3.0\n")
     assert _loaded_after(code) == ["scipy"]
+
+
+def test_reading_and_reporting_a_fit_loads_no_sampler():
+    # `gonio report` reads a saved fit and draws it: neither emcee (which loads
+    # scipy.stats) nor scipy.optimize, numba or ArviZ is needed for that.
+    loaded = _loaded_after("import gonio.fitting.results, gonio.report.fit_report, gonio.cli.report\n"
+                           "import sys\nassert 'scipy.optimize' not in sys.modules, 'scipy.optimize'")
+    assert loaded == ["matplotlib"]
+
+
+def test_a_fit_with_mcmc_and_its_files_loads_neither_arviz_nor_xarray():
+    # R-hat and ESS come from ArviZ's numpy core and posterior.nc is written with h5netcdf:
+    # `gonio fit` does not pay for arviz, xarray, pandas or numba (1 to 3 s of start-up).
+    code = ("import tempfile, numpy as np\n"
+            "from gonio.fitting import Dataset, fit\n"
+            "theta = np.arange(0.0, 80.0, 5.0)\n"
+            "data = Dataset(30.0, 0.0, theta, 0.0, 0.16 + 0.001 * np.cos(np.radians(theta)), 0.002)\n"
+            "result = fit(data, 'lambert', n_walkers=8, max_steps=300, tau_multiple=5.0, rhat_limit=1.2)\n"
+            "result.save(tempfile.mkdtemp())\n")
+    assert _loaded_after(code) == ["emcee", "scipy"]

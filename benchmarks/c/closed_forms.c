@@ -85,3 +85,45 @@ void oren_nayar_qualitative(size_t n, const double *ti, const double *pi_, const
         out[k] = rho / M_PI * (a + bcoef * cphi * sin(alpha) * tan(beta));
     }
 }
+
+/* Unpolarised Fresnel reflectance from the cosines of the incidence and transmission
+   angles, relative index m (Wolff, Nayar & Oren 1998, eq 2, amplitude form). */
+static double fresnel_from_cosines(double cos_i, double cos_t, double m) {
+    double rs = (cos_i - m * cos_t) / (cos_i + m * cos_t);
+    double rp = (m * cos_i - cos_t) / (m * cos_i + cos_t);
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+/* Wolff, Nayar & Oren (1998) eq 7 with the free-albedo scale rho/pi and the exact
+   Fresnel factors: entering at theta_i (index n), leaving towards theta_r (index 1/n). */
+void wolff(size_t n, const double *ti, const double *pi_, const double *tr,
+           const double *pr, double rho, double index, double *out) {
+    (void)pi_; (void)pr;
+    double inv_sq = 1.0 / (index * index);
+    for (size_t k = 0; k < n; ++k) {
+        double ci = cos(ti[k]), cr = cos(tr[k]);
+        double ct = sqrt(1.0 - (1.0 - ci * ci) * inv_sq);   /* refracted, entering */
+        double cin = sqrt(1.0 - (1.0 - cr * cr) * inv_sq);  /* internal, leaving */
+        double entry = 1.0 - fresnel_from_cosines(ci, ct, index);
+        double leave = 1.0 - fresnel_from_cosines(cin, cr, 1.0 / index);
+        out[k] = rho / M_PI * entry * leave;
+    }
+}
+
+/* Koenderink & van Doorn (1998) eq 26-28: the isotropic series of radial order 2 with
+   amplitudes a[0..4] of I_000, I_111, I_200, I_220, I_222; R_1^1 = rho, R_2^0 = 1 - 2 cos,
+   R_2^2 = rho^2 with rho^2 = 1 - cos(theta) (eq 10). */
+void kvd2(size_t n, const double *ti, const double *pi_, const double *tr,
+          const double *pr, double a000, double a111, double a200, double a220,
+          double a222, double *out) {
+    const double s = 1.0 / (2.0 * M_PI);
+    const double k000 = 0.5 * s * 2.0, k111 = sqrt(2.0) * s * 2.0, k200 = sqrt(1.5) * s;
+    const double k220 = 1.5 * s * 2.0, k222 = sqrt(4.5) * s * 2.0;
+    for (size_t k = 0; k < n; ++k) {
+        double ci = cos(ti[k]), cr = cos(tr[k]), cd = cos(pr[k] - pi_[k]);
+        double qi = 1.0 - ci, qr = 1.0 - cr;               /* rho^2 */
+        double zi = 1.0 - 2.0 * ci, zr = 1.0 - 2.0 * cr;   /* R_2^0 */
+        out[k] = a000 * k000 + a111 * k111 * sqrt(qi * qr) * cd + a200 * k200 * (zi + zr)
+                 + a220 * k220 * zi * zr + a222 * k222 * qi * qr * (2.0 * cd * cd - 1.0);
+    }
+}

@@ -459,7 +459,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     fitting.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=True,
                          help="fit an extra noise term, in every fit and in the comparison (default: yes)")
     fitting.add_argument("--walkers", type=int, default=None,
-                         help="emcee walkers (default 256 where all walkers are evaluated at once, else 32)")
+                         help="emcee walkers (default 32, for every model: gonio.fitting.mcmc.default_walkers)")
     fitting.add_argument("--max-steps", type=int, default=20000, help="step limit of each chain (default 20000)")
     fitting.add_argument("--tau-multiple", type=float, default=50.0,
                          help="chain length required, in autocorrelation times (default 50)")

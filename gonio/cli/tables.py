@@ -136,8 +136,10 @@ def _print_surface_tables() -> None:
     print(f"rendered surfaces (gonio.surfaces): {len(found)} table{'s' if len(found) != 1 else ''} in the user cache")
     for entry in found:
         print(f"    {entry['path'].name}: surface:{entry['spec']}")
-        print(f"        {entry['nodes']} nodes, Monte Carlo error per node median {entry['median_error']:.2%} "
-              f"(max {entry['max_error']:.2%}), {entry['bytes'] / 1e3:.0f} kB, rendered in {entry['build_seconds']:.0f} s")
+        error = (f"Monte Carlo error per node median {entry['median_error']:.3%} (max {entry['max_error']:.3%})"
+                 if entry["max_error"] > 0.0 else "every order exact, nothing sampled")
+        print(f"        {entry['nodes']} nodes, {error}, {entry['bytes'] / 1e3:.0f} kB, "
+              f"rendered in {entry['build_seconds']:.0f} s")
 
 
 def _run_clear(args: argparse.Namespace) -> int:

@@ -1,13 +1,21 @@
 """Convergence diagnostics of today's standard, computed by ArviZ.
 
 The rank-normalised split R-hat and the bulk and tail effective sample sizes of Vehtari
-et al. (2021) are computed with ArviZ (``arviz.rhat``, ``arviz.ess``) from the chain after
-burn-in, each emcee walker taken as one chain (the usual reading of an ensemble: every
-walker samples the posterior after burn-in; a stuck walker makes R-hat large). They
-complement emcee's integrated autocorrelation time: a fit has converged when the chain is
-50 autocorrelation times long *and* every R-hat is below :data:`RHAT_LIMIT`.
+et al. (2021) are computed by ArviZ from the chain after burn-in, each emcee walker taken
+as one chain (the usual reading of an ensemble: every walker samples the posterior after
+burn-in; a stuck walker makes R-hat large). They complement emcee's integrated
+autocorrelation time: a fit has converged when the chain is 50 autocorrelation times long
+*and* every R-hat is below :data:`RHAT_LIMIT`.
 
-ArviZ is imported on first use (it takes about two seconds), never at ``import gonio``.
+The numbers come from ``arviz_stats.base.array_stats``, ArviZ's computational core on
+numpy arrays (the package ``arviz`` 0.x re-exports the same functions as ``arviz.rhat``
+and ``arviz.ess``; tests/fitting/test_diagnostics.py checks that they agree to the last
+bit). It is imported without xarray (:func:`array_stats`): ``import arviz`` takes 1 to
+3 s (it loads xarray, pandas, matplotlib.pyplot and compiles a numba function of its ECDF
+code every time), which is most of what a ``gonio fit`` of a small recording would
+otherwise cost; ``arviz_stats.base`` needs numpy and scipy only. ``arviz`` itself is
+imported only for the in-memory ``InferenceData`` and PSIS-LOO (:func:`arviz`), never at
+``import gonio``.
 
 References
 ----------
@@ -19,16 +27,20 @@ Bayesian Analysis 16(2), 667 (2021). R. Kumar, C. Carroll, A. Hartikainen, O. Ma
 """
 from __future__ import annotations
 
+import functools
 import math
+import sys
 import warnings
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["RHAT_LIMIT", "arviz", "convergence_diagnostics", "inference_data"]
+__all__ = ["RHAT_LIMIT", "TAIL_PROBABILITIES", "arviz", "array_stats", "convergence_diagnostics", "inference_data"]
 
 #: Largest R-hat accepted for convergence (Vehtari et al. 2021, section 4.2).
 RHAT_LIMIT = 1.01
+#: Quantiles whose effective sample size is the tail ESS (ArviZ's default, Vehtari et al. 2021).
+TAIL_PROBABILITIES = (0.05, 0.95)
 
 
 def arviz():
@@ -37,6 +49,45 @@ def arviz():
         warnings.simplefilter("ignore", FutureWarning)  # the package announces its refactor on import
         import arviz as az
     return az
+
+
+@functools.cache
+def array_stats():
+    """ArviZ's diagnostics on numpy arrays (``arviz_stats.base.array_stats``), imported
+    without xarray and without leaving a trace in ``sys.modules``.
+
+    ``import arviz_stats`` loads its xarray interface whenever xarray is importable
+    (arviz-stats 0.8: about 1 s for xarray and pandas) even where that interface cannot
+    work (without arviz-base); its numpy core needs neither. So xarray is made
+    unimportable for the duration of the import (``sys.modules["xarray"] = None``, which
+    makes ``import xarray`` raise ``ModuleNotFoundError``, the case arviz-stats handles by
+    skipping that interface), then ``sys.modules`` gets back its ``xarray`` entry, or
+    none, as it was, and the arviz-stats modules this import added are taken out again
+    (the returned object keeps what it needs), so that a later ``import arviz_stats``
+    anywhere in the process gets the whole package. Where arviz-stats was imported before,
+    its own ``array_stats`` is returned untouched.
+    """
+    if "arviz_stats" in sys.modules:
+        from arviz_stats.base import array_stats as stats
+
+        return stats
+    before = set(sys.modules)
+    xarray = sys.modules.get("xarray", _ABSENT)
+    sys.modules["xarray"] = None  # type: ignore[assignment]
+    try:
+        from arviz_stats.base import array_stats as stats
+    finally:
+        if xarray is _ABSENT:
+            del sys.modules["xarray"]
+        else:
+            sys.modules["xarray"] = xarray
+        for name in set(sys.modules) - before:
+            if name == "arviz_stats" or name.startswith("arviz_stats."):
+                del sys.modules[name]
+    return stats
+
+
+_ABSENT = object()
 
 
 def convergence_diagnostics(chain: np.ndarray, names: Sequence[str], ess: bool = True) -> dict[str, dict[str, float]]:
@@ -67,19 +118,16 @@ def convergence_diagnostics(chain: np.ndarray, names: Sequence[str], ess: bool =
     chain = np.asarray(chain, float)
     if chain.shape[0] < 4:
         return {n: {"r_hat": math.nan, "ess_bulk": math.nan, "ess_tail": math.nan} for n in names}
-    az = arviz()
-    with warnings.catch_warnings():
-        # an ensemble has more walkers (chains) than thinned draws; ArviZ suspects a transpose
-        warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
-        data = az.convert_to_dataset({n: chain[:, :, k].T for k, n in enumerate(names)})
+    stats = array_stats()
+    by_parameter = np.transpose(chain, (2, 1, 0))  # (parameter, chain = walker, draw = step)
+    nan = np.full(len(names), math.nan)
     with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)  # a constant parameter gives NaN
-        r_hat = az.rhat(data, method="rank")
-        bulk = az.ess(data, method="bulk") if ess else None
-        tail = az.ess(data, method="tail") if ess else None
-    return {n: {"r_hat": float(r_hat[n]),
-                "ess_bulk": float(bulk[n]) if ess else math.nan,
-                "ess_tail": float(tail[n]) if ess else math.nan} for n in names}
+        r_hat = stats.rhat(by_parameter, method="rank")
+        bulk = stats.ess(by_parameter, method="bulk") if ess else nan
+        tail = stats.ess(by_parameter, method="tail", prob=TAIL_PROBABILITIES) if ess else nan
+    return {n: {"r_hat": float(r_hat[k]), "ess_bulk": float(bulk[k]), "ess_tail": float(tail[k])}
+            for k, n in enumerate(names)}
 
 
 def inference_data(chain: np.ndarray, log_prob: np.ndarray, names: Sequence[str],
@@ -100,13 +148,11 @@ def inference_data(chain: np.ndarray, log_prob: np.ndarray, names: Sequence[str]
     attributes : mapping, optional
         Stored as attributes of the posterior group.
     """
+    from .inference_file import inference_groups
+
     az = arviz()
-    posterior = {n: chain[:, :, k].T for k, n in enumerate(names)}
-    groups: dict[str, Any] = {"posterior": posterior, "sample_stats": {"lp": np.asarray(log_prob).T}}
-    if log_likelihood is not None:
-        groups["log_likelihood"] = {"y": np.transpose(log_likelihood, (1, 0, 2))}
-    if observed is not None:
-        groups["observed_data"] = {"y": np.asarray(observed, float)}
+    groups = {group: {name: values for name, (_, values) in variables.items()}
+              for group, variables in inference_groups(chain, log_prob, names, log_likelihood, observed).items()}
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
         data = az.from_dict(**groups)

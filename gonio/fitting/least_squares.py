@@ -25,7 +25,6 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from scipy import optimize
 
 from .problem import FitProblem
 
@@ -256,6 +255,8 @@ def _best_jitter(problem: FitProblem, vector: np.ndarray) -> float:
         trial[j] = jitter
         return -problem.log_likelihood(trial)
 
+    from scipy import optimize  # loaded where a fit runs, not with the results
+
     found = optimize.minimize_scalar(negative_log_likelihood, bounds=(0.0, upper), method="bounded")
     return float(found.x) if negative_log_likelihood(found.x) < negative_log_likelihood(0.0) else 0.0
 
@@ -377,6 +378,8 @@ def fit_least_squares(
 
         if not np.all(np.isfinite(residuals(x0))):
             return None
+        from scipy import optimize
+
         return optimize.least_squares(residuals, x0, bounds=(lower, upper), x_scale="jac", method="trf")
 
     for point in _start_points(problem, start, n_starts, rng):

@@ -1,9 +1,16 @@
-"""Bayesian fit with the affine-invariant ensemble sampler of emcee.
+"""Bayesian fit with emcee's ensemble moves.
 
 Posterior = prior x likelihood.  Priors are proper (:mod:`gonio.fitting.priors`); the
 likelihood is Gaussian with the measurement uncertainties (and the optional ``jitter``
 added in quadrature, :mod:`gonio.fitting.problem`).  The model is evaluated through its
-fixed-geometry fast path (``Model.at``), built once by :class:`FitProblem`.
+fixed-geometry fast path (``Model.at``), built once by :class:`FitProblem`, for a whole
+half-ensemble at a time.
+
+The walkers are advanced by emcee's moves (:mod:`gonio.fitting.moves`; by default
+differential evolution, whose autocorrelation time is a quarter of the stretch move's on
+the problems measured) in gonio's loop over preallocated arrays
+(:class:`gonio.fitting.ensemble.EnsembleChain`, the chain of ``emcee.EnsembleSampler``
+bit for bit, without its per-step bookkeeping).
 
 Convergence follows the emcee documentation (Foreman-Mackey et al. 2013; emcee
 "Autocorrelation analysis & convergence" tutorial) and Vehtari et al. (2021): every
@@ -31,12 +38,11 @@ import warnings
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
-import emcee
 import numpy as np
 
 from .diagnostics import RHAT_LIMIT, convergence_diagnostics
 from .least_squares import LeastSquaresResult
-from .priors import Prior, default_prior
+from .priors import Prior, Uniform, default_prior
 from .problem import FitProblem
 
 __all__ = ["DEFAULT_WALKERS", "SERIAL_WALKERS", "default_walkers", "VectorisedStretchMove", "ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "start_spread", "LogPosterior"]
@@ -44,9 +50,13 @@ __all__ = ["DEFAULT_WALKERS", "SERIAL_WALKERS", "default_walkers", "VectorisedSt
 
 #: Default ensemble size where the likelihood evaluates every walker at once (models that
 #: broadcast their parameters or are linear in their coefficients), chosen by measurement:
-#: effective samples per second grow with the ensemble while a step costs little more
-#: (benchmarks/bench_fitting.py, docs/fitting.md "Performance").
-DEFAULT_WALKERS = 256
+#: the run ends when every walker's chain has an R-hat below 1.01, which takes about 100
+#: autocorrelation times whatever the ensemble, so the time to convergence is least for a
+#: small ensemble whose steps cost little; with the DE move, 32 walkers converge fastest
+#: on the Fig 16 recording and the near-Gaussian problem (16 need more steps, 64 and more
+#: cost more per step) with a bulk ESS of about 2,500 (benchmarks/bench_moves.py,
+#: docs/fitting.md "Performance").
+DEFAULT_WALKERS = 32
 #: Default ensemble size where the model is evaluated one walker at a time (a step costs
 #: in proportion to the walkers, so more of them only lengthen the run).
 SERIAL_WALKERS = 32
@@ -66,45 +76,14 @@ class ConvergenceWarning(UserWarning):
     """The chain reached its step limit before the autocorrelation criterion was met."""
 
 
-class VectorisedStretchMove(emcee.moves.StretchMove):
-    """emcee's stretch move (Goodman & Weare 2010) with each half-ensemble's proposals
-    evaluated and accepted in one vectorised step.
+def __getattr__(name: str):
+    """:class:`~gonio.fitting.moves.VectorisedStretchMove`, still importable from here
+    (PEP 562: loading it imports emcee, which reading results does not need)."""
+    if name == "VectorisedStretchMove":
+        from .moves import VectorisedStretchMove
 
-    Identical in distribution to :class:`emcee.moves.StretchMove`: the same proposal
-    (``get_proposal`` is emcee's), the same acceptance probability
-    min(1, z^(d-1) p(y)/p(x)), the same red-blue split.  Two loops over walkers that cost
-    more than the model once the model itself is vectorised are done by numpy instead:
-    the log posterior of the proposals comes straight from ``log_prob_batch`` (not through
-    emcee's per-walker conversion of the results) and the acceptance test draws all its
-    uniform numbers at once.
-
-    Parameters
-    ----------
-    log_prob_batch : callable
-        ``log_prob_batch(coords) -> ndarray``: log posterior of every row of ``coords``.
-    a : float
-        Stretch scale (emcee's default 2).
-    """
-
-    def __init__(self, log_prob_batch: Callable[[np.ndarray], np.ndarray], a: float = 2.0) -> None:
-        super().__init__(a=a)
-        self.log_prob_batch = log_prob_batch
-
-    def propose(self, model, state):
-        """One update of both halves of the ensemble; returns the new state and acceptances."""
-        nwalkers = state.coords.shape[0]
-        accepted = np.zeros(nwalkers, dtype=bool)
-        halves = np.arange(nwalkers) % self.nsplits
-        if self.randomize_split:
-            model.random.shuffle(halves)
-        for split in range(self.nsplits):
-            moving = halves == split
-            proposal, factors = self.get_proposal(state.coords[moving], [state.coords[~moving]], model.random)
-            log_prob = np.asarray(self.log_prob_batch(proposal), float)
-            gain = factors + log_prob - state.log_prob[moving]
-            accepted[moving] = gain > np.log(model.random.rand(int(moving.sum())))
-            state = self.update(state, emcee.State(proposal, log_prob=log_prob), accepted, moving)
-        return state, accepted
+        return VectorisedStretchMove
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def resolve_priors(
@@ -142,6 +121,10 @@ class LogPosterior:
         self.specs = [problem.spec(name) for name in problem.free]
         self.model_seconds = 0.0
         self.calls = 0
+        self._lower, self._upper = support_box(self.specs, self.priors)
+        uniform = [k for k, p in enumerate(self.priors) if isinstance(p, Uniform)]
+        self._uniform_log_density = sum(-math.log(self.priors[k].upper - self.priors[k].lower) for k in uniform)
+        self._shaped = [(k, p) for k, p in enumerate(self.priors) if k not in uniform]
 
     def log_prior(self, vector) -> float:
         total = 0.0
@@ -166,22 +149,31 @@ class LogPosterior:
 
     def batch(self, vectors) -> np.ndarray:
         """Log posterior of every row of ``vectors`` (shape (W, n_free)) in one model
-        evaluation (emcee's ``vectorize=True``); equal to calling the posterior row by row.
-        Rows outside a physical range or the prior's support get ``-inf`` and are not
-        evaluated."""
-        vectors = np.asarray(vectors, float).reshape(-1, len(self.specs))
-        prior = np.zeros(vectors.shape[0])
-        for k, (p, spec) in enumerate(zip(self.priors, self.specs)):
-            column = vectors[:, k]
-            prior += np.where(spec.contains_array(column), p.logpdf_array(column), -math.inf)
+        evaluation; equal to calling the posterior row by row (to rounding). Rows outside
+        a physical range or the prior's support get ``-inf`` and are not evaluated."""
+        vectors = np.asarray(vectors, float).reshape(-1, self._lower.size)
+        inside = np.all((vectors >= self._lower) & (vectors <= self._upper), axis=1)
         out = np.full(vectors.shape[0], -math.inf)
-        inside = np.isfinite(prior)
-        if inside.any():
-            start = time.perf_counter()
-            out[inside] = prior[inside] + self.problem.log_likelihood_batch(vectors[inside])
-            self.model_seconds += time.perf_counter() - start
-            self.calls += int(inside.sum())
+        if not inside.any():
+            return out
+        rows = vectors if inside.all() else vectors[inside]
+        prior = self._uniform_log_density + sum(p.logpdf_array(rows[:, k]) for k, p in self._shaped)
+        start = time.perf_counter()
+        out[inside] = prior + self.problem.log_likelihood_batch(rows)
+        self.model_seconds += time.perf_counter() - start
+        self.calls += rows.shape[0]
         return out
+
+
+def support_box(specs, priors) -> tuple[np.ndarray, np.ndarray]:
+    """Closed lower and upper limits of each parameter where both its physical range and
+    its prior allow it (an open physical bound becomes the next float inside)."""
+    lower, upper = [], []
+    for spec, prior in zip(specs, priors):
+        lo, hi = spec.bounds
+        lower.append(max(np.nextafter(lo, math.inf) if spec.open_lower else lo, prior.lower))
+        upper.append(min(np.nextafter(hi, -math.inf) if spec.open_upper else hi, prior.upper))
+    return np.array(lower, float), np.array(upper, float)
 
 
 @dataclass
@@ -216,6 +208,10 @@ class McmcResult:
         (steps, max tau) at each check.
     diagnostics : dict
         ``{name: {"r_hat", "ess_bulk", "ess_tail"}}`` of the chain after burn-in (ArviZ).
+    rhat_limit : float
+        The R-hat criterion.
+    moves : str
+        The emcee moves of the chain (a name of :data:`gonio.fitting.moves.MOVES`).
     """
 
     free: tuple[str, ...]
@@ -236,6 +232,7 @@ class McmcResult:
     warnings: list[str] = field(default_factory=list)
     diagnostics: dict[str, dict[str, float]] = field(default_factory=dict)
     rhat_limit: float = RHAT_LIMIT
+    moves: str = "stretch"
 
     @property
     def n_steps(self) -> int:
@@ -302,19 +299,31 @@ def integrated_time(chain: np.ndarray, c: float = 5.0, max_walkers: int = TAU_WA
     return taus[window, np.arange(x.shape[2])]
 
 
+#: Rounds of start-ball draws (one candidate per walker each) before the remaining walkers
+#: are drawn from the priors.
+START_ROUNDS = 50
+
+
 def _initial_walkers(
     posterior: LogPosterior, centre: np.ndarray, spread: np.ndarray, n_walkers: int, rng: np.random.Generator
 ) -> np.ndarray:
+    """Start positions: Gaussian draws around ``centre`` inside the support.
+
+    Every walker comes from the ball unless :data:`START_ROUNDS` rounds of ``n_walkers``
+    draws leave some without a position of finite posterior (a ball mostly outside the
+    support); only those are drawn from the priors. (A fixed budget of 200 draws in all
+    once started 56 of 256 walkers from the priors, up to 30,000 posterior sd away, and
+    their way in outlasted the burn-in: docs/fitting.md, "Performance".)
+    """
     walkers = np.empty((n_walkers, centre.size))
     filled = 0
-    for _ in range(200):
-        trial = centre + spread * rng.standard_normal(centre.size)
-        if math.isfinite(posterior(trial)):
-            walkers[filled] = trial
-            filled += 1
-            if filled == n_walkers:
-                return walkers
-    # The ball around the optimum is mostly outside the support: draw from the priors.
+    for _ in range(START_ROUNDS):
+        trial = centre + spread * rng.standard_normal((n_walkers, centre.size))
+        inside = trial[np.isfinite(posterior.batch(trial))][: n_walkers - filled]
+        walkers[filled : filled + len(inside)] = inside
+        filled += len(inside)
+        if filled == n_walkers:
+            return walkers
     while filled < n_walkers:
         trial = np.array([p.sample(rng, 1)[0] for p in posterior.priors])
         if math.isfinite(posterior(trial)):
@@ -335,6 +344,7 @@ def sample_posterior(
     seed: int | None = 0,
     progress: Callable[[int, int, float], None] | None = None,
     rhat_limit: float = RHAT_LIMIT,
+    moves: str = "de",
 ) -> tuple[McmcResult, dict[str, Prior]]:
     """Sample the posterior with emcee until the autocorrelation criterion holds.
 
@@ -361,6 +371,10 @@ def sample_posterior(
         Seed of the walkers' start and of the sampler.
     progress : callable, optional
         ``progress(steps, max_steps, max_tau)`` after every check.
+    moves : str
+        The emcee moves (:data:`gonio.fitting.moves.MOVES`): ``"de"`` (differential
+        evolution, the default, chosen by measurement), ``"stretch"`` (emcee's default
+        move), or a mixture.
 
     Returns
     -------
@@ -385,12 +399,12 @@ def sample_posterior(
         centre[problem.free.index(name)] = min(max(value, lo + spread[-1]), hi - spread[-1]) if math.isfinite(hi - lo) else value
     walkers = _initial_walkers(posterior, centre, np.array(spread), n_walkers, rng)
 
-    # every walker of a half-ensemble in one model evaluation (numpy broadcasting over
-    # parameter arrays, gonio.models.Model.at)
-    sampler = emcee.EnsembleSampler(n_walkers, ndim, posterior.batch, vectorize=True,
-                                    moves=VectorisedStretchMove(posterior.batch))
-    # emcee draws its moves from a legacy RandomState carried by the State object.
-    state = emcee.State(walkers, random_state=np.random.RandomState(int(rng.integers(2**31))).get_state())
+    from .ensemble import EnsembleChain
+    from .moves import ensemble_moves
+
+    # emcee's moves draw from a legacy RandomState
+    random = np.random.RandomState(int(rng.integers(2**31)))
+    sampler = EnsembleChain(posterior.batch, ensemble_moves(moves, start.covariance, ndim), walkers, random)
     posterior.model_seconds = 0.0
     posterior.calls = 0
     history: list[tuple[int, float]] = []
@@ -404,7 +418,7 @@ def sample_posterior(
     largest = math.inf
     while steps < max_steps:
         n = min(check_every, max_steps - steps)
-        state = sampler.run_mcmc(state, n, progress=False)
+        sampler.run(n)
         steps += n
         if steps < next_check and steps < max_steps:
             if progress is not None:
@@ -433,8 +447,8 @@ def sample_posterior(
         previous = tau
     wall = time.perf_counter() - began
 
-    chain = sampler.get_chain()
-    log_prob = sampler.get_log_prob()
+    chain = sampler.get_chain().copy()
+    log_prob = sampler.get_log_prob().copy()
     notes = []
     if np.all(np.isfinite(tau)):
         burn_in = min(int(math.ceil(2.0 * tau.max())), steps // 2)
@@ -483,6 +497,7 @@ def sample_posterior(
         warnings=notes,
         diagnostics=diagnostics,
         rhat_limit=float(rhat_limit),
+        moves=moves,
     )
     return result, priors
 

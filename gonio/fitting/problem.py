@@ -600,24 +600,34 @@ class FitProblem:
             sigma = self.total_sigma(values, predicted)
             return -0.5 * (difference / sigma) ** 2 - np.log(sigma) - 0.5 * math.log(2.0 * math.pi)
         if np.all(np.asarray(extra) == 0.0):
-            if self._precision is None:
-                self._precision = np.linalg.inv(self.dataset.covariance)
-            precision = self._precision
+            precision = self._data_precision()
         else:
             precision = np.linalg.inv(self.dataset.covariance + np.diag(np.broadcast_to(extra, (self.dataset.n,))))
         g = precision @ difference
         q = np.diag(precision)
         return -0.5 * np.log(2.0 * math.pi / q) - 0.5 * g**2 / q
 
+    def _data_precision(self) -> np.ndarray:
+        """The inverse of the data's covariance (computed once)."""
+        if self._precision is None:
+            self._precision = np.linalg.inv(self.dataset.covariance)
+        return self._precision
+
     def pointwise_log_likelihood_batch(self, vectors: Any) -> np.ndarray:
         """:meth:`pointwise_log_likelihood` of every row of ``vectors``, shape (W, N): one
-        model evaluation for all rows when the errors are independent."""
+        model evaluation for all rows, except for correlated errors with a free extra
+        noise (one covariance per row)."""
         vectors = np.asarray(vectors, float).reshape(-1, self.ndim)
-        if self._cholesky is not None:
+        if self._cholesky is not None and self.jitter:
             return np.array([self.pointwise_log_likelihood(v) for v in vectors]).reshape(-1, self.dataset.n)
         values = self.batch_values(vectors)
         params = {name: values[name] for name in self.model.param_names}
         predicted = np.asarray(self._predict_checked(values, params), float).reshape(-1, self.dataset.n)
+        if self._cholesky is not None:  # the leave-one-out conditionals of pointwise_log_likelihood
+            precision = self._data_precision()
+            g = (predicted - self.dataset.value) @ precision  # precision is symmetric
+            q = np.diag(precision)
+            return -0.5 * np.log(2.0 * math.pi / q) - 0.5 * g**2 / q
         variance = self.dataset.sigma**2 + (np.asarray(self.extra_variance(values, predicted)) if self.jitter else 0.0)
         difference = predicted - self.dataset.value
         return -0.5 * difference**2 / variance - 0.5 * np.log(variance) - 0.5 * math.log(2.0 * math.pi)

@@ -208,9 +208,18 @@ class FitResult:
         return {p.name: p for p in problem.specs}
 
     def problem(self) -> FitProblem:
-        """Rebuild the :class:`FitProblem` of this fit."""
-        return FitProblem(self.model, self.dataset, self.fixed, self.options, self.jitter, self.alignment,
-                          self.stray_light)
+        """The :class:`FitProblem` of this fit, rebuilt once and kept while the model, the
+        dataset, the fixed values, the options, the extra noise and the rig-error parameters
+        stay the same (building one prepares the model's geometry terms: a report would
+        otherwise build it a dozen times)."""
+        key = (self.model, id(self.dataset), tuple(sorted(self.fixed.items())),
+               tuple(sorted(self.options.items())), self.jitter, tuple(self.alignment), self.stray_light)
+        cached = self.__dict__.get("_problem")
+        if cached is None or cached[0] != key:
+            cached = (key, FitProblem(self.model, self.dataset, self.fixed, self.options, self.jitter,
+                                      self.alignment, self.stray_light))
+            self.__dict__["_problem"] = cached
+        return cached[1]
 
     @property
     def converged(self) -> bool | None:
@@ -353,6 +362,7 @@ class FitResult:
                 "acceptance_fraction": m.acceptance_fraction.tolist(),
                 "tau_multiple": m.tau_multiple,
                 "rhat_limit": m.rhat_limit,
+                "moves": m.moves,
                 "tau_rtol": m.tau_rtol,
                 "max_steps": m.max_steps,
                 "wall_seconds": m.wall_seconds,
@@ -411,6 +421,10 @@ class FitResult:
         """
         from .diagnostics import inference_data
 
+        return inference_data(*self._inference_arrays())
+
+    def _inference_arrays(self) -> tuple:
+        """The arguments of :func:`~gonio.fitting.diagnostics.inference_data` for this fit."""
         if self.mcmc is None:
             raise ValueError("no posterior: the fit ran without MCMC")
         m = self.mcmc
@@ -420,19 +434,15 @@ class FitResult:
         problem = self.problem()
         pointwise = problem.pointwise_log_likelihood_batch(chain.reshape(-1, len(self.free))).reshape(
             chain.shape[:2] + (self.dataset.n,))
-        return inference_data(chain, m.log_prob[m.burn_in :: thin], self.free, pointwise, self.dataset.value,
-                              {"model": self.model, "quantity": self.dataset.quantity, "gonio_version": self.gonio_version})
+        return (chain, m.log_prob[m.burn_in :: thin], self.free, pointwise, self.dataset.value,
+                {"model": self.model, "quantity": self.dataset.quantity, "gonio_version": self.gonio_version})
 
     def _write_inference_data(self, path: Path) -> None:
-        import tempfile
+        # written with h5netcdf, read back by arviz.from_netcdf equal to inference_data()
+        # (importing ArviZ for the file would cost 1-3 s: gonio.fitting.inference_file)
+        from .inference_file import write_inference_data
 
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
-        os.close(fd)
-        try:
-            self.inference_data().to_netcdf(tmp)
-            write_atomic(path, Path(tmp).read_bytes())
-        finally:
-            Path(tmp).unlink(missing_ok=True)
+        write_atomic(path, write_inference_data(*self._inference_arrays()))
 
     def loo(self):
         """PSIS-LOO of the fit (ArviZ ``loo``): expected log predictive density, its error
@@ -481,6 +491,7 @@ class FitResult:
                 warnings=list(m["warnings"]),
                 diagnostics={k: {kk: _nan(vv) for kk, vv in v.items()} for k, v in m.get("diagnostics", {}).items()},
                 rhat_limit=float(m.get("rhat_limit", RHAT_LIMIT)),
+                moves=str(m.get("moves", "stretch")),  # results written before the moves were recorded
             )
         posterior = data["posterior"]
         for key, value in list(posterior.items()):
@@ -696,7 +707,7 @@ def _summary_text(result: FitResult) -> str:
             else "!!! NOT CONVERGED: step limit reached, numbers unreliable !!!"
         )
         lines += [
-            f"[[Posterior]] (emcee: {m.n_walkers} walkers x {m.n_steps} steps, burn-in {m.burn_in}, thin {m.thin}; {status})",
+            f"[[Posterior]] (emcee, {m.moves} move: {m.n_walkers} walkers x {m.n_steps} steps, burn-in {m.burn_in}, thin {m.thin}; {status})",
             f"    mean acceptance fraction = {result.posterior['acceptance_fraction']:.3f}; "
             f"samples kept = {result.posterior['n_samples']}",
             f"    {'name':<{width}} {'median':>10} {'-1sig':>9} {'+1sig':>9} {'2.5%':>10} {'97.5%':>10} {'MAP':>10} "

@@ -224,6 +224,27 @@ _RIGHT_ANGLE = 90.0
 #: Geometries evaluated at a time by the plain call on large inputs: the arrays of one
 #: chunk (64 KiB each) stay in the cache and below the allocator's mmap threshold.
 CHUNK = 8192
+#: Smallest plain call evaluated in chunks, and through a model's compiled path where it
+#: has one (:attr:`Model.compiled`): a smaller call never pays for loading numba.
+COMPILED_MIN = 2 * CHUNK
+#: Geometries the plain calls of a process evaluate with numpy before the compiled paths
+#: are loaded.  Loading numba and the cached loops costs about 0.5 s (1.1 s when they
+#: must be compiled; benchmarks/closed_form_speed.py), what numpy needs for about 2e7
+#: Oren-Nayar geometries; switching once the numpy work has cost as much bounds a
+#: process's total at twice the better of the two choices, whatever it evaluates later
+#: (the rent-or-buy rule), and a single call of moderate size never waits for numba.
+COMPILED_AFTER = 20_000_000
+_numpy_geometries = 0
+
+
+def _compiled_due(size: int) -> bool:
+    """Whether a plain call of ``size`` geometries takes the compiled path; otherwise it
+    counts towards :data:`COMPILED_AFTER`."""
+    global _numpy_geometries
+    if _numpy_geometries >= COMPILED_AFTER:
+        return True
+    _numpy_geometries += size
+    return False
 
 
 def _as_angles(
@@ -281,6 +302,14 @@ class Model:
         False, array parameters are evaluated one distinct parameter combination at a
         time (:func:`_evaluate_by_combination`): the same values, slower.  Every model
         that sets it is tested against that loop (tests/test_models_contract.py).
+    compiled : callable, optional
+        ``compiled() -> evaluate``: loads (importing numba) a compiled plain call
+        ``evaluate(theta_i, phi_i, theta_r, phi_r, params, options)`` of 1-D contiguous
+        angles [deg] and checked scalar parameters, giving the BRDF [1/sr] with the
+        horizon and NaN rules (:mod:`gonio.models._compiled`).  Used for plain calls of
+        at least :data:`COMPILED_MIN` geometries once the process has evaluated
+        :data:`COMPILED_AFTER` geometries with numpy; a faster path of the same formula,
+        tested equal to ``kernel``/``prepare`` (tests/models/test_compiled_closed_forms.py).
     """
 
     name: str
@@ -295,6 +324,7 @@ class Model:
     isotropic: bool = True
     linear_in: tuple[str, ...] = ()
     broadcasts_params: bool = False
+    compiled: Callable[[], Callable[..., np.ndarray]] | None = None
     _by_name: Mapping[str, Param] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -392,9 +422,16 @@ class Model:
         ti, pi_, tr, pr = _as_angles(theta_i, phi_i, theta_r, phi_r)
         if _any_array(params):
             return self._call_broadcast(ti, pi_, tr, pr, params, options)
-        if ti.size >= 2 * CHUNK:
+        if ti.size >= COMPILED_MIN:
+            if self.compiled is not None and _compiled_due(ti.size):
+                return self._call_compiled(ti, pi_, tr, pr, params, options)
             return self._call_in_chunks(ti, pi_, tr, pr, params, options)
         return self._call_scalar_params(ti, pi_, tr, pr, params, options)
+
+    def _call_compiled(self, ti, pi_, tr, pr, params, options) -> np.ndarray:
+        """:meth:`_call_in_chunks` through the model's compiled path (:attr:`compiled`)."""
+        flat = [np.ascontiguousarray(np.ravel(a)) for a in (ti, pi_, tr, pr)]
+        return self.compiled()(*flat, params, options).reshape(ti.shape)
 
     def _call_scalar_params(self, ti, pi_, tr, pr, params, options) -> np.ndarray:
         """The BRDF of checked scalar parameters at angles [deg] of one shape."""

@@ -56,6 +56,7 @@ __all__ = [
     "internal_reflection_integral",
     "physical_scale",
     "transmission_product",
+    "scale_factor",
     "wolff_brdf",
     "wolff_oren_nayar_brdf",
     "WOLFF",
@@ -418,19 +419,48 @@ def wolff_brdf(
     return scale * transmission_product(theta_i, theta_r, n, fresnel)
 
 
+def scale_factor(params, scale: str = "albedo") -> float:
+    """The factor in front of eq 7 [1/sr] for the ``wolff`` model's parameter values:
+    rho/pi (``scale="albedo"``) or :func:`physical_scale` at normal incidence and viewing
+    from ``n`` and ``omega`` (``scale="physical"``)."""
+    if scale == "albedo":
+        return params["rho"] / np.pi
+    return _physical_scale_normal(params["n"], params["omega"], DEFAULT_ORDER)
+
+
+def _transmission_at(theta_i, theta_r, cos_i, cos_r, fresnel: str) -> Callable[[float], np.ndarray]:
+    """:func:`_transmission_product` at fixed geometries as a function of n, remembering
+    its value for the last scalar n: the Fresnel terms depend on the geometry and n only,
+    so a fit with n fixed (or any repeated call) computes them once. An array n (an
+    ensemble of walkers) is evaluated each time."""
+    last: list = [None, None]
+
+    def product(n) -> np.ndarray:
+        if np.ndim(n):
+            return _transmission_product(theta_i, theta_r, cos_i, cos_r, n, fresnel)
+        if last[0] != float(n):
+            last[:] = [float(n), _transmission_product(theta_i, theta_r, cos_i, cos_r, float(n), fresnel)]
+        return last[1]
+
+    return product
+
+
 def _prepare(ti, pi_, tr, pr, scale: str = "albedo", fresnel: str = "exact") -> Callable[..., np.ndarray]:
     """Fixed-geometry evaluator of the ``wolff`` model (angles [rad])."""
     cos_i, cos_r = cos_from_half_tangent(ti), cos_from_half_tangent(tr)
-    theta_i, theta_r = np.asarray(ti, float), np.asarray(tr, float)
+    product = _transmission_at(np.asarray(ti, float), np.asarray(tr, float), cos_i, cos_r, fresnel)
 
     def evaluate(rho: float, n: float, omega: float) -> np.ndarray:
-        if scale == "albedo":
-            factor = rho / np.pi
-        else:
-            factor = _physical_scale_normal(n, omega, DEFAULT_ORDER)
-        return factor * _transmission_product(theta_i, theta_r, cos_i, cos_r, n, fresnel)
+        return scale_factor({"rho": rho, "n": n, "omega": omega}, scale) * product(n)
 
     return evaluate
+
+
+def _compiled_wolff():
+    """The compiled plain call of ``wolff`` (numba loads here, on first use)."""
+    from .wolff_compiled import wolff_plain
+
+    return wolff_plain
 
 
 WOLFF = register(
@@ -449,6 +479,7 @@ WOLFF = register(
         energy_conserving=True,
         reciprocal=True,
         isotropic=True,
+        compiled=_compiled_wolff,
     )
 )
 
@@ -463,11 +494,11 @@ RHO_ROUGH = Param(
 def _prepare_combined(ti, pi_, tr, pr, fresnel: str = "exact") -> Callable[..., np.ndarray]:
     """Fixed-geometry evaluator of ``wolff-oren-nayar`` (angles [rad])."""
     cos_i, cos_r = cos_from_half_tangent(ti), cos_from_half_tangent(tr)
-    theta_i, theta_r = np.asarray(ti, float), np.asarray(tr, float)
+    transmission = _transmission_at(np.asarray(ti, float), np.asarray(tr, float), cos_i, cos_r, fresnel)
     oren_nayar = OREN_NAYAR.prepare(ti, pi_, tr, pr)
 
     def evaluate(rho: float, sigma: float, n: float) -> np.ndarray:
-        product = _transmission_product(theta_i, theta_r, cos_i, cos_r, n, fresnel)
+        product = transmission(n)
         # eq 3 without interreflection, then C1 -> C1 * product (eq 9); a radiance cannot
         # be negative (see wolff_oren_nayar_brdf, Notes)
         direct = oren_nayar(rho, sigma, 0.0)

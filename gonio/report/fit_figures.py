@@ -35,7 +35,7 @@ from matplotlib.colors import Normalize, to_rgba_array
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
-from scipy import ndimage
+from matplotlib.ticker import MaxNLocator
 
 from gonio.fitting.dataset import QUANTITY_LABELS, Dataset
 from gonio.fitting.results import FitResult
@@ -72,8 +72,11 @@ class _Margins:
     gap_y: float = 0.0
 
 
-#: At most this many incidences are drawn in the data figure (evenly chosen).
-MAX_INCIDENCE_PANELS = 12
+#: At most this many incidences are drawn in the data figure (evenly chosen): every
+#: incidence of the shipped protocols (at most 5 in one recording), a sample of image-based
+#: data (CUReT, one incidence per value), where a panel holds a value or two and costs
+#: about 50 ms to draw (12 panels made most of a 10,000-point report's 2 s).
+MAX_INCIDENCE_PANELS = 8
 #: At most this many azimuth differences get a series of their own in an off-plane panel
 #: (those with the most measurements); the legend says how many were left out.
 MAX_AZIMUTH_SERIES = 6
@@ -85,6 +88,15 @@ DENSE_POINTS = 1000
 #: Steps drawn per walker in the trace figure at most (more than the axes have pixel
 #: columns; longer chains are drawn every k-th step).
 MAX_TRACE_POINTS = 1000
+#: Ticks of the data panels: a panel's cost is mostly its axes' ticks and their labels
+#: (about 2 ms each to make and draw), so a few well-placed ones [deg], and at most this
+#: many intervals on the value axis (none at the right edge, where the next panel's first
+#: label would touch it).
+_IN_PLANE_TICKS = (-60, -30, 0, 30, 60)
+_POLAR_TICKS = (0, 15, 30, 45, 60, 75)
+_PANEL_Y_BINS = 5
+#: At most this many tick intervals on the axes of the corner plot and the traces.
+_CORNER_BINS = 4
 #: Walkers drawn in the trace figure at most (:func:`_shown_walkers` picks them).
 MAX_TRACE_WALKERS = 32
 _LOWEST_WALKERS = 4
@@ -391,6 +403,7 @@ def _draw_in_plane_panel(ax: Axes, data: Dataset, panel: _Panel, series: _Series
                 capsize=2, lw=1)
     ax.axvline(panel.theta_i, color="0.6", ls=":", lw=1)
     ax.set_xlim(-90, 90)
+    ax.set_xticks(_IN_PLANE_TICKS)
     ax.set_xlabel("signed viewing angle theta_r [deg] (+ source side)")
 
 
@@ -446,7 +459,13 @@ def _draw_off_plane_panel(ax: Axes, data: Dataset, series: list[_Series], bands:
         ax.errorbar(data.theta_r[pick], data.value[pick], data.sigma[pick], fmt="o", ms=4, color=one.colour,
                     mec="k", mew=0.5, capsize=2, lw=1, label=one.label)
     ax.set_xlim(0, 90)
+    ax.set_xticks(_POLAR_TICKS)
     ax.set_xlabel("viewing angle theta_r [deg]")
+    if len(series) == 1 and n_offsets == 1:
+        # one azimuth: said on the plot, without a legend (which costs as much to draw as
+        # the rest of the panel: image data of many incidences has one azimuth each)
+        ax.text(0.98, 0.97, series[0].label, transform=ax.transAxes, ha="right", va="top", fontsize=7.5)
+        return
     omitted = f"{len(series)} of {n_offsets} azimuths" if n_offsets > len(series) else None
     ax.legend(fontsize=7.5, title=omitted, title_fontsize=7.5)
 
@@ -550,6 +569,7 @@ def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
         else:
             _draw_off_plane_panel(ax, data, panel_series, panel_bands, n_offsets)
         ax.set_ylim(shared_ylim or _data_range(data.value[panel.selection], data.sigma[panel.selection]))
+        ax.yaxis.set_major_locator(MaxNLocator(nbins=_PANEL_Y_BINS))
         # y given: no automatic title placement, which measures every tick label again
         ax.set_title(panel.title, fontsize=10, y=1.0, pad=_TITLE_PAD_PT)
         ax.grid(alpha=0.3)
@@ -647,7 +667,9 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
         ax.text(0.5, 0.5, "no posterior samples (fit run without MCMC)", ha="center", va="center")
         ax.set_axis_off()
         return fig
-    axes = grid.subplots(squeeze=False)
+    # the lower triangle only: an axes costs about as much to make as to draw, so the
+    # hidden upper triangle is not made at all
+    axes = {(i, j): fig.add_subplot(grid[i, j]) for i in range(n) for j in range(i + 1)}
     ranges = []
     for j in range(n):
         lo, hi = np.percentile(samples[:, j], [0.2, 99.8])
@@ -655,11 +677,8 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
             lo, hi = lo - 0.5 * max(abs(lo), 1e-9), hi + 0.5 * max(abs(hi), 1e-9)
         ranges.append((lo, hi))
     for i in range(n):
-        for j in range(n):
+        for j in range(i + 1):
             ax = axes[i, j]
-            if j > i:
-                ax.set_axis_off()
-                continue
             if i == j:
                 ax.hist(samples[:, j], bins=bins, range=ranges[j], color="C0", histtype="stepfilled", alpha=0.6)
                 q = np.percentile(samples[:, j], [16, 50, 84])
@@ -671,6 +690,8 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
             else:
                 hist, xe, ye = np.histogram2d(samples[:, j], samples[:, i], bins=bins, range=[ranges[j], ranges[i]])
                 # One-bin Gaussian smoothing removes the histogram's shot noise from the contours.
+                from scipy import ndimage  # loaded by the corner plot only
+
                 hist = ndimage.gaussian_filter(hist, 1.0)
                 ax.plot(samples[::max(1, samples.shape[0] // 2000), j], samples[::max(1, samples.shape[0] // 2000), i],
                         ",", color="0.6", alpha=0.5)
@@ -684,16 +705,19 @@ def corner_figure(result: FitResult, bins: int = 30) -> Figure:
                         ax.contour(centres_x, centres_y, hist.T, levels=levels, colors="k", linewidths=0.7)
                 ax.set_ylim(ranges[i])
             ax.set_xlim(ranges[j])
+            ax.xaxis.set_major_locator(MaxNLocator(nbins=_CORNER_BINS))
+            if i != j:
+                ax.yaxis.set_major_locator(MaxNLocator(nbins=_CORNER_BINS))
             if i == n - 1:
                 ax.set_xlabel(_param_label(result, names[j]))
                 ax.tick_params(axis="x", labelrotation=45, labelsize=8)
             else:
-                ax.set_xticklabels([])
+                ax.tick_params(axis="x", labelbottom=False)
             if j == 0 and i > 0:
                 ax.set_ylabel(_param_label(result, names[i]))
                 ax.tick_params(axis="y", labelsize=8)
             elif i != j:
-                ax.set_yticklabels([])
+                ax.tick_params(axis="y", labelleft=False)
     fig.suptitle(f"Posterior of {len(samples)} samples: 68 % and 95 % regions", fontsize=10)
     return fig
 
@@ -768,6 +792,7 @@ def trace_figure(result: FitResult) -> Figure:
         if limits is not None:
             ax.set_ylim(*limits)
         ax.set_ylabel(_param_label(result, names[j]), fontsize=9)
+        ax.yaxis.set_major_locator(MaxNLocator(nbins=_CORNER_BINS))
     log_prob = m.log_prob[::stride, shown]
     finite = log_prob[np.isfinite(log_prob)]
     _walker_lines(axes[-1], steps[::stride], log_prob, "C3")

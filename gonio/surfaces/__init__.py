@@ -18,8 +18,12 @@ kernel
     The compiled path tracer (numba; loaded on first render).
 estimator
     :func:`render` (the estimator and its derivation) and :func:`render_albedo`.
+analytic
+    The scattering orders the papers give exactly for a surface (summed, not sampled,
+    in its table).
 table
-    Rendered BRDF tables: grid, interpolation, the on-disk cache, the emulator's sample.
+    Rendered BRDF tables: grids, the node estimator, interpolation, the on-disk cache, the
+    emulator's sample.
 spec
     ``kind=...,key=value`` sample specs.
 

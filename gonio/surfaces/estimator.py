@@ -22,7 +22,7 @@ __all__ = ["Rendering", "Albedo", "render", "render_albedo", "RENDERER_VERSION",
 
 #: Version of the estimator and the kernel; part of every table's cache key, so a change
 #: of the numbers (a fix, another sampler) never reuses an old table.
-RENDERER_VERSION = 1
+RENDERER_VERSION = 2
 #: Largest polar angle rendered [deg]; directions between it and 90 deg are rendered at
 #: it (the BRDF is continuous there except at grazing retro-reflection, where it grows
 #: like 1/cos theta).
@@ -129,19 +129,24 @@ def _unit_vectors(theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
                                          axis=-1))
 
 
-def geometry_seed(seed: int, surface: Surface, geometry: tuple[float, float, float, float]) -> np.uint64:
+def geometry_seed(seed: int, surface: Surface, geometry: tuple[float, float, float, float] | None = None
+                  ) -> np.uint64:
     """The stream of one geometry: a function of the seed, the kind and the four angles.
 
     Keyed by the geometry, so a geometry gets the same numbers whatever else is rendered
-    with it; reciprocal geometries get independent streams.
+    with it; reciprocal geometries get independent streams.  ``geometry=None`` gives the
+    common stream of every geometry (common random numbers, :func:`render`).
     """
     words = [int(seed), sum(map(ord, surface.kind))]
-    words += [int.from_bytes(struct.pack("<d", float(a)), "little") for a in geometry]
+    if geometry is None:
+        words.append(1)  # a geometry's next word is the bit pattern of theta_i, 1 only for 5e-324 deg
+    else:
+        words += [int.from_bytes(struct.pack("<d", float(a)), "little") for a in geometry]
     return np.random.SeedSequence(words).generate_state(1, np.uint64)[0]
 
 
 def _accumulate(surface: Surface, sources: np.ndarray, views: np.ndarray, seeds: np.ndarray, paths: int,
-                bounces: int | None, workers: int) -> np.ndarray:
+                bounces: int | None, workers: int, expected_bounces: bool = False) -> np.ndarray:
     """Kernel accumulators (G, ACCUMULATORS) of the pit, groove or field, in threads."""
     from .kernel import render_geometries
 
@@ -152,7 +157,7 @@ def _accumulate(surface: Surface, sources: np.ndarray, views: np.ndarray, seeds:
     def task(start: int) -> None:
         part = slice(start, start + _CHUNK)
         render_geometries(kind, params, heights, cell_top, sources[part], views[part], seeds[part], int(paths),
-                          max_bounces, out[part])
+                          max_bounces, out[part], expected_bounces)
 
     starts = range(0, sources.shape[0], _CHUNK)
     if workers <= 1 or sources.shape[0] <= _CHUNK:
@@ -182,7 +187,8 @@ def _check_render_options(paths: int, bounces: int | None) -> None:
 
 
 def render(surface: Surface, theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike, phi_r: ArrayLike,
-           paths: int = 20_000, seed: int = 0, bounces: int | None = None, workers: int = 1) -> Rendering:
+           paths: int = 20_000, seed: int = 0, bounces: int | None = None, workers: int = 1,
+           common_random_numbers: bool = False, expected_bounces: bool = False) -> Rendering:
     """Render the BRDF of ``surface`` by Monte Carlo path tracing [1/sr].
 
     Parameters
@@ -203,6 +209,17 @@ def render(surface: Surface, theta_i: ArrayLike, phi_i: ArrayLike, theta_r: Arra
         None (default) = all, unbiased.
     workers : int
         Threads (geometries are shared out; the numbers do not depend on it).
+    common_random_numbers : bool
+        False (default): every geometry has its own random stream, keyed by the seed and
+        its angles, and the errors of different geometries are independent.  True: every
+        geometry is rendered with the same paths (path k has the same groove, azimuth,
+        camera point and bounce numbers at every geometry), so the result is the exact
+        BRDF of one finite sample of paths and its error varies smoothly with the angles
+        instead of jumping from one geometry to the next (rendered tables, Notes).
+    expected_bounces : bool
+        V-grooves (``VGroove``, ``VGrooveField``) only: the light each bounce brings from
+        the other facet is integrated over that facet in closed form instead of traced
+        (Notes); the same expectation with a smaller variance.  Ignored for other kinds.
 
     Returns
     -------
@@ -248,6 +265,29 @@ def render(surface: Surface, theta_i: ArrayLike, phi_i: ArrayLike, theta_r: Arra
     (contribution rho/pi, zero variance) and light leaving a pit never returns below the
     plane, so f = (1 - coverage) rho/pi + coverage f_pit for every bounce limit.
 
+    Expected bounces (V-grooves): in a long groove the cross-section is all that matters
+    (eq 18), and the light a facet point u sends that lands on the other facet's strip
+    [v1, v2] is the integral of eq 19's kernel, the view factor |sin phi(v2) -
+    sin phi(v1)| / 2 (phi: the cross-section angle from the point's normal under which
+    it sees v).  The other facet is lit uniformly on [m^s/w, 1] (eq 21), so the next
+    vertex's direct light is added as its expectation, w_k rho * rho (n'.s)+ F(u -> lit
+    strip), and the path moves to a point of the other facet drawn with sin phi uniform
+    (weight times rho F(u -> facet)); the first vertex keeps its exact 0-or-1 shadow test
+    (is it on its facet's lit strip).  Unbiased (the conditional expectation of the
+    traced estimate); the per-path variance of the second and later orders falls
+    (:mod:`.kernel`, ``_groove_expected_path``).
+
+    Random numbers: SplitMix64, path k of a stream starting a fixed 2^20 draws after path
+    k - 1 (:mod:`.kernel`).  By default the stream of a geometry is keyed by the seed, the
+    kind and its four angles, so each geometry's standard error describes an error
+    independent of every other geometry's (what the error-bar tests need).  With
+    ``common_random_numbers`` every geometry uses the stream of the seed and the kind:
+    the standard error of each value is unchanged, but the errors of different
+    geometries are correlated (for nearby geometries nearly equal): the rendered values
+    are then the BRDF of one finite random sample of the surface, as a measured sample is
+    one finite patch of it, and differences between nearby geometries are much more
+    precise than the values (docs/surfaces.md, "Tables").
+
     References
     ----------
     M. Oren, S. K. Nayar, IJCV 14(3), 1995, section 4 (the BRDF of a facet surface, eq 8,
@@ -270,9 +310,13 @@ def render(surface: Surface, theta_i: ArrayLike, phi_i: ArrayLike, theta_r: Arra
     index = np.flatnonzero(valid)
     sums = np.zeros((len(ti), COLUMNS))
     if index.size and not (isinstance(surface, PittedPlane) and surface.coverage == 0.0):
-        seeds = np.array([geometry_seed(seed, surface, (ti[k], pi_[k], tr[k], pr[k])) for k in index], np.uint64)
+        if common_random_numbers:
+            seeds = np.full(index.size, geometry_seed(seed, surface), np.uint64)
+        else:
+            seeds = np.array([geometry_seed(seed, surface, (ti[k], pi_[k], tr[k], pr[k])) for k in index], np.uint64)
+        expected = expected_bounces and isinstance(surface, (VGroove, VGrooveField))
         sums[index] = _accumulate(surface, _unit_vectors(ti[index], pi_[index]), _unit_vectors(tr[index], pr[index]),
-                                  seeds, paths, bounces, workers)
+                                  seeds, paths, bounces, workers, expected)
     cumulative, cumulative_error = _mean_and_error(np.cumsum(sums[:, 0:3].T, axis=0),
                                                    np.stack([sums[:, 3], sums[:, 6], sums[:, 7]]),
                                                    np.stack([sums[:, 11], sums[:, 14], sums[:, 15]]), paths)

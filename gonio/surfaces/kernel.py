@@ -34,8 +34,19 @@ by Russian roulette with survival probability rho from the third vertex on (weig
 unchanged: unbiased).  Per path the contributions are kept in three bins (vertex 1,
 vertex 2, vertices 3 and more), accumulated with their squares.
 
+V-grooves can instead be rendered with *expected bounces*
+(:func:`_groove_expected_path`): in a long groove the light a facet point sends to the
+other facet, and the part of it that lands on the other facet's lit strip, are view
+factors in closed form, so the next vertex's direct light is added as its conditional
+expectation instead of a traced 0-or-1 sample; the same expectation, a smaller variance.
+
 Random numbers: SplitMix64 (Steele, Lea & Flood 2014), one stream per geometry, seeded by
-the caller; the same seeds give the same numbers on any machine and in any thread.
+the caller; the same seeds give the same numbers on any machine and in any thread.  Path k
+of a stream starts PATH_STRIDE numbers after path k - 1 (a jump ahead of SplitMix64's
+counter, :func:`path_state`), so a path's numbers depend on the stream seed and k alone,
+not on how many numbers the paths before it used: rendered with the same seed, path k
+of two geometries has the same groove, azimuth and camera point and the same bounce
+numbers (common random numbers, :func:`gonio.surfaces.render`).
 
 All angles here are radians, all vectors unit 3-tuples in the sample frame (z: the mean
 normal).
@@ -47,8 +58,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["VGROOVE", "PIT", "FIELD", "ACCUMULATORS", "BOUNCE_CAP", "MAX_CELL_STEPS",
-           "render_geometries", "sample_gaussian_slopes", "uniform_numbers"]
+__all__ = ["VGROOVE", "PIT", "FIELD", "ACCUMULATORS", "BOUNCE_CAP", "MAX_CELL_STEPS", "PATH_STRIDE",
+           "render_geometries", "sample_gaussian_slopes", "uniform_numbers", "path_state"]
 
 #: Kind codes.
 VGROOVE, PIT, FIELD = 0, 1, 2
@@ -68,6 +79,11 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
+#: Numbers reserved for each path of a stream: 2^20, far more than a path draws (at most
+#: about 3 per vertex and BOUNCE_CAP vertices, plus the slope's rejection draws), so the
+#: paths of a stream never share a number; 2^44 paths fit in the 2^64-long cycle.
+PATH_STRIDE = 1 << 20
+_PATH_JUMP = np.uint64((0x9E3779B97F4A7C15 * PATH_STRIDE) % 2**64)
 _TWO_PI = 2.0 * math.pi
 #: Hits closer than this to a ray's origin [length units] are ignored (self-intersection).
 _T_MIN = 1e-10
@@ -84,6 +100,13 @@ def _uniform(state: np.ndarray) -> float:
     z = (z ^ (z >> _S27)) * _MIX2
     z = z ^ (z >> _S31)
     return float(z >> _S11) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True, nogil=True)
+def path_state(seed: np.uint64, path: int) -> np.uint64:
+    """SplitMix64 state at the start of path ``path`` of the stream ``seed``: the state
+    after ``path * PATH_STRIDE`` draws (the counter advances by a constant per draw)."""
+    return seed + np.uint64(path) * _PATH_JUMP
 
 
 @njit(cache=True, nogil=True)
@@ -357,6 +380,97 @@ def _rotated(x: float, y: float, z: float, azimuth: float) -> tuple[float, float
     return c * x + s * y, -s * x + c * y, z
 
 
+# --------------------------------------------------------------------------- V-groove, expected bounces
+@njit(cache=True, nogil=True)
+def _lit_from(tan_a: float, sx_mirror: float, sz: float) -> float:
+    """Lowest lit position v (0: bottom, 1: top) of facet 1 in the frame where source x is
+    ``sx_mirror``: the shadow line of the top of facet 0, (-1, 0) along -s, meets facet 1
+    at x = -(1 + r)/(1 - r), r = tan_a sx/sz (facet 1 faces the source iff r < 1)."""
+    r = tan_a * sx_mirror / sz
+    return max(0.0, -(1.0 + r) / (1.0 - r))
+
+
+@njit(cache=True, nogil=True)
+def _strip_sine(tan_a: float, sin_a: float, cos_a: float, u: float, v: float) -> float:
+    """sin of the angle from the normal of facet 0, in the groove's cross-section, under
+    which its point at u sees the point v of facet 1 (u, v: 0 bottom, 1 top)."""
+    dx, dz = v + u, tan_a * (v - u)
+    length = math.sqrt(dx * dx + dz * dz)
+    return (-dx * cos_a + dz * sin_a) / length if length > 0.0 else -1.0
+
+
+@njit(cache=True, nogil=True)
+def _groove_expected_path(params, shape, source, view, max_bounces: int, state: np.ndarray,
+                          bins: np.ndarray) -> int:
+    """One path of a V-groove with the light of every bounce integrated over the facet.
+
+    In a long groove everything depends on the cross-section alone (Oren & Nayar 1995,
+    eq 18).  A facet point u (0 bottom, 1 top) sees the other facet's point v under the
+    cross-section angle phi from its normal; the share of the light a Lambertian point
+    sends that lands on the strip [v1, v2] of the other facet is the integral of the
+    translational-symmetry kernel K'/pi of eq 19 over the strip, in closed form the view
+    factor F = |sin phi(v2) - sin phi(v1)| / 2 (Siegel & Howell, Thermal Radiation Heat
+    Transfer: the crossed-strings result for an infinitely long strip; sin phi is uniform
+    over the light a point sends).  A collimated source lights the other facet uniformly
+    on [v_lit, 1] (the shadow of the near top edge: v_lit = m^s/w of eq 21), so the next
+    vertex's direct light has the conditional expectation
+    w rho * rho (n'.s)+ F(u -> [v_lit, 1]), which is added in place of its traced 0-or-1
+    sample; the path then moves to a point of the other facet drawn with sin phi uniform
+    over the whole facet, with weight times rho F(u -> [0, 1]), and so on.  The first
+    vertex (the camera ray's hit) keeps its exact 0-or-1 shadow test (is it on its
+    facet's lit strip).  With all bounces, a weight below 1e-4 goes on with probability
+    weight/1e-4 at weight 1e-4 (Russian roulette, unbiased).  Returns 1 if the path was
+    cut at BOUNCE_CAP.
+    """
+    rho = params[0]
+    azimuth = _path_frame(VGROOVE, params, shape, state)
+    tan_a, sin_a, cos_a = shape[0], shape[1], shape[2]
+    sx, _, sz = _rotated(source[0], source[1], source[2], azimuth)
+    vx, _, vz = _rotated(view[0], view[1], view[2], azimuth)
+    ox = 2.0 * _uniform(state) - 1.0  # the camera ray of _camera_origin, traced in the cross-section
+    facet, t = _groove_trace(tan_a, ox, 0.0, -vx, -vz, -1)
+    bins[0] = bins[1] = bins[2] = 0.0
+    if facet < 0:
+        return 0
+    u = min(abs(ox - t * vx), 1.0)
+    # frame mirrored so that the current facet is facet 0: source x is sx (facet 0) or -sx
+    mirror = sx if facet == 0 else -sx
+    own_cosine = sin_a * mirror + cos_a * sz
+    if own_cosine > 0.0 and u >= _lit_from(tan_a, -mirror, sz):
+        bins[0] += rho * own_cosine
+    weight = 1.0
+    vertex = 1
+    while tan_a > 0.0:
+        if max_bounces > 0 and vertex >= max_bounces:
+            return 0
+        if vertex >= BOUNCE_CAP:
+            return 1
+        bottom = _strip_sine(tan_a, sin_a, cos_a, u, 0.0)
+        top = _strip_sine(tan_a, sin_a, cos_a, u, 1.0)
+        other_cosine = -sin_a * mirror + cos_a * sz
+        if other_cosine > 0.0:
+            lit = _strip_sine(tan_a, sin_a, cos_a, u, _lit_from(tan_a, mirror, sz))
+            bins[min(vertex + 1, 3) - 1] += weight * rho * rho * other_cosine * 0.5 * abs(top - lit)
+        weight *= rho * 0.5 * abs(top - bottom)
+        if weight <= 0.0:
+            return 0
+        if max_bounces == 0 and weight < 1e-4:
+            if _uniform(state) * 1e-4 >= weight:
+                return 0
+            weight = 1e-4
+        sine = bottom + (top - bottom) * _uniform(state)
+        cosine = math.sqrt(max(0.0, 1.0 - sine * sine))
+        # direction cos(phi) n0 + sin(phi) t0 (n0 = (sin a, cos a), t0 = (-cos a, sin a)) from
+        # p = (-u, tan_a (u - 1)) to the line of facet 1, z = tan_a (x - 1)
+        dx, dz = cosine * sin_a - sine * cos_a, cosine * cos_a + sine * sin_a
+        x0, z0 = -u, tan_a * (u - 1.0)
+        step = (tan_a * (x0 - 1.0) - z0) / (dz - tan_a * dx)
+        u = min(max(x0 + step * dx, 0.0), 1.0)
+        mirror = -mirror
+        vertex += 1
+    return 0
+
+
 @njit(cache=True, nogil=True)
 def _one_path(kind, params, shape, heights, cell_top, source, view, max_bounces: int,
               state: np.ndarray, bins: np.ndarray) -> tuple[int, int]:
@@ -407,7 +521,7 @@ def _one_path(kind, params, shape, heights, cell_top, source, view, max_bounces:
 @njit(cache=True, nogil=True)
 def render_geometries(kind: int, params: np.ndarray, heights: np.ndarray, cell_top: np.ndarray,
                       sources: np.ndarray, views: np.ndarray, seeds: np.ndarray, paths: int,
-                      max_bounces: int, out: np.ndarray) -> None:
+                      max_bounces: int, out: np.ndarray, expected: bool = False) -> None:
     """Accumulate ``paths`` paths for each geometry into ``out`` (G, ACCUMULATORS).
 
     Parameters
@@ -430,18 +544,25 @@ def render_geometries(kind: int, params: np.ndarray, heights: np.ndarray, cell_t
     out : numpy.ndarray
         Receives the accumulators (module notes) of each geometry; the bins are divided by
         pi cos(theta_i), so that their means are BRDF contributions [1/sr].
+    expected : bool
+        VGROOVE only: integrate the light of each bounce over the other facet
+        (:func:`_groove_expected_path`) instead of tracing it.
     """
     shape = np.zeros(4)
     bins = np.zeros(3)
     state = np.empty(1, np.uint64)
     for g in range(sources.shape[0]):
-        state[0] = seeds[g]
         scale = 1.0 / (math.pi * sources[g, 2])
         for k in range(ACCUMULATORS):
             out[g, k] = 0.0
         for k in range(paths):
-            cut, segments = _one_path(kind, params, shape, heights, cell_top, sources[g], views[g],
-                                      max_bounces, state, bins)
+            state[0] = path_state(seeds[g], k)
+            if expected and kind == VGROOVE:
+                cut, segments = _groove_expected_path(params, shape, sources[g], views[g], max_bounces, state,
+                                                      bins), 1
+            else:
+                cut, segments = _one_path(kind, params, shape, heights, cell_top, sources[g], views[g],
+                                          max_bounces, state, bins)
             b0, b1, b2 = bins[0] * scale, bins[1] * scale, bins[2] * scale
             if k == 0:
                 out[g, 11], out[g, 12], out[g, 13] = b0, b1, b2

@@ -69,19 +69,22 @@ from ..models.tabulated.coordinates import (
     z_from_y,
 )
 from ..models.tabulated.interpolation import Axis
+from .analytic import every_order_known, known_orders
 from .estimator import RENDERER_VERSION, kernel_inputs, render
 from .spec import SurfaceSpec
 
 __all__ = ["THETA_MAX", "FLOOR", "TABLE_FORMAT", "SurfaceGrid", "DEFAULT_GRID", "table_coordinates",
-           "node_geometries", "SurfaceTable", "GRIDS", "table_key", "table_path", "render_table", "TabulatedSurface",
-           "cached_tables", "NAME_PREFIX"]
+           "node_geometries", "SurfaceTable", "GRIDS", "EXACT_GRIDS", "grid_for", "table_key", "table_path",
+           "COMMON_RANDOM_NUMBERS", "node_values", "render_table", "TabulatedSurface", "cached_tables",
+           "NAME_PREFIX"]
 
 #: Largest polar angle of the table [deg] (module notes).
 THETA_MAX = 89.0
 #: Added to the BRDF before the logarithm [1/sr].
 FLOOR = 1e-4 / math.pi
-#: Version of the table layout (part of the key).
-TABLE_FORMAT = 1
+#: Version of the table layout and its node estimator (part of the key): 2 = exact low
+#: orders plus sampled rest, common random numbers for the V-groove field (:func:`node_values`).
+TABLE_FORMAT = 2
 #: File names of surface tables start with this.
 NAME_PREFIX = "surface-"
 
@@ -113,9 +116,26 @@ DEFAULT_GRID = SurfaceGrid()
 #: The grid of each kind.  The single-slope groove and the pits have kinks inside the
 #: domain (onsets of shadowing at theta = 90 deg - theta_a; the hemispherical pit's
 #: forward single scattering ends at theta_i + theta_r = 90 deg, Koenderink et al. eq 28)
-#: and get more nodes; interpolation errors of both grids: docs/surfaces.md.
+#: and get more nodes; interpolation errors of both grids: docs/surfaces.md.  Used where
+#: part of the BRDF is sampled: the Monte Carlo error of the nodes (median 0.05-0.6 %)
+#: exceeds the interpolation error (median 1e-4 to 2e-4).
 GRIDS = {"vgrooves": DEFAULT_GRID, "heightfield": DEFAULT_GRID, "vgroove": SurfaceGrid(20, 11, 16),
          "pits": SurfaceGrid(20, 11, 16)}
+#: The grids of tables whose every order is known exactly (:func:`~.analytic.every_order_known`:
+#: pits, grooves at one or two bounces): interpolation is their only error, and their
+#: nodes cost little, so they are finer (measured at 3000 random geometries up to 89 deg:
+#: the V-groove field median 1.2e-5, 99th percentile 1.1e-4; the single slope and the
+#: pits, kinked, median 1.3e-5 and 1.7e-5, 99th percentile 8e-4 and 1.9e-3).
+EXACT_GRIDS = {"vgrooves": SurfaceGrid(28, 15, 22), "vgroove": SurfaceGrid(36, 19, 28),
+               "pits": SurfaceGrid(36, 19, 28)}
+
+
+def grid_for(spec: SurfaceSpec) -> SurfaceGrid:
+    """The table grid of ``spec``: :data:`EXACT_GRIDS` where every order is known, else
+    :data:`GRIDS`."""
+    if every_order_known(spec.surface, spec.bounces):
+        return EXACT_GRIDS[spec.surface.kind]
+    return GRIDS[spec.surface.kind]
 
 
 def table_coordinates(theta_i: np.ndarray, theta_r: np.ndarray, delta_phi: np.ndarray
@@ -196,7 +216,7 @@ class SurfaceTable:
 
 def table_key(spec: SurfaceSpec, grid: SurfaceGrid | None = None) -> dict:
     """Everything that changes a table's numbers (module notes), as plain values."""
-    grid = grid or GRIDS[spec.surface.kind]
+    grid = grid or grid_for(spec)
     return {"format": TABLE_FORMAT, "renderer": RENDERER_VERSION, "coordinates": COORDINATES_VERSION,
             "kind": spec.surface.kind, "parameters": spec.surface.parameters(), "paths": spec.paths,
             "seed": spec.seed, "bounces": spec.bounces, "grid": list(grid.shape), "theta_max": THETA_MAX,
@@ -213,6 +233,58 @@ def table_path(spec: SurfaceSpec, grid: SurfaceGrid | None = None, directory: Pa
 
     digest = hashlib.sha256(_key_text(table_key(spec, grid)).encode()).hexdigest()[:16]
     return Path(directory or cache_dir()) / f"{NAME_PREFIX}{spec.surface.kind}-{digest}.npz"
+
+
+#: Kinds whose table nodes share one stream (common random numbers), chosen by
+#: measurement (benchmarks/surfaces_tables.py, docs/surfaces.md "Tables"): for the
+#: V-groove field the shared paths make the node error three times less jagged and halve
+#: what a fit cannot absorb of it; for the single-slope groove they make the error larger
+#: and the fitted parameters scatter more, for the height field larger and no smoother
+#: (its nodes' paths see different facets): those keep one stream per node.
+COMMON_RANDOM_NUMBERS = {"vgrooves": True, "vgroove": False, "heightfield": False, "pits": False}
+
+
+def node_values(spec: SurfaceSpec, theta_i: np.ndarray, theta_r: np.ndarray, delta_phi: np.ndarray,
+                common_random_numbers: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A table's estimate of the all-bounce (or truncated) BRDF at geometries [1/sr].
+
+    Parameters
+    ----------
+    spec : SurfaceSpec
+        The surface, paths, seed and bounce limit.
+    theta_i, theta_r, delta_phi : numpy.ndarray
+        Source and viewing polar angles and phi_r - phi_i [deg] (1-D, equal length).
+    common_random_numbers : bool, optional
+        Render every geometry with the same paths (:func:`~.estimator.render`); default:
+        the kind's entry of :data:`COMMON_RANDOM_NUMBERS`.
+
+    Returns
+    -------
+    value, standard_error : numpy.ndarray
+        The BRDF and the standard error of its sampled part [1/sr]; 0 where nothing is
+        sampled.
+
+    Notes
+    -----
+    value = the orders a paper gives exactly (:func:`~.analytic.known_orders`) + the
+    Monte Carlo estimate of the remaining orders from :func:`~.estimator.render`'s paths
+    (``orders[2]``: the third and later scattering events).  An analytic partial sum (a
+    control variate of coefficient 1): the expectation is the BRDF of the surface at the
+    bounce limit, the variance that of the sampled orders alone.  The V-grooves render
+    with ``expected_bounces`` (the light of each bounce integrated over the other facet).
+    Where every order is known (pits; grooves at one or two bounces) nothing is rendered;
+    where nothing is (the height field) every order is sampled.
+    """
+    known = known_orders(spec.surface, theta_i, 0.0, theta_r, delta_phi, spec.bounces)
+    if known is not None and known.orders is None:
+        return np.asarray(known.value, float), np.zeros(np.shape(theta_i))
+    if common_random_numbers is None:
+        common_random_numbers = COMMON_RANDOM_NUMBERS[spec.surface.kind]
+    rendered = render(spec.surface, theta_i, 0.0, theta_r, delta_phi, paths=spec.paths, seed=spec.seed,
+                      bounces=spec.bounces, common_random_numbers=common_random_numbers, expected_bounces=True)
+    if known is None:
+        return rendered.value, rendered.standard_error
+    return known.value + rendered.orders[2], rendered.order_error[2]
 
 
 def render_table(spec: SurfaceSpec, grid: SurfaceGrid | None = None, workers: int | None = None,
@@ -240,7 +312,7 @@ def render_table(spec: SurfaceSpec, grid: SurfaceGrid | None = None, workers: in
     if not spec.surface.isotropic:
         raise ValueError(f"surface {spec.text()}: only isotropic surfaces are tabulated "
                          "(render an anisotropic one with gonio.surfaces.render)")
-    grid = grid or GRIDS[spec.surface.kind]
+    grid = grid or grid_for(spec)
     alpha, beta, dphi = (np.degrees(a).ravel() for a in node_geometries(grid))
     kernel_inputs(spec.surface)  # a height field is realised once, before the threads start
     batch = 16
@@ -251,9 +323,7 @@ def render_table(spec: SurfaceSpec, grid: SurfaceGrid | None = None, workers: in
     def task(first: int) -> int:
         part = slice(first, first + batch)
         # source at beta (nearer the normal), camera at alpha: the reciprocal configuration
-        rendered = render(spec.surface, beta[part], 0.0, alpha[part], dphi[part], paths=spec.paths,
-                          seed=spec.seed, bounces=spec.bounces)
-        value[part], error[part] = rendered.value, rendered.standard_error
+        value[part], error[part] = node_values(spec, beta[part], alpha[part], dphi[part])
         return min(batch, alpha.size - first)
 
     done = 0
@@ -300,7 +370,7 @@ class TabulatedSurface:
             raise ValueError(f"surface {spec.text()}: an anisotropic surface (a V-groove with phi_a) cannot be an "
                              "emulated sample: the rig has no sample rotation and its tables are isotropic; omit "
                              "phi_a for the isotropic single-slope surface")
-        self.spec, self.grid, self.progress, self.workers = spec, grid or GRIDS[spec.surface.kind], progress, workers
+        self.spec, self.grid, self.progress, self.workers = spec, grid or grid_for(spec), progress, workers
         self._table: SurfaceTable | None = None
         #: Whether the last :meth:`load` rendered the table (False: read from the cache).
         self.rendered = False

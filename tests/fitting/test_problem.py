@@ -203,7 +203,7 @@ def test_aperture_averaged_linear_models_keep_the_linear_path():
         assert FitProblem(model, rig, **kwargs)._linear is None
 
 
-@pytest.mark.parametrize("case", [0, 1, 2, 4, 7])
+@pytest.mark.parametrize("case", [0, 1, 2, 4, 5, 7])
 def test_batch_pointwise_likelihood_equals_one_walker_at_a_time(case):
     model, data, fixed, jitter = _batch_cases()[case]
     problem = FitProblem(model, data, fixed, jitter=jitter)

@@ -50,7 +50,8 @@ def test_data_figure_draws_each_incidence_once_in_its_plane():
     sources, _ = data.incidences()
     assert len(sources) == 5
     assert len(_axes_with_data(fig)) == len(fig.axes) == len(sources)  # no empty "no ... data" panels
-    assert not [text for ax in fig.axes for text in ax.texts]
+    # no "no ... data" notes; the only texts name the azimuth of a one-azimuth sweep
+    assert all(text.get_text().startswith("phi_r - phi_i = ") for ax in fig.axes for text in ax.texts)
     titles = [ax.get_title() for ax in fig.axes]
     for theta_i, phi_i in sources:
         assert sum(f"theta_i = {theta_i:g} deg, phi_i = {phi_i:g} deg" in title for title in titles) == 1
@@ -58,6 +59,9 @@ def test_data_figure_draws_each_incidence_once_in_its_plane():
     assert all("signed viewing angle" in x_labels[f"theta_i = {t:g} deg, phi_i = 0 deg"] for t in (30, 45, 60))
     assert x_labels["theta_i = 60 deg, phi_i = -45 deg"] == "viewing angle theta_r [deg]"
     assert x_labels["theta_i = 75 deg, phi_i = -60 deg"] == "viewing angle theta_r [deg]"
+    for ax in fig.axes:  # an off-plane panel names its azimuths: a legend, or one text for one azimuth
+        if ax.get_xlabel() == "viewing angle theta_r [deg]":
+            assert (ax.get_legend() is None) == (len(ax.texts) == 1)
 
 
 def test_data_figure_puts_both_planes_of_one_incidence_side_by_side():
@@ -212,7 +216,7 @@ def test_data_figure_bands_come_from_one_draw_set_equal_to_per_series_bands(samp
     # The reference path: each series' band on its own, with the same draws (same seed).
     panels = [panel for group in fit_figures._data_panels(result) for panel in group]
     series = [one for panel in panels for one in fit_figures._off_plane_series(result.dataset, panel)[0]]
-    assert len(series) == len(fig.axes) == 12
+    assert len(series) == len(fig.axes) == fit_figures.MAX_INCIDENCE_PANELS  # 12 incidences, 8 drawn
     for ax, one in zip(fig.axes, series):
         alone = original(result, *one.geometry, n_draws=50)
         np.testing.assert_allclose(ax.lines[0].get_ydata(), alone[2], rtol=1e-12, atol=0)  # the median line

@@ -347,13 +347,15 @@ def test_combined_model_close_to_wolff_for_smooth_surfaces():
 
 @pytest.mark.parametrize("name, options", [("wolff", o) for o in OPTIONS] + [("wolff-oren-nayar", {"fresnel": "polynomial"})])
 def test_fixed_geometry_path_equals_direct_call_for_every_option(name, options):
-    """Model.at (fitting's path, geometry precomputed) is the same formula as the plain call."""
+    """Model.at (fitting's path, geometry precomputed) is the same formula as the plain call,
+    also when it reuses the Fresnel terms of a repeated n (the sequence returns to earlier
+    indices, so a cache keyed wrongly would give the previous n's values)."""
     model = gonio.models.get(name)
     rng = np.random.default_rng(11)
     ti, tr = rng.uniform(0, 90, 300), rng.uniform(0, 90, 300)
     pi_, pr = rng.uniform(-180, 180, 300), rng.uniform(-180, 180, 300)
     fixed = model.at(ti, pi_, tr, pr, **options)
-    for values in ({}, {"n": 1.33}, {"n": 2.2, "rho": 0.3}):
+    for values in ({}, {"n": 1.33}, {"n": 1.33, "rho": 0.5}, {"n": 2.2, "rho": 0.3}, {}, {"n": 1.33}):
         direct = model(ti, pi_, tr, pr, **values, **options)
         np.testing.assert_allclose(fixed(**values), direct, rtol=1e-13, atol=0)
 

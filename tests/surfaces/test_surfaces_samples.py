@@ -12,7 +12,7 @@ from gonio.cli import CLIError, main
 from gonio.cli import demo
 from gonio.cli.run import DEFAULT_SAMPLE, emulated_rig
 from gonio.cli.samples import check_sample_spec, parse_sample_spec
-from gonio.surfaces.table import GRIDS, SurfaceGrid, TabulatedSurface
+from gonio.surfaces.table import EXACT_GRIDS, GRIDS, SurfaceGrid, TabulatedSurface
 
 SMALL = SurfaceGrid(6, 5, 6)
 #: A surface sample whose table renders in a fraction of a second (small grid, 100 paths).
@@ -33,8 +33,9 @@ view = [-60, -30, 0, 30]
 def cache(tmp_path, monkeypatch):
     """A private table cache, and small grids so that every table renders at once."""
     monkeypatch.setenv("GONIO_TABLE_DIR", str(tmp_path / "tables"))
-    for kind in list(GRIDS):
-        monkeypatch.setitem(GRIDS, kind, SMALL)
+    for grids in (GRIDS, EXACT_GRIDS):
+        for kind in list(grids):
+            monkeypatch.setitem(grids, kind, SMALL)
     return tmp_path / "tables"
 
 

@@ -10,17 +10,20 @@ import pytest
 import gonio
 from gonio.cli import main
 from gonio.models.tabulated import store
-from gonio.surfaces import VGrooveField, render
+from gonio.surfaces import VGrooveField
 from gonio.surfaces import table as tables
 from gonio.surfaces.spec import DEFAULT_PATHS, parse_surface_spec
 from gonio.surfaces.table import (
+    EXACT_GRIDS,
     FLOOR,
     GRIDS,
     THETA_MAX,
     SurfaceGrid,
     SurfaceTable,
     TabulatedSurface,
+    grid_for,
     node_geometries,
+    node_values,
     render_table,
     table_coordinates,
     table_key,
@@ -65,16 +68,19 @@ def test_coordinates_are_symmetric_in_source_and_viewer():
         assert np.allclose(a, b, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("model,params,median,p99", [
+@pytest.mark.parametrize("model,params,grid,median,p99", [
     # the paper's rough-surface approximation (eq 33-35, kinked where its max/min switch)
-    # and the pitted surface (Koenderink et al. eq 28 ends at theta_i + theta_r = 90 deg);
-    # bounds 1.5x the measured median (1.0e-4, 1.7e-4) and 99th percentile (5.2e-3, 7.0e-3)
-    ("oren-nayar", {"rho": 0.9, "sigma": 30.0, "ir_weight": 1.0}, 1.5e-4, 8e-3),
-    ("pitted", {"rho": 0.9, "psi": 90.0, "coverage": 0.7}, 2.6e-4, 1.1e-2),
+    # and the pitted surface (Koenderink et al. eq 28 ends at theta_i + theta_r = 90 deg),
+    # on the grids of sampled tables and on the finer ones of exact tables; bounds 1.5x
+    # the measured median (1.0e-4, 1.7e-4; 1.1e-5, 1.7e-5) and 99th percentile (5.2e-3,
+    # 7.0e-3; 1.6e-3, 1.9e-3)
+    ("oren-nayar", {"rho": 0.9, "sigma": 30.0, "ir_weight": 1.0}, GRIDS["vgrooves"], 1.5e-4, 8e-3),
+    ("pitted", {"rho": 0.9, "psi": 90.0, "coverage": 0.7}, GRIDS["pits"], 2.6e-4, 1.1e-2),
+    ("oren-nayar", {"rho": 0.9, "sigma": 30.0, "ir_weight": 1.0}, EXACT_GRIDS["vgrooves"], 1.6e-5, 2.5e-3),
+    ("pitted", {"rho": 0.9, "psi": 90.0, "coverage": 0.7}, EXACT_GRIDS["pits"], 2.6e-5, 2.9e-3),
 ])
-def test_interpolation_error_between_the_nodes(model, params, median, p99):
+def test_interpolation_error_between_the_nodes(model, params, grid, median, p99):
     # the grid and the cubic rule alone: a deterministic function tabulated at the nodes
-    grid = GRIDS["vgrooves"] if model == "oren-nayar" else GRIDS["pits"]
     alpha, beta, dphi = (np.degrees(a) for a in node_geometries(grid))
     table = SurfaceTable(np.log(gonio.brdf(model, beta, 0.0, alpha, dphi, **params) + FLOOR))
     geometries = _random_geometries(3000)
@@ -83,19 +89,30 @@ def test_interpolation_error_between_the_nodes(model, params, median, p99):
     assert np.median(error) < median and np.percentile(error, 99) < p99
 
 
-def test_table_holds_the_renders_of_its_nodes_and_threads_change_nothing():
+def test_exact_tables_get_the_finer_grids():
+    assert grid_for(parse_surface_spec("kind=pits,psi=60,coverage=1,rho=0.9")) == EXACT_GRIDS["pits"]
+    assert grid_for(parse_surface_spec("kind=vgrooves,sigma=30,rho=0.9,bounces=2")) == EXACT_GRIDS["vgrooves"]
+    assert grid_for(parse_surface_spec("kind=vgroove,theta_a=40,rho=0.9,bounces=1")) == EXACT_GRIDS["vgroove"]
+    assert grid_for(parse_surface_spec("kind=vgrooves,sigma=30,rho=0.9")) == GRIDS["vgrooves"]
+    assert grid_for(parse_surface_spec("kind=vgrooves,sigma=30,rho=0.9,bounces=3")) == GRIDS["vgrooves"]
+    assert grid_for(parse_surface_spec("kind=heightfield,sigma=30,rho=0.9,bounces=1")) == GRIDS["heightfield"]
+
+
+def test_table_holds_its_node_values_and_threads_change_nothing():
+    # every node is node_values of its geometry alone (common random numbers: a node's
+    # paths do not depend on the other nodes), whatever the threads
     spec = parse_surface_spec("kind=vgrooves,sigma=25,rho=0.8,paths=200,seed=3")
     arrays = render_table(spec, SMALL, workers=1)
     assert np.array_equal(arrays["log_brdf"], render_table(spec, SMALL, workers=2)["log_brdf"])
     alpha, beta, dphi = (np.degrees(a) for a in node_geometries(SMALL))
     index = (2, 3, 4)
-    node = render(spec.surface, beta[index], 0.0, alpha[index], dphi[index], paths=200, seed=3)
-    assert math.exp(arrays["log_brdf"][index]) - FLOOR == pytest.approx(float(node.value), rel=1e-12)
-    assert arrays["relative_error"][index] == pytest.approx(float(node.standard_error / node.value), rel=1e-12)
+    value, error = node_values(spec, beta[index][None], alpha[index][None], dphi[index][None])
+    assert math.exp(arrays["log_brdf"][index]) - FLOOR == pytest.approx(float(value[0]), rel=1e-12)
+    assert arrays["relative_error"][index] == pytest.approx(float(error[0] / value[0]), rel=1e-12)
     table = SurfaceTable(arrays["log_brdf"])
     # cubic Lagrange interpolation passes through the nodes, from either side (reciprocity)
-    assert table(beta[index], 0.0, alpha[index], dphi[index]) == pytest.approx(float(node.value), rel=1e-12)
-    assert table(alpha[index], 30.0, beta[index], 30.0 - dphi[index]) == pytest.approx(float(node.value), rel=1e-12)
+    assert table(beta[index], 0.0, alpha[index], dphi[index]) == pytest.approx(float(value[0]), rel=1e-12)
+    assert table(alpha[index], 30.0, beta[index], 30.0 - dphi[index]) == pytest.approx(float(value[0]), rel=1e-12)
 
 
 def test_table_values_below_the_horizon_nan_and_beyond_theta_max():
@@ -168,6 +185,17 @@ def test_tables_clear_removes_surface_tables_and_keeps_look_alikes(cache, capsys
     out = capsys.readouterr().out
     assert f"removed {surface.path}" in out and f"kept {look_alike}" in out
     assert not surface.path.exists() and look_alike.exists()
+
+
+def test_tables_info_says_which_tables_sample_nothing(cache, capsys, monkeypatch):
+    monkeypatch.setitem(EXACT_GRIDS, "pits", SMALL)
+    TabulatedSurface(parse_surface_spec("kind=pits,psi=60,coverage=0.5,rho=0.7")).load()
+    TabulatedSurface(parse_surface_spec("kind=vgrooves,sigma=10,rho=0.5,paths=100"), SMALL, workers=1).load()
+    assert main(["tables", "info"]) == 0
+    out = capsys.readouterr().out
+    assert "surface:kind=pits,psi=60,coverage=0.5,rho=0.7,paths=20000,seed=0,bounces=all\n" \
+           f"        {SMALL.y * SMALL.zeta * SMALL.t} nodes, every order exact, nothing sampled" in out
+    assert "180 nodes, Monte Carlo error per node median" in out
 
 
 def test_tables_build_renders_a_surface_once(cache, capsys, monkeypatch):

@@ -297,4 +297,17 @@ def series_model(coefficients: KvdCoefficients, name: str = "kvd-series", descri
         isotropic=True,
         linear_in=tuple(p.name for p in params),
         broadcasts_params=True,
+        compiled=_compiled_series(coefficients.modes),
     )
+
+
+def _compiled_series(modes: Sequence[Mode]):
+    """Loader of the compiled plain call of a series (numba loads on first use)."""
+    names = [coefficient_name(*mode) for mode in modes]
+
+    def load():
+        from .compiled import series_plain
+
+        return series_plain(modes, names)
+
+    return load

@@ -494,20 +494,26 @@ def oren_nayar_brdf(theta_i, phi_i, theta_r, phi_r, rho: float, sigma: float, ir
     return _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r)(rho, sigma, ir_weight)
 
 
+def _qualitative_coefficients(rho, sigma, variant: str = "eq36") -> tuple:
+    """The scalars a = rho/pi A and b = rho/pi B of  a + b shape  (eq 36; see below)."""
+    half = C1_SATURATION_FOOTNOTE11 if variant == "footnote11" else C1_SATURATION
+    sigma_sq = np.radians(sigma) ** 2
+    diffuse = np.divide(rho, math.pi)
+    return diffuse * _c1_rad(sigma_sq, half), diffuse * (C2_AMPLITUDE * _saturation(sigma_sq, C23_SATURATION))
+
+
 def _prepare_qualitative(theta_i, phi_i, theta_r, phi_r, variant: str = "eq36"):
     """Geometry-only term of eq 36 (angles [rad]); returns f(rho, sigma).
 
-    f = a + b shape with a = rho/pi A, b = rho/pi B and shape = max(0, cos dphi)
-    sin(alpha) tan(beta) >= 0, carried as its exact ``linear_form``.
+    f = a + b shape with a = rho/pi A, b = rho/pi B (:func:`_qualitative_coefficients`)
+    and shape = max(0, cos dphi) sin(alpha) tan(beta) >= 0, carried as its exact
+    ``linear_form``.
     """
-    half = C1_SATURATION_FOOTNOTE11 if variant == "footnote11" else C1_SATURATION
     shape = np.maximum(cos_from_half_tangent(phi_r - phi_i), 0.0) * sin_from_half_tangent(np.maximum(theta_i, theta_r))
     shape *= np.tan(np.minimum(theta_i, theta_r))
 
     def coefficients(rho, sigma) -> tuple:
-        sigma_sq = np.radians(sigma) ** 2
-        diffuse = np.divide(rho, math.pi)
-        return diffuse * _c1_rad(sigma_sq, half), diffuse * (C2_AMPLITUDE * _saturation(sigma_sq, C23_SATURATION))
+        return _qualitative_coefficients(rho, sigma, variant)
 
     def evaluate(rho: float, sigma: float) -> np.ndarray:
         a, b = coefficients(rho, sigma)
@@ -560,6 +566,20 @@ def oren_nayar_qualitative_brdf(
     return _prepare_qualitative(theta_i, phi_i, theta_r, phi_r, variant)(rho, sigma)
 
 
+def _compiled_oren_nayar():
+    """The compiled plain call of ``oren-nayar`` (numba loads here, on first use)."""
+    from .compiled import oren_nayar_plain
+
+    return oren_nayar_plain
+
+
+def _compiled_qualitative():
+    """The compiled plain call of ``oren-nayar-qualitative`` (numba loads here)."""
+    from .compiled import qualitative_plain
+
+    return qualitative_plain
+
+
 OREN_NAYAR = register(
     Model(
         name="oren-nayar",
@@ -569,6 +589,7 @@ OREN_NAYAR = register(
         prepare=_prepare_oren_nayar,
         energy_conserving=False,
         broadcasts_params=True,
+        compiled=_compiled_oren_nayar,
     )
 )
 
@@ -583,5 +604,6 @@ OREN_NAYAR_QUALITATIVE = register(
         energy_conserving=False,
         linear_in=("rho",),
         broadcasts_params=True,
+        compiled=_compiled_qualitative,
     )
 )
