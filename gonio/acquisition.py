@@ -36,6 +36,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from drivers.errors import DriverError
+
 from . import __version__
 from .data import RecordingError, RecordingWriter, point_key
 from .protocols import PlannedPoint, Protocol, load, plan
@@ -352,6 +354,13 @@ def characterise_camera(rig, point: PlannedPoint, protocol: Protocol) -> dict[st
     }
 
 
+#: What makes a linearity series fail without stopping the run (recorded as the series'
+#: ``error``; a resume measures it again): an instrument's error or timeout, and a series
+#: the fit refuses (too few levels, no signal, a singular design). Anything else is a
+#: fault of the program and stops the run like one.
+SERIES_FAILURES = (DriverError, OSError, ValueError)
+
+
 def characterise_linearity(rig, camera: Mapping[str, Any], protocol: Protocol,
                            monitor_offset: float = 0.0) -> dict[str, Any]:
     """The camera's linearity series at the photon transfer's geometry (EMVA 1288), or why it failed.
@@ -373,11 +382,16 @@ def characterise_linearity(rig, camera: Mapping[str, Any], protocol: Protocol,
         rig.measure(theta_i, phi_i, view, exposure=start, settle_time=protocol.rig.settle_time)
         result = acquire_linearity(rig, start, gain, lambda t: dark + max(rate, 0.0) * t,
                                    max_exposure=protocol.exposure.max_time, monitor_offset=monitor_offset)
-    except KeyboardInterrupt:
-        raise
-    except Exception as error:  # an instrument problem: the readings are then not corrected
+    except SERIES_FAILURES as error:  # the instrument, or a series the fit refuses: readings not corrected
         return {"error": f"linearity series failed ({type(error).__name__}: {error})"}
     return result.to_dict()
+
+
+def _series_missing(camera: Mapping[str, Any]) -> bool:
+    """Whether a recording's ``camera`` metadata lacks a linearity series, or holds only
+    one that failed (its ``error``): the series a run measures after its last point."""
+    series = camera.get("linearity")
+    return not isinstance(series, Mapping) or "error" in series
 
 
 class _Run:
@@ -391,6 +405,7 @@ class _Run:
         self.measured_since_dark: int | None = None
         self.consecutive_errors = 0
         self.on_reference = False
+        self.prepared = False
         self.start_wall = time.perf_counter()
         self.start_instrument = clock()
 
@@ -398,6 +413,7 @@ class _Run:
     def prepare(self, lamp_voltage: float, warm_up: bool, first: PlannedPoint | None) -> None:
         """Motion settings, monitor dark, lamp on and warm, camera characterisation."""
         rig, stored = self.rig, self.writer.stored_metadata
+        self.prepared = True
         limits = self.protocol.rig
         if limits.velocity is not None or limits.acceleration is not None:
             rig.set_motion(limits.velocity, limits.acceleration)
@@ -412,13 +428,17 @@ class _Run:
         if "camera" not in stored and first is not None and hasattr(rig, "roi_frame"):
             self.writer.update(camera=self._characterise(first))
 
-    def characterise_linearity(self) -> None:
+    def characterise_linearity(self, lamp_voltage: float, warm_up: bool) -> None:
         """The camera's linearity series once per recording, after the last point
         (:func:`characterise_linearity`): when the photon transfer succeeded and the
-        recording has no series yet."""
+        recording has no series yet, or only one that failed. A resumed session with no
+        point left to measure did not :meth:`prepare` the rig: the lamp is switched on
+        (and warmed) first."""
         camera = self.writer.stored_metadata.get("camera", {})
-        if "system_gain_dn_per_e" not in camera or "linearity" in camera:
+        if "system_gain_dn_per_e" not in camera or not _series_missing(camera):
             return
+        if not self.prepared:
+            self.prepare(lamp_voltage, warm_up, None)
         offset = self.writer.stored_metadata.get("monitor_dark", {}).get("offset_v", 0.0)
         self.writer.update(camera={**camera, "linearity": characterise_linearity(self.rig, camera, self.protocol,
                                                                                  offset)})
@@ -617,7 +637,7 @@ def run_protocol(
             run.do(count, len(todo), job)
         if run.on_reference:
             change_sample("sample")
-        run.characterise_linearity()
+        run.characterise_linearity(lamp_voltage, warm_up)
     except KeyboardInterrupt:
         run.finish("interrupted")
         raise

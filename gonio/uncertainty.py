@@ -120,13 +120,25 @@ class LinearityCorrection:
 
     @classmethod
     def from_metadata(cls, camera: Mapping) -> "LinearityCorrection | None":
-        """From ``metadata["camera"]["linearity"]``; None when missing or failed."""
+        """From ``metadata["camera"]["linearity"]``; None when the series is missing or
+        failed (its ``error``).
+
+        Raises
+        ------
+        ValueError
+            A series record that cannot be read, naming what is wrong with it.
+        """
         from drivers.linearity import LinearityResult
 
-        try:
-            result = LinearityResult.from_dict(camera["linearity"])
-        except (KeyError, TypeError, ValueError):
+        series = camera.get("linearity")
+        if series is None or (isinstance(series, Mapping) and "error" in series):
             return None
+        try:
+            result = LinearityResult.from_dict(series)
+        except (KeyError, TypeError, ValueError) as error:
+            reason = f"no {error}" if isinstance(error, KeyError) else str(error)
+            raise ValueError(f"metadata camera.linearity cannot be read ({type(error).__name__}: {reason}); "
+                             "expected the record drivers.linearity.LinearityResult.to_dict writes") from None
         return cls(result.coefficients, result.covariance, result.signal_range)
 
     def factor(self, signal: np.ndarray) -> np.ndarray:

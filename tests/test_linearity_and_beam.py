@@ -123,6 +123,73 @@ def test_a_recording_without_a_series_says_it_is_not_corrected(recordings, tmp_p
     assert any("not corrected for the camera's non-linearity" in w for w in reduced.warnings)
 
 
+def test_a_series_record_that_cannot_be_read_is_reported_as_such(recordings, tmp_path):
+    broken = shutil.copytree(recordings["ideal"], tmp_path / "broken")
+    meta = json.loads((broken / "metadata.json").read_text())
+    del meta["camera"]["linearity"]["covariance"]
+    (broken / "metadata.json").write_text(json.dumps(meta))
+    reduced = acquisition.reduce_recording(broken)
+    assert reduced.linearity_jacobian is None
+    assert any("camera.linearity cannot be read (KeyError: no 'covariance')" in w for w in reduced.warnings)
+    assert not any("has no linearity series" in w for w in reduced.warnings)
+
+
+SHORT = """
+[protocol]
+name = "short"
+[sample]
+label = "plaster"
+[[block]]
+theta_i = 30
+phi_i = 0
+view = [-10, 20]
+"""
+
+
+@pytest.mark.parametrize("stored", [None, {"error": "linearity series failed (LampError: lamp current is 0 A)"}])
+def test_a_resume_with_no_point_left_measures_a_missing_or_failed_series(tmp_path, stored):
+    """The series comes after the last point: a run interrupted during it, resumed, has no
+    point left and did not switch the lamp on for one; the resume measures the series (a
+    failed one again), and the readings are corrected."""
+    folder = record(tmp_path / "short", SHORT, SAMPLE, 4)
+    meta = json.loads((folder / "metadata.json").read_text())
+    measured = meta["camera"].pop("linearity")
+    if stored is not None:
+        meta["camera"]["linearity"] = stored
+    (folder / "metadata.json").write_text(json.dumps(meta))
+    record(folder, SHORT, SAMPLE, 4, resume=True)
+    series = json.loads((folder / "metadata.json").read_text())["camera"]["linearity"]
+    assert "error" not in series, series
+    # the same seed, the emulator's lamp started again: a series of the same camera, its
+    # coefficients within 4 of their standard errors of the first run's
+    difference = np.subtract(series["coefficients"], measured["coefficients"])
+    assert np.all(np.abs(difference) < 4 * np.sqrt(np.diag(measured["covariance"])))
+    assert acquisition.reduce_recording(folder).linearity_jacobian is not None
+
+
+class _FailingRig:
+    """A rig whose first exposure raises ``error``."""
+
+    def __init__(self, error: Exception):
+        self.error = error
+
+    def measure(self, *args, **kwargs):
+        raise self.error
+
+
+def test_a_series_records_an_instrument_failure_and_raises_a_fault_of_the_program():
+    from drivers.errors import CameraError
+    from gonio.protocols import loads
+
+    camera = {"geometry": [30.0, 0.0, 10.0], "system_gain_dn_per_e": 0.1, "dark_variance_dn2": 1.0,
+              "dark_variance_rate_dn2_per_s": 0.0, "exposures_s": [0.01]}
+    protocol = loads(SHORT, source="short.toml")
+    failed = acquisition.characterise_linearity(_FailingRig(CameraError(-300, "camera fault")), camera, protocol)
+    assert failed == {"error": "linearity series failed (CameraError: camera error -300: camera fault)"}
+    with pytest.raises(TypeError, match="a bug"):
+        acquisition.characterise_linearity(_FailingRig(TypeError("a bug")), camera, protocol)
+
+
 # ----------------------------------------------------------------------- beam profile
 def test_calibration_per_incidence_removes_the_beams_bias_at_the_ideal_error(recordings):
     beam = acquisition.reduce_recording(recordings["beam"])

@@ -258,13 +258,18 @@ def correct_linearity(meta: Mapping[str, Any], points, rate: np.ndarray, budget:
     Readings above the series' top are corrected by extrapolation and counted in a warning.
     """
     camera = meta.get("camera", {})
-    correction = LinearityCorrection.from_metadata(camera) if apply else None
+    series = camera.get("linearity")
+    reason = series.get("error") if isinstance(series, Mapping) else None  # why a series failed
+    try:
+        correction = LinearityCorrection.from_metadata(camera) if apply else None
+    except ValueError as error:  # a record that cannot be read: said as such, not as a missing one
+        correction, reason = None, str(error)
     if correction is None:
         if not apply:
             warnings.append("the camera's linearity correction was left out on request")
-        elif camera and "system_gain_dn_per_e" in camera:
-            reason = camera.get("linearity", {}).get("error", "the recording has no linearity series")
-            warnings.append(f"readings not corrected for the camera's non-linearity: {reason}")
+        elif reason is not None or (camera and "system_gain_dn_per_e" in camera):
+            warnings.append("readings not corrected for the camera's non-linearity: "
+                            f"{reason or 'the recording has no linearity series'}")
         return rate, budget, None, None
     signal = np.asarray(points["roi_mean"], float) - np.asarray(points["dark_mean"], float)
     factor = correction.factor(signal)
