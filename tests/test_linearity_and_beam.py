@@ -255,9 +255,39 @@ def test_joined_recordings_merge_their_readings_per_incidence(recordings):
     assert np.linalg.eigvalsh(dataset.covariance).min() > 0
 
 
+def test_a_joined_part_without_a_reference_is_calibrated_by_the_others_readings(recordings, tmp_path):
+    """A recording without a standard, joined with one that read it at the part's lamp
+    angle: its values are calibrated by those readings, as the value's planned angle says."""
+    short = acquisition.reduce_recording(record(tmp_path / "short", SHORT, SAMPLE, 4))
+    assert short.reference_irradiance is None
+    joined = acquisition.combine_reduced([acquisition.reduce_recording(recordings["ideal"]), short])
+    n = len(short.radiance)
+    assert [joined.incidences[g].theta_i for g in joined.incidence[-n:]] == [30.0] * n
+    dataset, _ = joined.fit_inputs("per-incidence")
+    assert dataset.metadata["incidence_theta_i"][-n:] == [30.0] * n
+    assert np.linalg.eigvalsh(dataset.covariance).min() > 0
+
+
+def test_the_fit_matches_values_to_readings_by_the_planned_angle(recordings):
+    """A stage whose readback tolerance is wider than a few hundredths of a degree records
+    values further from the plan: the fit still calibrates each by the readings the
+    reduction divided it by, and a subset keeps its values' angles."""
+    from gonio.fitting import Dataset
+
+    dataset, _ = acquisition.reduce_recording(recordings["beam"]).fit_inputs("per-incidence")
+    weights = incidence_weights(dataset.metadata)
+    moved = Dataset(dataset.theta_i + 0.2, dataset.phi_i, dataset.theta_r, dataset.phi_r, dataset.value,
+                    dataset.sigma, quantity=dataset.quantity, metadata=dataset.metadata, covariance=dataset.covariance)
+    rig = FitProblem("oren-nayar", moved, FIXED, alignment="theta_i_offset")._rig
+    np.testing.assert_array_equal(rig.value_weights, weights)
+    last = dataset.subset(np.arange(dataset.n)[-3:])
+    assert last.metadata["incidence_theta_i"] == dataset.metadata["incidence_theta_i"][-3:]
+    np.testing.assert_array_equal(incidence_weights(last.metadata), weights[-3:])
+
+
 def test_the_rigs_prediction_calibrates_each_value_by_its_incidence(recordings):
     dataset, _ = acquisition.reduce_recording(recordings["beam"]).fit_inputs("per-incidence")
-    weights = incidence_weights(dataset.theta_i, dataset.metadata)
+    weights = incidence_weights(dataset.metadata)
     assert weights.shape == (dataset.n, 3) and np.allclose(weights.sum(axis=1), 1.0)
     problem = FitProblem("oren-nayar", dataset, FIXED, alignment="theta_i_offset")
     rig = problem._rig

@@ -67,7 +67,7 @@ from gonio.models import Model, Param
 from .priors import Normal
 
 __all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG", "STRAY_LIGHT",
-           "RIG_ERROR_NAMES", "COMPILED_MODELS", "INCIDENCE_TOLERANCE_DEG", "parse_alignment", "alignment_prior",
+           "RIG_ERROR_NAMES", "COMPILED_MODELS", "parse_alignment", "alignment_prior",
            "reference_calibration", "incidence_weights", "RigPrediction", "is_identity"]
 
 #: Range of every alignment parameter [deg]: beyond it the rig is not misaligned but mis-built.
@@ -167,19 +167,14 @@ def reference_calibration(metadata: Mapping[str, Any]) -> tuple[np.ndarray, np.n
     return geometry, weights / weights.sum(), reflectance
 
 
-#: Largest difference between a value's recorded lamp polar angle and the planned angle of
-#: the reference readings that calibrate it [deg]: five times the stage's readback
-#: tolerance (0.01 deg, drivers.rig.Rig).
-INCIDENCE_TOLERANCE_DEG = 0.05
-
-
-def incidence_weights(theta_i: np.ndarray, metadata: Mapping[str, Any]) -> np.ndarray:
+def incidence_weights(metadata: Mapping[str, Any]) -> np.ndarray:
     """Each value's weights of the reference readings under a calibration per incidence.
 
     ``metadata["reference_standard"]`` holds, per reading, its planned lamp polar angle
-    (``incidence``) and its weight in that angle's irradiance (``incidence_weights``,
-    written by :mod:`gonio.reduction`); a value takes the readings whose angle is within
-    :data:`INCIDENCE_TOLERANCE_DEG` of its recorded ``theta_i`` [deg].
+    (``incidence``) and its weight in that angle's irradiance (``incidence_weights``);
+    ``metadata["incidence_theta_i"]`` holds, per value, the planned angle of the readings
+    that calibrated it (both written by :mod:`gonio.reduction`): a value takes the readings
+    planned at its angle, as the reduction divided it by them.
 
     Returns
     -------
@@ -189,32 +184,33 @@ def incidence_weights(theta_i: np.ndarray, metadata: Mapping[str, Any]) -> np.nd
     Raises
     ------
     ValueError
-        A record without the per-reading angles and weights, or a value whose polar angle
-        no reading shares (naming it).
+        A record without the per-reading angles and weights or the per-value angles, or a
+        value whose angle no reading shares (naming it).
 
     Examples
     --------
     >>> record = {"geometry": [[30, 0, 10, 180], [60, 0, 10, 180], [60, 0, 10, 180]], "weights": [1, 1, 1],
     ...           "reflectance": [0.99] * 3, "incidence": [30, 60, 60], "incidence_weights": [1, 0.4, 0.6]}
-    >>> incidence_weights(np.array([60.002, 29.999]), {"reference_standard": record}).tolist()
+    >>> incidence_weights({"reference_standard": record, "incidence_theta_i": [60.0, 30.0]}).tolist()
     [[0.0, 0.4, 0.6], [1.0, 0.0, 0.0]]
     """
     record = metadata.get("reference_standard")
     if isinstance(record, str):
         record = json.loads(record)
     try:
-        angle = np.asarray(record["incidence"], float).reshape(-1)
+        angle = np.round(np.asarray(record["incidence"], float).reshape(-1), 6)
         within = np.asarray(record["incidence_weights"], float).reshape(-1)
+        theta = np.round(np.asarray(metadata["incidence_theta_i"], float).reshape(-1), 6)
     except (TypeError, KeyError, ValueError):
-        raise ValueError("dataset metadata reference_standard: a calibration per incidence needs each reading's "
-                         "'incidence' (planned theta_i [deg]) and 'incidence_weights'") from None
-    theta = np.asarray(theta_i, float).reshape(-1)
-    nearest = angle[np.argmin(np.abs(theta[:, None] - angle[None, :]), axis=1)]
-    far = np.abs(nearest - theta) > INCIDENCE_TOLERANCE_DEG
-    if far.any():
-        raise ValueError(f"calibration per incidence: no reference reading at theta_i = {theta[far][0]:g} deg "
+        raise ValueError("dataset metadata: a calibration per incidence needs reference_standard's 'incidence' "
+                         "(planned theta_i of each reading [deg]) and 'incidence_weights', and each value's "
+                         "'incidence_theta_i' (written by gonio.reduction)") from None
+    matched = theta[:, None] == angle[None, :]
+    unmatched = ~matched.any(axis=1)
+    if unmatched.any():
+        raise ValueError(f"calibration per incidence: no reference reading at theta_i = {theta[unmatched][0]:g} deg "
                          f"(the readings are at {sorted(set(angle.tolist()))} deg)")
-    return np.where(nearest[:, None] == angle[None, :], within[None, :], 0.0)
+    return np.where(matched, within[None, :], 0.0)
 
 
 class RigPrediction:
@@ -271,7 +267,10 @@ class RigPrediction:
         #: weights of the reference readings, (N, K): those of its lamp polar angle.
         self.value_weights = None
         if self.reference is not None and metadata.get("calibration") == "per-incidence":
-            self.value_weights = incidence_weights(self.geometry[0], metadata)
+            self.value_weights = incidence_weights(metadata)
+            if self.value_weights.shape[0] != self.geometry[0].size:
+                raise ValueError(f"dataset metadata incidence_theta_i: {self.value_weights.shape[0]} angles for "
+                                 f"{self.geometry[0].size} values; expected one per value")
 
     @staticmethod
     def _signal(lambert: Model, geometry) -> np.ndarray:

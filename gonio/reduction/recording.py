@@ -203,7 +203,7 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
         repeats=np.array(counts, int), reference_irradiance=reference.irradiance if reference else None,
         reference_irradiance_sigma=reference.sigma if reference else None, label=label,
         metadata={"recording": str(folder), "protocol": meta.get("protocol", {}).get("name"),
-                  "planned_view": [k[2] for k in keys],
+                  "planned_view": [k[2] for k in keys], "planned_theta_i": [float(k[0]) for k in keys],
                   **({"aperture_sr": [float(a) for a in aperture]} if aperture else {}),
                   **({"reference_standard": reference.record} if reference else {})},
         budget=budget, calibration=reference.calibration if reference else {}, flags=flags, excluded=excluded,
@@ -212,7 +212,7 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
         linearity_covariance=None if jacobian is None else rows.linearity.covariance_matrix,
         reference_linearity=reference.linearity if reference else None,
         incidences=reference.incidences if reference else (),
-        incidence=_incidence_of(keys, reference.incidences if reference else ()),
+        incidence=_incidence_of([k[0] for k in keys], reference.incidences if reference else ()),
     )
 
 
@@ -224,11 +224,11 @@ def _linearity_component(values: np.ndarray, jacobian: np.ndarray, covariance: n
     return np.abs(values) * np.sqrt(np.einsum("ni,ij,nj->n", d, covariance, d))
 
 
-def _incidence_of(keys: list[tuple], incidences: tuple[IncidenceCalibration, ...]) -> np.ndarray:
-    """For each value (planned geometry ``keys``), its entry in ``incidences``: the reference
-    readings planned at the same lamp polar angle (-1 when there are none)."""
-    where = {round(c.theta_i, 6): k for k, c in enumerate(incidences)}
-    return np.array([where.get(round(float(key[0]), 6), -1) for key in keys], int)
+def _incidence_of(planned_theta_i, incidences: tuple[IncidenceCalibration, ...]) -> np.ndarray:
+    """For each value (its planned lamp polar angle [deg]), its entry in ``incidences``: the
+    reference readings planned at the same angle (-1 when there are none)."""
+    where = {round(float(c.theta_i), 6): k for k, c in enumerate(incidences)}
+    return np.array([where.get(round(float(t), 6), -1) for t in planned_theta_i], int)
 
 
 def _excluded(points) -> dict[str, int]:
@@ -281,7 +281,8 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
             calibration[key] = max(p.calibration.get(key, 0.0) for p in refs)
         sigma = irradiance * math.sqrt(sum(v**2 for v in calibration.values()))
     linearity = _joint_linearity(parts, refs, weights)
-    incidences, incidence = _joint_incidences(parts, refs, weights, linearity[3])
+    incidences = _joint_incidences(refs, weights, linearity[3])
+    planned_theta_i = [float(t) for p in parts for t in p.metadata.get("planned_theta_i", p.theta_i)]
     if refs:
         reference_record = _combined_reference_record(refs, weights, incidences)
     consistency = {f"{k} ({p.metadata.get('protocol')})": v for p in parts for k, v in p.consistency.items()}
@@ -292,6 +293,7 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
         label=label or parts[0].label,
         metadata={"recordings": [p.metadata.get("recording") for p in parts],
                   "planned_view": [v for p in parts for v in p.metadata.get("planned_view", list(p.view))],
+                  "planned_theta_i": planned_theta_i,
                   **({"aperture_sr": parts[0].metadata["aperture_sr"]} if "aperture_sr" in parts[0].metadata else {}),
                   **({"reference_standard": reference_record} if reference_record else {})},
         budget=budget, calibration=calibration,
@@ -301,7 +303,7 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
         unit=parts[0].unit,
         window=None if any(p.window is None for p in parts) else np.concatenate([p.window for p in parts]),
         linearity_jacobian=linearity[0], linearity_covariance=linearity[1], reference_linearity=linearity[2],
-        incidences=incidences, incidence=incidence,
+        incidences=incidences, incidence=_incidence_of(planned_theta_i, incidences),
     )
 
 
@@ -332,10 +334,9 @@ def _joint_linearity(parts: "list[Reduced]", refs: "list[Reduced]", weights: np.
     return jacobian, covariance, reference if refs else None, pad
 
 
-def _joint_incidences(parts: "list[Reduced]", refs: "list[Reduced]", weights: np.ndarray, pad):
+def _joint_incidences(refs: "list[Reduced]", weights: np.ndarray, pad) -> tuple[IncidenceCalibration, ...]:
     """The irradiance at each lamp polar angle from the joined recordings' reference readings
-    (an angle read in several recordings: their inverse-variance mean), and each value's
-    entry in them."""
+    (an angle read in several recordings: their inverse-variance mean)."""
     offsets = np.concatenate([[0], np.cumsum([len(p.metadata.get("reference_standard", {}).get("weights", []))
                                               for p in refs])]).astype(int)
     angles = sorted({c.theta_i for p in refs for c in p.incidences})
@@ -352,11 +353,7 @@ def _joint_incidences(parts: "list[Reduced]", refs: "list[Reduced]", weights: np
             float(sum(weights[k] * c.weight for k, _, c in here)),
             tuple(int(offsets[k] + r) for k, _, c in here for r in c.readings),
             tuple(float(s * w) for s, (_, _, c) in zip(share, here) for w in c.reading_weights), linear))
-    where = {c.theta_i: k for k, c in enumerate(merged)}
-    incidence = np.concatenate([
-        np.array([where[p.incidences[g].theta_i] if g >= 0 else -1 for g in p.incidence], int)
-        if p.incidence is not None else np.full(len(p.radiance), -1) for p in parts])
-    return tuple(merged), incidence
+    return tuple(merged)
 
 
 def _combined_reference_record(refs: "list[Reduced]", weights: np.ndarray,

@@ -318,10 +318,15 @@ class Reduced:
         json_path = write_atomic(folder / "budget.json", json.dumps(summary, indent=2, default=float) + "\n")
         return csv_path, json_path
 
-    def _dataset_metadata(self, calibration: str = "common") -> dict[str, Any]:
-        out = {k: v for k, v in self.metadata.items() if k != "planned_view"}
+    def _dataset_metadata(self, calibration: str = "common", group: np.ndarray | None = None) -> dict[str, Any]:
+        """The metadata a dataset carries; calibrated per incidence, with each value's
+        ``incidence_theta_i``: the planned lamp polar angle [deg] of the reference readings
+        that calibrate it (``group``, its entries in :attr:`incidences`), which a fit of the
+        rig's errors calibrates it by (:func:`gonio.fitting.rig_errors.incidence_weights`)."""
+        out = {k: v for k, v in self.metadata.items() if k not in ("planned_view", "planned_theta_i")}
         if calibration != "common":
             out["calibration"] = calibration
+            out["incidence_theta_i"] = [float(self.incidences[g].theta_i) for g in group]
         out["uncertainty_budget"] = {k: v["median_relative"] for k, v in self.budget_summary()["components"].items()}
         if self.calibration:
             out["calibration_budget"] = dict(self.calibration)
@@ -361,7 +366,7 @@ class Reduced:
             value = self.radiance * factor
             covariance = covariance * np.outer(factor, factor)
             covariance += np.outer(value, value) * self._incidence_deviations()[np.ix_(group, group)]
-            metadata = self._dataset_metadata(calibration)
+            metadata = self._dataset_metadata(calibration, group)
         return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
                        quantity="radiance", label=self.label, metadata=metadata, covariance=covariance)
 
@@ -433,7 +438,7 @@ class Reduced:
             shared = np.where(np.equal.outer(group, group), u2[group][:, None], 0.0) + common
             covariance = covariance / np.outer(scale, scale) + np.outer(value, value) * shared
             return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
-                           quantity="brdf", label=self.label, metadata=self._dataset_metadata(calibration),
+                           quantity="brdf", label=self.label, metadata=self._dataset_metadata(calibration, group),
                            covariance=covariance)
         scale = self.reference_irradiance * cos_i
         value = self.radiance / scale
