@@ -26,14 +26,20 @@ Decisions (tested in tests/drivers/test_driver_linearity.py):
   the exposure is raised by factors of 1.15 until a pixel of the window saturates, and
   ``levels`` exposures from 5 % to 100 % of the last unsaturated one are measured, each
   ``frames`` times going up and again coming down (a linear lamp drift cancels in each
-  level's mean), each level's dark level from a dark frame at its exposure.  The PTC alone
-  does not do: it stops at the automatic exposure (45-50 % of full scale), while readings
-  go to 75 % and HDR brackets to saturation.
+  level's mean), each level's dark level from a dark frame at its exposure.  A frame with
+  a saturated pixel in the window (a lamp drifting up since the top was found) is not
+  kept: the series is measured again from a top one step lower, up to
+  :data:`MAX_TOP_BACK_OFFS` times, then refused.  The PTC alone does not do: it stops at
+  the automatic exposure (45-50 % of full scale), while readings go to 75 % and HDR
+  brackets to saturation.  Unlike EMVA 1288's 5-95 % of saturation, the series goes to
+  100 % of the longest unsaturated exposure: readings and HDR brackets reach it.
 - **The noise of each frame** is its shot and read noise from the PTC's system gain and
   dark variance (``(K S + sigma_d^2) / (N S^2)`` relative, ``N`` pixels), plus a lamp
   term ``q / t`` (flicker left by the monitor, or all of it without one, white: averaging
   down with the exposure) whose ``q`` is the pooled excess scatter of the frames within
-  the levels (Type A); each level's mean adds its dark frame's noise.  The covariance of
+  runs of consecutive frames at one level (Type A: each pass's frames apart, so that a
+  lamp drift between the up and down passes, which cancels in the level's mean, does not
+  enter it); each level's mean adds its dark frame's noise.  The covariance of
   (c1, c2) is that of the weighted least squares, not rescaled; its chi-square is recorded.
 - **The correction acts on the digital signal**: it is applied to readings at any gain
   and exposure by their signal in DN (a non-linearity of the ADC, as emulated); a rig
@@ -59,6 +65,9 @@ __all__ = ["LinearityResult", "correction_factor", "correction_jacobian", "fit_l
 LOWEST_LEVEL = 0.05
 #: Factor by which the exposure is raised while looking for the top of the series.
 TOP_SEARCH_STEP = 1.15
+#: Times a series with a saturated frame is measured again from a top one
+#: :data:`TOP_SEARCH_STEP` lower before it is refused.
+MAX_TOP_BACK_OFFS = 3
 
 
 @dataclass(frozen=True)
@@ -90,6 +99,11 @@ class LinearityResult:
         Frames per level.
     gain : float
         Analog gain factor of the series [-].
+    series : mapping or None
+        Every frame as measured, the arguments of :func:`fit_linearity` (``exposure`` [s],
+        ``signal`` [DN], ``lamp``, ``level``, ``dark_variance`` [DN^2] per frame, in the
+        order measured; ``pixels``, ``system_gain`` [DN/e-], ``gain``): ``fit_linearity(
+        **series)`` fits it again (:meth:`refit`).
     """
 
     coefficients: np.ndarray
@@ -106,6 +120,13 @@ class LinearityResult:
     lamp_variance: float
     frames: int
     gain: float = 1.0
+    series: Mapping[str, Any] | None = None
+
+    def refit(self) -> "LinearityResult":
+        """The series fitted again from its frames (:attr:`series`)."""
+        if self.series is None:
+            raise ValueError("this linearity record keeps no frames to fit again")
+        return fit_linearity(**self.series)
 
     def consistency_with_none(self) -> float:
         """``c^T C^-1 c``: chi-square (2 dof) of the coefficients against a linear camera."""
@@ -121,7 +142,8 @@ class LinearityResult:
                 "linearity_error": self.linearity_error, "exposures_s": [float(t) for t in self.exposures],
                 "signal_dn": [float(s) for s in self.signal], "ratio": [float(r) for r in self.ratio],
                 "ratio_sigma": [float(u) for u in self.ratio_sigma], "lamp_variance_s": self.lamp_variance,
-                "frames": self.frames, "gain_factor": self.gain}
+                "frames": self.frames, "gain_factor": self.gain,
+                **({"series": _plain(self.series)} if self.series is not None else {})}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "LinearityResult":
@@ -131,7 +153,12 @@ class LinearityResult:
                    float(data["linearity_error"]), np.asarray(data["exposures_s"], float),
                    np.asarray(data["signal_dn"], float), np.asarray(data["ratio"], float),
                    np.asarray(data["ratio_sigma"], float), float(data["lamp_variance_s"]), int(data["frames"]),
-                   float(data.get("gain_factor", 1.0)))
+                   float(data.get("gain_factor", 1.0)), data.get("series"))
+
+
+def _plain(series: Mapping[str, Any]) -> dict[str, Any]:
+    """The frames' record in plain numbers (lists) for JSON."""
+    return {k: (np.asarray(v).tolist() if np.ndim(v) else v) for k, v in series.items()}
 
 
 def _powers(signal: np.ndarray, signal_range: float) -> np.ndarray:
@@ -206,19 +233,19 @@ def linearity_error(irradiation: np.ndarray, signal: np.ndarray, saturation: flo
 
 
 def _lamp_variance(ratio: np.ndarray, shot: np.ndarray, exposure: np.ndarray, level: np.ndarray) -> float:
-    """``q`` [s]: the relative scatter of ``S / (t M)`` within the levels beyond the shot and
-    read noise ``shot`` (relative variance per frame), times the exposure, pooled over the
-    levels by their degrees of freedom (Type A); 0 when there is no excess."""
+    """``q`` [s]: the relative scatter of ``S / (t M)`` beyond the shot and read noise
+    ``shot`` (relative variance per frame) within each run of consecutive frames at one
+    level (frames in the order measured: a lamp drift between runs stays out), times the
+    exposure, pooled over the runs by their degrees of freedom (Type A); 0 when there is
+    no excess."""
     weighted, dof = 0.0, 0
-    for l in np.unique(level):
-        frames = level == l
-        n = int(frames.sum())
-        if n < 2:
+    for run in np.split(np.arange(level.size), np.flatnonzero(np.diff(level)) + 1):
+        if run.size < 2:
             continue
-        r = ratio[frames]
-        excess = float(np.var(r / r.mean(), ddof=1) - shot[frames].mean())
-        weighted += (n - 1) * excess * float(exposure[frames].mean())
-        dof += n - 1
+        r = ratio[run]
+        excess = float(np.var(r / r.mean(), ddof=1) - shot[run].mean())
+        weighted += (run.size - 1) * excess * float(exposure[run].mean())
+        dof += run.size - 1
     return max(weighted / dof, 0.0) if dof else 0.0
 
 
@@ -236,7 +263,8 @@ def fit_linearity(exposure: Sequence[float], signal: Sequence[float], lamp: Sequ
     lamp : sequence of float
         Lamp reading during every frame (monitor minus its dark offset), 1 without a monitor.
     level : sequence of int
-        Level of every frame (frames of one level share their exposure and dark frame).
+        Level of every frame (frames of one level share their exposure and dark frame),
+        in the order measured.
     pixels : int
         Pixels of the window.
     system_gain : float
@@ -299,7 +327,9 @@ def fit_linearity(exposure: Sequence[float], signal: Sequence[float], lamp: Sequ
                            response=float(solution[0]), chi2=float(residual @ residual), dof=int(levels.size - 3),
                            linearity_error=linearity_error(irradiation, mean_signal, signal_range),
                            exposures=mean_t, signal=mean_signal, ratio=mean_ratio, ratio_sigma=relative,
-                           lamp_variance=q, frames=int(np.max(np.bincount(lv))), gain=float(gain))
+                           lamp_variance=q, frames=int(np.max(np.bincount(lv))), gain=float(gain),
+                           series={"exposure": t, "signal": s, "lamp": m, "level": lv, "pixels": int(pixels),
+                                   "system_gain": float(system_gain), "dark_variance": dark, "gain": float(gain)})
 
 
 def _top_exposure(rig, start: float, max_exposure: float) -> float:
@@ -312,6 +342,20 @@ def _top_exposure(rig, start: float, max_exposure: float) -> float:
         top = exposure
         exposure = round(exposure * TOP_SEARCH_STEP, 9)
     return top
+
+
+def _series_frames(rig, exposures: np.ndarray, frames: int, monitor_offset: float) -> list[tuple] | None:
+    """The series' frames going up and coming down (exposure, signal, lamp, level, pixels,
+    gain), or None at the first frame with a saturated pixel in the window."""
+    rows = []
+    for k in list(range(exposures.size)) + list(range(exposures.size - 1, -1, -1)):
+        for _ in range(frames):
+            m = rig.measure(exposure=float(exposures[k]), dark="auto")
+            if m.roi_saturated > 0:
+                return None
+            lamp = m.monitor - monitor_offset if math.isfinite(m.monitor) else 1.0
+            rows.append((float(exposures[k]), m.signal, lamp, k, m.roi_pixels, m.gain))
+    return rows
 
 
 def acquire_linearity(rig, start_exposure: float, system_gain: float, dark_variance, *, levels: int = 8,
@@ -338,16 +382,23 @@ def acquire_linearity(rig, start_exposure: float, system_gain: float, dark_varia
     Returns
     -------
     LinearityResult
+
+    Raises
+    ------
+    ValueError
+        A frame saturated at every top tried (:data:`MAX_TOP_BACK_OFFS` steps down), or a
+        series :func:`fit_linearity` refuses.
     """
     top = _top_exposure(rig, start_exposure, max_exposure)
-    exposures = series_exposures(top, levels)
-    order = list(range(levels)) + list(range(levels - 1, -1, -1))
-    rows = []
-    for k in order:
-        for _ in range(frames):
-            m = rig.measure(exposure=float(exposures[k]), dark="auto")
-            lamp = m.monitor - monitor_offset if math.isfinite(m.monitor) else 1.0
-            rows.append((float(exposures[k]), m.signal, lamp, k, m.roi_pixels, m.gain))
+    for _ in range(MAX_TOP_BACK_OFFS + 1):
+        rows = _series_frames(rig, series_exposures(top, levels), frames, monitor_offset)
+        if rows is not None:
+            break
+        top = round(top / TOP_SEARCH_STEP, 9)
+    else:
+        raise ValueError(f"a frame of the linearity series saturated at every top exposure from "
+                         f"{top * TOP_SEARCH_STEP ** (MAX_TOP_BACK_OFFS + 1):.4g} s down to "
+                         f"{top * TOP_SEARCH_STEP:.4g} s: a lamp that is not steady")
     t, s, lamp, level, pixels, gain = (np.array(c) for c in zip(*rows))
     return fit_linearity(t, s, lamp, level.astype(int), int(pixels[0]), system_gain,
                          np.array([dark_variance(x) for x in t]), gain=float(gain[0]))

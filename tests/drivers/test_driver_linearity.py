@@ -7,6 +7,8 @@ non-linearity (drivers.emulator.systematics.nonlinear_signal).
 """
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from scipy.optimize import brentq
@@ -144,3 +146,66 @@ def test_series_through_the_rig_on_the_emulated_camera(nonlinearity):
         assert result.consistency_with_none() > 100.0
     else:
         assert result.consistency_with_none() < 13.8  # chi-square, 2 dof, 99.9 %
+
+
+class _DriftingLamp:
+    """A rig whose lamp jumps by ``jump`` once the top of the series was found: a window of
+    PIXELS pixels saturating at 3000 DN, 1.5e5 DN/s at the lamp's first level."""
+
+    def __init__(self, jump: float):
+        self.jump, self.calls, self.exposures = jump, 0, []
+
+    def measure(self, exposure: float, dark: str = "auto"):
+        from types import SimpleNamespace
+
+        self.calls += 1
+        lamp = 1.0 if self.calls <= 6 else self.jump  # the top search takes 6 frames from 10 ms
+        signal = 1.5e5 * exposure * lamp
+        self.exposures.append(exposure)
+        return SimpleNamespace(roi_saturated=int(signal > 3000.0), signal=signal, monitor=float("nan"),
+                               roi_pixels=PIXELS, gain=1.0)
+
+
+def test_a_series_with_a_saturated_frame_is_measured_again_from_a_lower_top():
+    rig = _DriftingLamp(1.15)  # the top found, 2624 DN, now reads 3017 DN: saturated
+    result = acquire_linearity(rig, 0.01, K, lambda t: DARK_VAR)
+    top = 0.01 * 1.15**4
+    assert max(rig.exposures[6:]) == pytest.approx(top)  # the first series reached the top found
+    assert result.exposures.max() == pytest.approx(top / 1.15, rel=1e-6)
+    assert result.signal_range < 3000.0 and np.all(np.asarray(result.series["signal"]) <= 3000.0)
+    with pytest.raises(ValueError, match="saturated at every top exposure"):
+        acquire_linearity(_DriftingLamp(2.0), 0.01, K, lambda t: DARK_VAR)  # 3 steps down still saturate
+
+
+def test_the_record_keeps_every_frame_and_fits_again_from_them():
+    rng = np.random.default_rng(5)
+    result = _fit(*_series(rng, lambda s: nonlinear_signal(s, 0.005, FULL_SCALE), lamp_rms=2e-4))
+    back = LinearityResult.from_dict(json.loads(json.dumps(result.to_dict())))
+    assert len(back.series["signal"]) == LEVELS * FRAMES
+    again = back.refit()
+    np.testing.assert_array_equal(again.coefficients, result.coefficients)
+    np.testing.assert_array_equal(again.covariance, result.covariance)
+
+
+def test_a_lamp_drift_between_the_passes_does_not_inflate_the_lamp_term():
+    """A lamp drifting linearly by 0.1 % over the series (up, then down: it cancels in each
+    level's mean) leaves the lamp term as without drift: the scatter is taken within each
+    pass's frames of a level, not across the passes."""
+    exposures = series_exposures(0.03, LEVELS)
+    order = np.repeat(np.r_[np.arange(LEVELS), np.arange(LEVELS)[::-1]], 2)
+
+    def series(drift: float):
+        rng = np.random.default_rng(11)
+        t = exposures[order]
+        lamp = (1.0 + drift * np.linspace(0.0, 1.0, t.size)) * (1.0 + 2e-4 * np.sqrt(0.01 / t)
+                                                                 * rng.standard_normal(t.size))
+        linear = 2900.0 / 0.03 * t * lamp
+        signal = linear + np.sqrt((K * linear + DARK_VAR) / PIXELS) * rng.standard_normal(t.size)
+        return _fit(t, signal, np.ones(t.size), order)
+
+    steady, drifting = series(0.0), series(1e-3)
+    # The same noise draws: the drift adds to consecutive frames' differences at most
+    # 1e-3 / 31 per frame, (3e-5)^2 t ~ 1e-11 s against q = (2e-4)^2 x 0.01 s = 4e-10 s;
+    # pooled across the passes it would add (5e-4)^2 t ~ 4e-9 s, ten times q.
+    assert drifting.lamp_variance == pytest.approx(steady.lamp_variance, rel=0.1)
+    assert steady.lamp_variance == pytest.approx(4e-10, rel=0.5)  # 15 dof of scatter: +-40 % (1 sigma)
