@@ -142,7 +142,7 @@ label = "plaster"
 [[block]]
 theta_i = 30
 phi_i = 0
-view = [-10, 20]
+view = [0, 20, -40]
 """
 
 
@@ -229,9 +229,12 @@ def test_per_incidence_datasets_divide_by_each_incidences_irradiance(recordings)
 def test_a_sample_incidence_without_a_reference_is_refused(tmp_path):
     text = PROTOCOL.replace("geometries = [[30, 0, -10], [45, 0, -10], [60, 0, -10]]",
                             "geometries = [[30, 0, -10], [60, 0, -10]]").replace("step = 10", "step = 35")
-    reduced = acquisition.reduce_recording(_record(tmp_path / "partial", "ideal", text))
+    reduced = acquisition.reduce_recording(_record(tmp_path / "partial", "ideal:beam_falloff=0.02", text))
     with pytest.raises(ValueError, match=r"no reference reading at theta_i = \[45.0\] deg"):
         reduced.fit_inputs("per-incidence")
+    # the beam shows between 30 and 60 deg; the remedy named is not the refused one
+    warning = next(w for w in reduced.warnings if "differs between lamp polar angles" in w)
+    assert "read the standard at theta_i = [45.0] deg too" in warning and "--calibration" not in warning
     with pytest.raises(ValueError, match="calibration='bogus'"):
         reduced.fit_inputs("bogus")
     assert main(["fit", str(tmp_path / "partial"), "--model", "lambert", "--calibration", "per-incidence",
@@ -255,10 +258,21 @@ def test_joined_recordings_merge_their_readings_per_incidence(recordings):
     assert np.linalg.eigvalsh(dataset.covariance).min() > 0
 
 
-def test_a_joined_part_without_a_reference_is_calibrated_by_the_others_readings(recordings, tmp_path):
+@pytest.fixture(scope="module")
+def short(tmp_path_factory):
+    """A recording of three points without a reference standard."""
+    return acquisition.reduce_recording(record(tmp_path_factory.mktemp("short") / "short", SHORT, SAMPLE, 4))
+
+
+def test_a_recording_without_a_standard_is_refused_a_calibration_per_incidence(short):
+    with pytest.raises(ValueError, match="no reference standard was measured"):
+        short.fit_inputs("per-incidence")
+    assert short.fit_inputs()[0].quantity == "normalised_radiance"
+
+
+def test_a_joined_part_without_a_reference_is_calibrated_by_the_others_readings(recordings, short):
     """A recording without a standard, joined with one that read it at the part's lamp
     angle: its values are calibrated by those readings, as the value's planned angle says."""
-    short = acquisition.reduce_recording(record(tmp_path / "short", SHORT, SAMPLE, 4))
     assert short.reference_irradiance is None
     joined = acquisition.combine_reduced([acquisition.reduce_recording(recordings["ideal"]), short])
     n = len(short.radiance)

@@ -71,35 +71,42 @@ def _reference(rows: Readings, protocol, aperture) -> _Reference | None:
     relative["certificate"] = standard.reflectance_uncertainty
     relative["angular behaviour"] = standard.angular_uncertainty
     consistency = {"reference_reduced_chi2": chi2 / (ref.size - 1)} if ref.size > 1 else {}
-    if len(incidences) > 1:
-        _check_incidences(incidences, rows.warnings)
     total = mean * math.sqrt(sum(v**2 for v in relative.values()))
     return _Reference(float(mean), float(total), {k: float(v) for k, v in relative.items()}, consistency, record,
                       incidences, readings.linearity(np.arange(ref.size)))
 
 
-#: Below this chi-square p-value the reference's irradiances at different lamp polar angles
-#: are called inconsistent (the threshold of the fits' goodness-of-fit test).
-INCIDENCE_CONSISTENCY_ALPHA = 1e-3
-
-
-def _check_incidences(incidences: tuple[IncidenceCalibration, ...], warnings: list[str]) -> None:
+def _check_incidences(incidences: tuple[IncidenceCalibration, ...], sample_theta_i, warnings: list[str]) -> None:
     """Warn when the standard's irradiance differs between lamp polar angles beyond its
-    readings' noise: a beam that is not uniform (or a misaligned rig) that one common E_0
-    does not calibrate."""
-    from scipy.special import gammaincc
+    readings' noise (the chi-square test of the fits' adequacy, at its threshold): a beam
+    that is not uniform (or a misaligned rig) that one common E_0 does not calibrate. The
+    remedy named depends on whether the standard was read at every planned lamp polar
+    angle of the sample (``sample_theta_i`` [deg]).
 
+    The chi-square takes the ``E_k`` as independent with their stated errors: readings
+    of different angles that share a dark frame or a lamp-drift interval make it
+    approximate (docs/acquisition.md, "Calibration per incidence")."""
+    from ..fitting.adequacy import ALPHA, chi2_pvalue
+
+    if len(incidences) < 2:
+        return
     e = np.array([c.irradiance for c in incidences])
     inverse = 1.0 / np.array([c.irradiance * c.sigma for c in incidences]) ** 2
     mean = np.sum(inverse * e) / np.sum(inverse)
     chi2 = float(np.sum(inverse * (e - mean) ** 2))
-    p = float(gammaincc(0.5 * (len(e) - 1), 0.5 * chi2))
-    if p < INCIDENCE_CONSISTENCY_ALPHA:
-        spread = ", ".join(f"{c.theta_i:g} deg {c.irradiance / mean - 1:+.1e}" for c in incidences)
-        warnings.append(f"{INCONSISTENT_INCIDENCES} beyond its noise "
-                        f"(chi-square {chi2:.3g} for {len(e) - 1} degrees of freedom, p = {p:.1e}; {spread}): a lamp "
-                        "beam that is not uniform, or a misaligned rig. Calibrate per incidence "
-                        "(gonio fit --calibration per-incidence) or fit the alignment (--alignment)")
+    p = chi2_pvalue(chi2, len(e) - 1)
+    if p >= ALPHA:
+        return
+    spread = ", ".join(f"{c.theta_i:g} deg {c.irradiance / mean - 1:+.1e}" for c in incidences)
+    missing = sorted(set(np.round(np.asarray(sample_theta_i, float), 2).tolist())
+                     - {round(float(c.theta_i), 2) for c in incidences})
+    remedy = ("Calibrate per incidence (gonio fit --calibration per-incidence) or fit the alignment (--alignment)"
+              if not missing else
+              f"Fit the alignment (--alignment), or read the standard at theta_i = {missing} deg too (the sample's "
+              "lamp angles without a reading) to calibrate per incidence")
+    warnings.append(f"{INCONSISTENT_INCIDENCES} beyond its noise "
+                    f"(chi-square {chi2:.3g} for {len(e) - 1} degrees of freedom, p = {p:.1e}; {spread}): a lamp "
+                    f"beam that is not uniform, or a misaligned rig. {remedy}")
 
 
 @dataclass(frozen=True)
@@ -176,6 +183,8 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
         raise ValueError(f"{folder}: the recording holds no successfully measured, unsaturated sample points")
     groups = planned_groups(points, sample)
     keys = sorted(groups)
+    if reference is not None:
+        _check_incidences(reference.incidences, [k[0] for k in keys], rows.warnings)
     resolution = {int(k): float(v) for k, v in meta.get("stage", {}).get("encoder_resolution_deg", {}).items()}
     combined = combine_groups([np.array(groups[k]) for k in keys], rows, readback_geometry(points), resolution,
                               carried=rows.linearity_jacobian)

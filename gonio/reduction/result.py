@@ -468,7 +468,8 @@ class Reduced:
             for a uniform beam. ``"per-incidence"``: each value brought to the common level
             by the standard read at its lamp polar angle (:meth:`relative_radiance`), for a
             beam whose irradiance over the window changes with the lamp's angle; the prior
-            on the scale is the same. Needs a reference reading at every sample polar angle.
+            on the scale is the same. Needs a reference reading at every sample polar angle
+            (``ValueError`` otherwise, and without a reference standard).
 
         Returns
         -------
@@ -478,7 +479,8 @@ class Reduced:
         from ..fitting import Normal
 
         if self.reference_irradiance is None:
-            _calibration(calibration)
+            if _calibration(calibration) == "per-incidence":
+                self._incidence_groups()  # refused, as the command line refuses it, naming why
             return self.normalised_radiance(), {}
         return self.relative_radiance(calibration), {
             "scale": Normal(self.reference_irradiance, self.reference_irradiance_sigma, 0.0, math.inf)}
