@@ -58,7 +58,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["LinearityResult", "correction_factor", "correction_jacobian", "fit_linearity", "linearity_error",
+__all__ = ["LinearityResult", "correction_factor", "correction_slope", "correction_jacobian", "fit_linearity", "linearity_error",
            "series_exposures", "acquire_linearity"]
 
 #: Lowest level of the series as a fraction of its top exposure (EMVA 1288: 5 % of saturation).
@@ -167,7 +167,7 @@ def _powers(signal: np.ndarray, signal_range: float) -> np.ndarray:
     return np.stack([x, x * x], axis=-1)
 
 
-def correction_factor(signal, coefficients, signal_range: float) -> np.ndarray:
+def correction_factor(signal: np.ndarray | float, coefficients: Sequence[float], signal_range: float) -> np.ndarray:
     """``S_linear / S = 1 + c1 x + c2 x^2`` for signals ``S`` [DN above the dark level].
 
     Examples
@@ -178,7 +178,22 @@ def correction_factor(signal, coefficients, signal_range: float) -> np.ndarray:
     return 1.0 + _powers(signal, signal_range) @ np.asarray(coefficients, float)
 
 
-def correction_jacobian(signal, coefficients, signal_range: float) -> np.ndarray:
+def correction_slope(signal: np.ndarray | float, coefficients: Sequence[float], signal_range: float) -> np.ndarray:
+    """``dS_linear / dS = 1 + 2 c1 x + 3 c2 x^2``: what an error of a signal ``S`` [DN above
+    the dark level] becomes in the corrected signal (its noise scales by this, not by
+    :func:`correction_factor`).
+
+    Examples
+    --------
+    >>> float(correction_slope(1500.0, [0.0, 0.004], 3000.0))
+    1.003
+    """
+    powers = _powers(signal, signal_range)
+    return 1.0 + powers @ (np.array([2.0, 3.0]) * np.asarray(coefficients, float))
+
+
+def correction_jacobian(signal: np.ndarray | float, coefficients: Sequence[float],
+                        signal_range: float) -> np.ndarray:
     """Relative sensitivity of the corrected signal to (c1, c2): ``(x, x^2) / (1 + c1 x + c2 x^2)``,
     shape signal.shape + (2,), so that a coefficient error ``dc`` changes ``S_linear`` by
     the fraction ``jacobian @ dc``."""

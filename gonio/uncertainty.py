@@ -147,6 +147,13 @@ class LinearityCorrection:
 
         return correction_factor(signal, self.coefficients, self.signal_range)
 
+    def slope(self, signal: np.ndarray) -> np.ndarray:
+        """``dS_linear / dS`` of signals [DN]: the factor of their errors
+        (:func:`drivers.linearity.correction_slope`)."""
+        from drivers.linearity import correction_slope
+
+        return correction_slope(signal, self.coefficients, self.signal_range)
+
     def jacobian(self, signal: np.ndarray) -> np.ndarray:
         """Relative sensitivity of corrected signals to (c1, c2), shape signal.shape + (2,)."""
         from drivers.linearity import correction_jacobian

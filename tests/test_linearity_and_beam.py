@@ -102,6 +102,21 @@ def test_the_series_is_recorded_and_its_uncertainty_is_a_covariance(recordings):
     assert not np.allclose(covariance - np.diag(np.diag(covariance)), without - np.diag(np.diag(without)))
 
 
+def test_the_readings_noise_is_scaled_by_the_corrections_slope(recordings):
+    from gonio.data import read_metadata, read_points
+    from gonio.reduction.readings import readings_of
+
+    meta, points = read_metadata(recordings["nonlinear"]), read_points(recordings["nonlinear"])
+    corrected, raw = readings_of(meta, points), readings_of(meta, points, linearity=False)
+    signal = (points["roi_mean"] - points["dark_mean"])[corrected.index]
+    slope = corrected.linearity.slope(signal)
+    factor = corrected.linearity.factor(signal)
+    assert np.max(slope - factor) > 1e-3  # the readings near the top: c2 x^2 ~ 2e-3 apart
+    for name in ("shot_read", "dark", "prnu"):
+        np.testing.assert_allclose(corrected.budget[name][corrected.index], raw.budget[name][raw.index] * slope,
+                                   rtol=1e-12)
+
+
 def test_a_linear_camera_gets_no_correction_to_speak_of(recordings):
     series = json.loads((recordings["ideal"] / "metadata.json").read_text())["camera"]["linearity"]
     c, covariance = np.array(series["coefficients"]), np.array(series["covariance"])

@@ -248,11 +248,14 @@ def read_readings(folder: str | Path, lamp: str = "auto", linearity: bool = True
 
 
 def correct_linearity(meta: Mapping[str, Any], points, rate: np.ndarray, budget: dict[str, np.ndarray],
-                      usable: np.ndarray, warnings: list[str], apply: bool = True):
+                      usable: np.ndarray, warnings: list[str], apply: bool = True
+                      ) -> tuple[np.ndarray, dict[str, np.ndarray], LinearityCorrection | None, np.ndarray | None]:
     """Every reading corrected by the camera's linearity (:class:`~gonio.uncertainty.LinearityCorrection`).
 
     The correction acts on each reading's signal ``S = roi_mean - dark_mean`` [DN]: the
-    rate and every budget component are multiplied by ``1 + c1 x + c2 x^2``. Returns the
+    rate is multiplied by ``1 + c1 x + c2 x^2`` and every budget component, an error of
+    ``S`` (shot and read noise, dark level, PRNU), by the correction's slope
+    ``dS_linear / dS = 1 + 2 c1 x + 3 c2 x^2``. Returns the
     rate, the budget, the correction (None when the recording has none or ``apply`` is
     False, both said in ``warnings``) and the rows' sensitivity to its coefficients.
     Readings above the series' top are corrected by extrapolation and counted in a warning.
@@ -277,7 +280,8 @@ def correct_linearity(meta: Mapping[str, Any], points, rate: np.ndarray, budget:
     if above.any():
         warnings.append(f"{int(above.sum())} reading(s) above the top of the linearity series "
                         f"({correction.signal_range:.0f} DN): their correction is extrapolated")
-    return rate * factor, {name: c * factor for name, c in budget.items()}, correction, correction.jacobian(signal)
+    slope = correction.slope(signal)
+    return rate * factor, {name: c * slope for name, c in budget.items()}, correction, correction.jacobian(signal)
 
 
 def readings_of(meta: Mapping[str, Any], points: dict[str, np.ndarray], lamp: str = "auto",

@@ -16,7 +16,7 @@ from scipy.optimize import brentq
 from drivers.emulator.ccd import CCDParams
 from drivers.emulator.rig import EmulatedRig
 from drivers.emulator.systematics import Systematics, nonlinear_signal
-from drivers.linearity import (LinearityResult, acquire_linearity, correction_factor, fit_linearity,
+from drivers.linearity import (LinearityResult, acquire_linearity, correction_factor, correction_slope, fit_linearity,
                                linearity_error, series_exposures)
 from drivers.rig import Rig
 
@@ -209,3 +209,16 @@ def test_a_lamp_drift_between_the_passes_does_not_inflate_the_lamp_term():
     # pooled across the passes it would add (5e-4)^2 t ~ 4e-9 s, ten times q.
     assert drifting.lamp_variance == pytest.approx(steady.lamp_variance, rel=0.1)
     assert steady.lamp_variance == pytest.approx(4e-10, rel=0.5)  # 15 dof of scatter: +-40 % (1 sigma)
+
+
+def test_an_error_of_the_signal_scales_by_the_corrections_slope():
+    """The noise of a corrected signal, by Monte Carlo of the correction itself: its slope
+    1 + 2 c1 x + 3 c2 x^2, not its factor 1 + c1 x + c2 x^2 (here 1.15 against 1.05)."""
+    rng = np.random.default_rng(2)
+    coefficients, top = [0.0, 0.05], 3000.0
+    signal = 3000.0 + 5.0 * rng.standard_normal(200_000)
+    corrected = signal * correction_factor(signal, coefficients, top)
+    # 2e5 draws: the standard deviation to 0.16 % (1 sigma); 0.5 % is 3 of them, and 7 % off
+    # is the factor
+    assert np.std(corrected) / 5.0 == pytest.approx(float(correction_slope(3000.0, coefficients, top)), rel=5e-3)
+    assert float(correction_slope(3000.0, coefficients, top)) == pytest.approx(1.15, rel=1e-12)
