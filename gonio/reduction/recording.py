@@ -13,7 +13,8 @@ from ..protocols import loads
 from .combining import combine, combine_groups
 from .geometry import planned_groups, readback_geometry, readback_or_plan
 from .readings import CHECK_BLOCK, REFERENCE_BLOCK, Readings, readings_of
-from .result import COMMON_CALIBRATION, INCONSISTENT_INCIDENCES, LOW_SIGNAL_SIGMAS, IncidenceCalibration, Reduced
+from .result import (ANGULAR_BEHAVIOUR, COMMON_CALIBRATION, INCONSISTENT_INCIDENCES, LOW_SIGNAL_SIGMAS,
+                     IncidenceCalibration, Reduced)
 
 __all__ = ["reduce_recording", "combine_reduced"]
 
@@ -69,7 +70,7 @@ def _reference(rows: Readings, protocol, aperture) -> _Reference | None:
               "incidence": planned.tolist(), "incidence_weights": within.tolist()}
     relative = {f"reference {n}": v / mean for n, v in parts.items() if v > 0}
     relative["certificate"] = standard.reflectance_uncertainty
-    relative["angular behaviour"] = standard.angular_uncertainty
+    relative[ANGULAR_BEHAVIOUR] = standard.angular_uncertainty
     consistency = {"reference_reduced_chi2": chi2 / (ref.size - 1)} if ref.size > 1 else {}
     total = mean * math.sqrt(sum(v**2 for v in relative.values()))
     return _Reference(float(mean), float(total), {k: float(v) for k, v in relative.items()}, consistency, record,

@@ -10,8 +10,8 @@ import numpy as np
 
 from ..uncertainty import COMPONENTS, LinearityCorrection
 
-__all__ = ["Reduced", "IncidenceCalibration", "CALIBRATIONS", "COMMON_CALIBRATION", "SATURATED_MAJORITY",
-           "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT"]
+__all__ = ["Reduced", "IncidenceCalibration", "CALIBRATIONS", "COMMON_CALIBRATION", "ANGULAR_BEHAVIOUR",
+           "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT"]
 
 #: A fit is refused when more than this fraction of the sample points saturated.
 SATURATED_MAJORITY = 0.5
@@ -29,9 +29,14 @@ REDUCTION_FORMAT = "gonio reduction 1"
 #: one lamp irradiance E_0 for every value, or the irradiance measured at each value's
 #: lamp polar angle.
 CALIBRATIONS = ("common", "per-incidence")
-#: Components of the calibration budget common to every incidence (the standard's
-#: certificate and its departure from Lambertian), as opposed to its readings' noise.
-COMMON_CALIBRATION = ("certificate", "angular behaviour")
+#: The standard's departure from Lambertian (a component of :attr:`Reduced.calibration`):
+#: common to every value under one ``E_0``; under a calibration per incidence each ``E_k``
+#: carries the departure at its own angle, an error of that angle's values alone.
+ANGULAR_BEHAVIOUR = "angular behaviour"
+#: Components of the calibration budget common to the values of every recording: the
+#: standard's certificate and its departure from Lambertian, as opposed to its readings'
+#: noise (joined recordings do not average them down).
+COMMON_CALIBRATION = ("certificate", ANGULAR_BEHAVIOUR)
 #: Opening of the reduction's warning that the standard's irradiance differs between lamp
 #: polar angles (gonio.reduction.recording): a dataset calibrated per incidence drops it.
 INCONSISTENT_INCIDENCES = "the reference standard's irradiance differs between lamp polar angles"
@@ -54,7 +59,8 @@ class IncidenceCalibration:
         ``E_k`` from the readings at this angle [radiance unit per sr].
     sigma : float
         Relative standard uncertainty of ``E_k`` from its readings' budget [-] (the
-        certificate and the angular behaviour are common to every angle, not in it).
+        certificate and the standard's departure from Lambertian are not in it:
+        :meth:`Reduced._incidence_deviations`).
     weight : float
         Weight of these readings in the common ``E_0`` [-].
     readings : tuple of int
@@ -227,13 +233,29 @@ class Reduced:
             reference = np.array([c.linearity for c in self.incidences])[group]
         return factor, group, self._covariance(reference)
 
+    def _incidence_variances(self) -> np.ndarray:
+        """Relative variance of each ``E_k`` [-]: its readings' budget and the standard's
+        departure from Lambertian at its angle (:data:`ANGULAR_BEHAVIOUR`, taken
+        independent between angles: the departure the calibration per incidence absorbs
+        into each angle's irradiance)."""
+        angular = self.calibration.get(ANGULAR_BEHAVIOUR, 0.0)
+        return np.array([c.sigma for c in self.incidences]) ** 2 + angular**2
+
     def _incidence_deviations(self) -> np.ndarray:
         """Covariance of the relative errors of ``E_k / E_0`` between incidences, (K, K):
         ``delta_kl u_k^2 - W_l u_l^2 - W_k u_k^2 + sum_m W_m^2 u_m^2`` (``W`` the weights of
-        the incidences' readings in ``E_0``, ``u`` their relative uncertainties). With the
-        inverse-variance weights of ``E_0`` these errors are uncorrelated with ``E_0``'s,
-        so the prior on the scale keeps its width (:meth:`fit_inputs`)."""
-        u2 = np.array([c.sigma for c in self.incidences]) ** 2
+        the incidences' readings in ``E_0``, ``u`` the relative uncertainties of the ``E_k``,
+        :meth:`_incidence_variances`).
+
+        Approximation (docs/acquisition.md, "Calibration per incidence"): the ``E_k`` are
+        taken as independent, and ``W`` as their inverse-variance weights, which makes
+        these errors uncorrelated with ``E_0``'s, so that the prior on the scale keeps its
+        width (:meth:`fit_inputs`). Both hold to first order only: readings at different
+        angles can share a dark frame (the same exposure and window) and a lamp-drift
+        interval between checks, and ``E_0`` weights its readings by their independent
+        components only (:func:`~gonio.reduction.combining.combine`) while ``u_k`` counts
+        the shared ones in full."""
+        u2 = self._incidence_variances()
         w = np.array([c.weight for c in self.incidences])
         w = w / w.sum()
         return np.diag(u2) - np.add.outer(w * u2, w * u2) + np.sum(w**2 * u2)
@@ -419,8 +441,8 @@ class Reduced:
         this dataset does not average it away (:meth:`fit_inputs` puts it into one prior
         on the scale instead, which is equivalent). With ``calibration="per-incidence"``,
         ``f = L / (E_k cos theta_i)`` with the irradiance ``E_k`` the standard gave at the
-        value's lamp polar angle: its readings' error is common to the values of that
-        angle, the certificate and angular behaviour to all.
+        value's lamp polar angle: its readings' error and the standard's departure from
+        Lambertian there are common to the values of that angle, the certificate to all.
         """
         from ..fitting import Dataset
 
@@ -433,8 +455,8 @@ class Reduced:
             factor, group, covariance = self._per_incidence()
             scale = self.reference_irradiance / factor * cos_i
             value = self.radiance / scale
-            common = sum(self.calibration.get(k, 0.0) ** 2 for k in COMMON_CALIBRATION)
-            u2 = np.array([c.sigma for c in self.incidences]) ** 2
+            common = sum(self.calibration.get(k, 0.0) ** 2 for k in COMMON_CALIBRATION if k != ANGULAR_BEHAVIOUR)
+            u2 = self._incidence_variances()
             shared = np.where(np.equal.outer(group, group), u2[group][:, None], 0.0) + common
             covariance = covariance / np.outer(scale, scale) + np.outer(value, value) * shared
             return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
