@@ -300,6 +300,11 @@ def test_joined_recordings_merge_their_readings_per_incidence(recordings):
     assert np.all(joined.linearity_jacobian[:n, 2:] == 0.0) and np.all(joined.linearity_jacobian[n:, :2] == 0.0)
     dataset, _ = joined.fit_inputs("per-incidence")
     assert np.linalg.eigvalsh(dataset.covariance).min() > 0
+    # the stored uncertainty (reduced.csv, the low_signal flags) is the covariance's: the
+    # linearity component taken relative to the joint E_0, not to each part's own
+    np.testing.assert_allclose(np.sqrt(np.diag(joined.covariance())), joined.radiance_sigma, rtol=1e-12)
+    own = np.concatenate([p.budget["linearity"] for p in parts])
+    assert np.max(np.abs(joined.budget["linearity"] / own - 1.0)) > 1e-3  # it did change
 
 
 @pytest.fixture(scope="module")

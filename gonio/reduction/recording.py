@@ -191,11 +191,12 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
                               carried=rows.linearity_jacobian)
     geometry, values, budget, counts, repeat_stats, jacobian = combined
     if jacobian is not None:
-        budget["linearity"] = _linearity_component(values, jacobian, rows.linearity.covariance_matrix, reference)
+        budget["linearity"] = _linearity_component(values, jacobian, rows.linearity.covariance_matrix,
+                                                   reference.linearity if reference is not None else None)
     pixels = np.array([points["roi_pixels"][groups[k][0]] for k in keys], float)
     window = np.clip(1.0 / pixels - 1.0 / float(np.max(points["roi_pixels"])), 0.0, None)  # as ccd_components
     total = np.sqrt(sum(b**2 for b in budget.values()))
-    flags = np.where(values <= LOW_SIGNAL_SIGMAS * total, "low_signal", "").astype(object)
+    flags = _low_signal_flags(values, total)
     consistency = dict(rows.consistency)
     consistency.update(reference.consistency if reference else {})
     dof = sum(r["n"] - 1 for r in repeat_stats)
@@ -227,11 +228,18 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
 
 
 def _linearity_component(values: np.ndarray, jacobian: np.ndarray, covariance: np.ndarray,
-                         reference: _Reference | None) -> np.ndarray:
+                         reference: np.ndarray | None) -> np.ndarray:
     """The budget's ``linearity`` component of each value: ``|x| sqrt(d C d^T)`` with ``d`` its
-    sensitivity to the correction's coefficients relative to the reference standard's."""
-    d = jacobian - (reference.linearity if reference is not None and reference.linearity is not None else 0.0)
+    sensitivity to the correction's coefficients relative to the reference standard's
+    (``reference``, None without a standard)."""
+    d = jacobian - (reference if reference is not None else 0.0)
     return np.abs(values) * np.sqrt(np.einsum("ni,ij,nj->n", d, covariance, d))
+
+
+def _low_signal_flags(values: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """``"low_signal"`` for the values at or below :data:`LOW_SIGNAL_SIGMAS` of their
+    uncertainty, else ``""``."""
+    return np.where(values <= LOW_SIGNAL_SIGMAS * sigma, "low_signal", "").astype(object)
 
 
 def _incidence_of(planned_theta_i, incidences: tuple[IncidenceCalibration, ...]) -> np.ndarray:
@@ -263,7 +271,10 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
     are combined by their inverse-variance weighted mean (the runs must share lamp,
     voltage, monitor and camera settings for their relative radiances to be comparable);
     the calibration's certificate and angular components are common to the runs and are
-    not averaged down.
+    not averaged down. Each recording's linearity coefficients are its own (independent
+    between recordings), and each value's ``linearity`` component and total uncertainty
+    are taken again relative to the joint ``E_0`` (as :meth:`Reduced.covariance`), the
+    ``low_signal`` flags with them.
     """
     if not parts:
         raise ValueError("combine_reduced needs at least one reduced recording")
@@ -290,15 +301,20 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
         for key in COMMON_CALIBRATION:
             calibration[key] = max(p.calibration.get(key, 0.0) for p in refs)
         sigma = irradiance * math.sqrt(sum(v**2 for v in calibration.values()))
-    linearity = _joint_linearity(parts, refs, weights)
-    incidences = _joint_incidences(refs, weights, linearity[3])
+    linearity = _JointLinearity.of(parts)
+    jacobian, coefficients, reference = linearity.jacobian(), linearity.covariance(), linearity.reference(refs, weights)
+    incidences = _joint_incidences(refs, weights, linearity)
+    radiance = cat("radiance")
+    if jacobian is not None:  # each value's sensitivity now relative to the joint E_0's
+        budget["linearity"] = _linearity_component(radiance, jacobian, coefficients, reference)
+    total = np.sqrt(sum(b**2 for b in budget.values()))
     planned_theta_i = [float(t) for p in parts for t in p.metadata.get("planned_theta_i", p.theta_i)]
     if refs:
         reference_record = _combined_reference_record(refs, weights, incidences)
     consistency = {f"{k} ({p.metadata.get('protocol')})": v for p in parts for k, v in p.consistency.items()}
     return Reduced(
         theta_i=cat("theta_i"), phi_i=cat("phi_i"), theta_r=cat("theta_r"), phi_r=cat("phi_r"), view=cat("view"),
-        radiance=cat("radiance"), radiance_sigma=cat("radiance_sigma"), repeats=cat("repeats"),
+        radiance=radiance, radiance_sigma=total, repeats=cat("repeats"),
         reference_irradiance=irradiance, reference_irradiance_sigma=sigma,
         label=label or parts[0].label,
         metadata={"recordings": [p.metadata.get("recording") for p in parts],
@@ -307,57 +323,82 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
                   **({"aperture_sr": parts[0].metadata["aperture_sr"]} if "aperture_sr" in parts[0].metadata else {}),
                   **({"reference_standard": reference_record} if reference_record else {})},
         budget=budget, calibration=calibration,
-        flags=np.concatenate([p.flags if p.flags is not None else np.full(len(p.radiance), "", object) for p in parts]),
+        flags=_low_signal_flags(radiance, total),
         excluded={k: sum(p.excluded.get(k, 0) for p in parts) for k in {k for p in parts for k in p.excluded}},
         warnings=tuple(dict.fromkeys(w for p in parts for w in p.warnings)), consistency=consistency,
         unit=parts[0].unit,
         window=None if any(p.window is None for p in parts) else np.concatenate([p.window for p in parts]),
-        linearity_jacobian=linearity[0], linearity_covariance=linearity[1], reference_linearity=linearity[2],
+        linearity_jacobian=jacobian, linearity_covariance=coefficients, reference_linearity=reference,
         incidences=incidences, incidence=_incidence_of(planned_theta_i, incidences),
     )
 
 
-def _joint_linearity(parts: "list[Reduced]", refs: "list[Reduced]", weights: np.ndarray):
-    """The joined recordings' sensitivities to the coefficients of every recording's linearity
-    correction (two columns per corrected recording, the others' columns 0), their block-
-    diagonal covariance, the joint E_0's sensitivity (the recordings' by their weights in
-    it), and a function padding one recording's sensitivities to the joint columns."""
-    sizes = [0 if p.linearity_jacobian is None else p.linearity_jacobian.shape[1] for p in parts]
-    starts = np.concatenate([[0], np.cumsum(sizes)])
+@dataclass(frozen=True)
+class _JointLinearity:
+    """The joined recordings' linearity corrections: two coefficients per corrected
+    recording, each recording's in its own columns (``starts[k]:starts[k + 1]``)."""
 
-    def pad(part: "Reduced", vector: np.ndarray | None) -> np.ndarray:
-        out = np.zeros(np.shape(vector)[:-1] + (int(starts[-1]),)) if vector is not None else np.zeros(int(starts[-1]))
-        k = next(i for i, p in enumerate(parts) if p is part)
-        if vector is not None and sizes[k]:
-            out[..., starts[k]:starts[k + 1]] = vector
+    parts: tuple
+    starts: np.ndarray
+
+    @classmethod
+    def of(cls, parts: "list[Reduced]") -> "_JointLinearity":
+        sizes = [0 if p.linearity_jacobian is None else p.linearity_jacobian.shape[1] for p in parts]
+        return cls(tuple(parts), np.concatenate([[0], np.cumsum(sizes)]).astype(int))
+
+    @property
+    def columns(self) -> int:
+        return int(self.starts[-1])
+
+    def pad(self, part: "Reduced", vector: np.ndarray | None) -> np.ndarray:
+        """``part``'s sensitivities (..., its columns) in the joint columns (0 elsewhere; a
+        part without a correction, ``vector`` None: zeros, (P,))."""
+        if vector is None:
+            return np.zeros(self.columns)
+        k = next(i for i, p in enumerate(self.parts) if p is part)
+        out = np.zeros(np.shape(vector)[:-1] + (self.columns,))
+        out[..., self.starts[k]:self.starts[k + 1]] = vector
         return out
 
-    if not starts[-1]:
-        return None, None, None, pad
-    jacobian = np.concatenate([pad(p, p.linearity_jacobian) if p.linearity_jacobian is not None
-                               else np.zeros((len(p.radiance), int(starts[-1]))) for p in parts])
-    covariance = np.zeros((int(starts[-1]),) * 2)
-    for k, p in enumerate(parts):
-        if sizes[k]:
-            covariance[starts[k]:starts[k + 1], starts[k]:starts[k + 1]] = p.linearity_covariance
-    reference = sum((w * pad(p, p.reference_linearity) for w, p in zip(weights, refs)), np.zeros(int(starts[-1])))
-    return jacobian, covariance, reference if refs else None, pad
+    def jacobian(self) -> np.ndarray | None:
+        """Every value's sensitivity to the joint coefficients, (n, P); None without any."""
+        if not self.columns:
+            return None
+        return np.concatenate([self.pad(p, p.linearity_jacobian) if p.linearity_jacobian is not None
+                               else np.zeros((len(p.radiance), self.columns)) for p in self.parts])
+
+    def covariance(self) -> np.ndarray | None:
+        """The joint coefficients' covariance, block-diagonal (the recordings' series are
+        independent), (P, P)."""
+        if not self.columns:
+            return None
+        out = np.zeros((self.columns, self.columns))
+        for k, p in enumerate(self.parts):
+            if self.starts[k + 1] > self.starts[k]:
+                out[self.starts[k]:self.starts[k + 1], self.starts[k]:self.starts[k + 1]] = p.linearity_covariance
+        return out
+
+    def reference(self, refs: "list[Reduced]", weights: np.ndarray) -> np.ndarray | None:
+        """The joint E_0's sensitivity: the recordings' by their weights in it."""
+        if not self.columns or not refs:
+            return None
+        return sum((w * self.pad(p, p.reference_linearity) for w, p in zip(weights, refs)), np.zeros(self.columns))
 
 
-def _joint_incidences(refs: "list[Reduced]", weights: np.ndarray, pad) -> tuple[IncidenceCalibration, ...]:
+def _joint_incidences(refs: "list[Reduced]", weights: np.ndarray,
+                      linearity: _JointLinearity) -> tuple[IncidenceCalibration, ...]:
     """The irradiance at each lamp polar angle from the joined recordings' reference readings
     (an angle read in several recordings: their inverse-variance mean)."""
     offsets = np.concatenate([[0], np.cumsum([len(p.metadata.get("reference_standard", {}).get("weights", []))
                                               for p in refs])]).astype(int)
-    angles = sorted({c.theta_i for p in refs for c in p.incidences})
     merged = []
-    for theta in angles:
+    for theta in sorted({c.theta_i for p in refs for c in p.incidences}):
         here = [(k, p, c) for k, p in enumerate(refs) for c in p.incidences if c.theta_i == theta]
         inverse = np.array([1.0 / (c.irradiance * c.sigma) ** 2 for _, _, c in here])
         share = inverse / inverse.sum()
         value = float(np.sum(share * [c.irradiance for _, _, c in here]))
-        linear = None if pad(refs[0], None).size == 0 else sum(
-            s * pad(p, c.linearity) for s, (_, p, c) in zip(share, here))
+        linear = None if not linearity.columns else sum(
+            s * linearity.pad(p, c.linearity) for s, (_, p, c) in zip(share, here))
         merged.append(IncidenceCalibration(
             theta, value, float(1.0 / math.sqrt(inverse.sum()) / value),
             float(sum(weights[k] * c.weight for k, _, c in here)),
