@@ -26,11 +26,13 @@ Lambert is the same loop with the coefficients (rho/pi, 0, 0).  The lamp sub-ray
 the lamp direction only and the camera sub-rays on the camera direction only, so a
 recording's three lamp directions cost 3 x 7 sub-rays per walker, not N x 7.
 
-The formulas are those of :func:`gonio.models.oren_nayar.functional._oren_nayar_shapes`,
-:func:`~gonio.instrument.cone_quadrature` and
-:func:`~drivers.rig_geometry.misaligned_angles` in scalar form: any change there must be
-made here too (tests/fitting/test_compiled_rig.py compares the two paths on random
-alignments, the normal view, a lamp pushed through the normal and grazing axes).
+The arithmetic of eq 33-35 is the models' own scalar form
+(:func:`gonio.models.oren_nayar.compiled.eq33_35`), the cubature's points those of
+:func:`gonio.instrument.cone_offsets`; the rotations are those of
+:func:`~drivers.rig_geometry.misaligned_angles` and the sub-ray frame that of
+:func:`~gonio.instrument.cone_quadrature` in scalar form: any change there must be made
+here too (tests/fitting/test_compiled_rig.py compares the two paths on random alignments,
+the normal view, a lamp pushed through the normal and grazing axes).
 
 References
 ----------
@@ -46,17 +48,16 @@ import numpy as np
 from numba import njit
 
 from drivers.rig_geometry import ALIGNMENT_ERRORS
-from gonio.instrument import _DISK_ANGLES, _DISK_RADII, _DISK_WEIGHTS, cone_half_angle
+from gonio.instrument import cone_offsets
 from gonio.models import Model
-from gonio.models.oren_nayar.functional import C2_AMPLITUDE, C3_AMPLITUDE
+from gonio.models._compiled import JIT_OPTIONS
+from gonio.models.oren_nayar.compiled import eq33_35
 
 from .rig_errors import COMPILED_MODELS
 
 __all__ = ["CompiledRigRadiance", "rig_radiance"]
 
 _RAD = math.pi / 180.0
-_TWO_OVER_PI = 2.0 / math.pi
-_FOUR_OVER_PI_SQ = 4.0 / math.pi**2
 #: cos(theta_i) of an axis at or below which the aperture average is not weighted by the
 #: sub-rays' cosines (as :class:`gonio.instrument._SubRays` does at grazing incidence).
 _GRAZING_COS = 1e-12
@@ -64,14 +65,14 @@ _GRAZING_COS = 1e-12
 # sin(phi), sin(theta), cos(theta), tan(theta).
 
 
-@njit(cache=True, nogil=True)
+@njit(**JIT_OPTIONS)
 def _to_sample(x: float, y: float, z: float, ca: float, sa: float, cb: float, sb: float):
     """A lab direction in the tilted sample's frame: ``R^T d`` with ``R = R_y(a) R_x(-b)``."""
     x1, z1 = x * ca - z * sa, x * sa + z * ca
     return x1, y * cb - z1 * sb, y * sb + z1 * cb
 
 
-@njit(cache=True, nogil=True)
+@njit(**JIT_OPTIONS)
 def _cone_rays(vx: float, vy: float, vz: float, cos_beta, sin_beta, cos_ring, sin_ring, rays) -> float:
     """The 7 sub-rays about the axis ``v`` into ``rays`` (7, 6: theta [rad], cos and sin of
     phi, sin, cos and tan of theta); returns cos(theta) of the axis.
@@ -110,31 +111,25 @@ def _cone_rays(vx: float, vy: float, vz: float, cos_beta, sin_beta, cos_ring, si
     return az
 
 
-@njit(cache=True, nogil=True)
+@njit(**JIT_OPTIONS)
 def _oren_nayar(t_i: float, cp_i: float, sp_i: float, s_i: float, c_i: float, tan_i: float,
                 t_r: float, cp_r: float, sp_r: float, s_r: float, c_r: float, tan_r: float,
                 a: float, b: float, c: float) -> float:
     """``max(a + b direct_shape + c ir_shape, 0)`` of one (lamp, camera) sub-ray pair, each
-    given by theta [rad], cos and sin of phi, sin, cos and tan of theta (eq 33-35; the
-    shapes of ``_oren_nayar_shapes`` from these per-direction values)."""
+    given by theta [rad], cos and sin of phi, sin, cos and tan of theta: the arguments of
+    eq 33-35 (:func:`~gonio.models.oren_nayar.compiled.eq33_35`) from these per-direction
+    values."""
     cos_dphi = min(max(cp_i * cp_r + sp_i * sp_r, -1.0), 1.0)
     if t_i >= t_r:
         alpha, beta, sin_alpha, tan_beta = t_i, t_r, s_i, tan_r
     else:
         alpha, beta, sin_alpha, tan_beta = t_r, t_i, s_r, tan_i
-    scaled = beta * _TWO_OVER_PI
-    ir_shape = scaled * scaled
-    angular_c2 = sin_alpha - ir_shape * scaled if cos_dphi < 0.0 else sin_alpha
-    direct = tan_beta * cos_dphi * angular_c2 * C2_AMPLITUDE
-    c3 = alpha * beta * _FOUR_OVER_PI_SQ
     cosines = c_i + c_r
     half = (s_i + s_r) / cosines if cosines > 0.0 else math.tan(0.5 * (alpha + beta))
-    direct += c3 * c3 * (1.0 - abs(cos_dphi)) * half * C3_AMPLITUDE
-    value = direct * b + c * (ir_shape * cos_dphi) + a
-    return value if value > 0.0 else 0.0
+    return eq33_35(cos_dphi, sin_alpha, tan_beta, alpha, beta, half, a, b, c)
 
 
-@njit(cache=True, nogil=True)
+@njit(**JIT_OPTIONS)
 def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignment, coefficients,
                  lamp_rule, camera_rule, ring, weights, out) -> None:
     """``<f cos theta_i>`` through the apertures at the true geometry of every alignment [1/sr].
@@ -200,12 +195,12 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
             out[w, n] = total * lamp_cos[lamp] if grazing else total
 
 
-def _rule(solid_angle_sr: float) -> np.ndarray:
-    """cos and sin of the cubature points' angles from the axis of a cone, shape (2, 7)
-    (:func:`gonio.instrument.cone_quadrature`)."""
-    half = math.radians(cone_half_angle(solid_angle_sr))
-    beta = 2.0 * np.arcsin(_DISK_RADII * 2.0 * math.sin(half / 2.0) / 2.0)
-    return np.stack([np.cos(beta), np.sin(beta)])
+def _rule(solid_angle_sr: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cubature of a cone (:func:`gonio.instrument.cone_offsets`) as the kernel takes it:
+    cos and sin of the points' angles from the axis, (2, 7); cos and sin of their angles
+    around it, (2, 7); their weights, (7,)."""
+    beta, around, weights = cone_offsets(solid_angle_sr)
+    return np.stack([np.cos(beta), np.sin(beta)]), np.stack([np.cos(around), np.sin(around)]), weights
 
 
 class CompiledRigRadiance:
@@ -239,8 +234,8 @@ class CompiledRigRadiance:
         self.n = ti.size
         self._lamp, self._lamp_of = _distinct(ti, pi_)
         self._camera, self._camera_of = _distinct(tr, pr)
-        self._rules = (_rule(apertures[0]), _rule(apertures[1]))
-        self._ring = np.stack([np.cos(_DISK_ANGLES), np.sin(_DISK_ANGLES)])
+        (lamp_rule, self._ring, self._weights), (camera_rule, _, _) = _rule(apertures[0]), _rule(apertures[1])
+        self._rules = (lamp_rule, camera_rule)
         probe = base.at(30.0, 0.0, 10.0, 180.0).linear_form()
         self._coefficients = probe.coefficients
 
@@ -264,7 +259,7 @@ class CompiledRigRadiance:
         coefficients = np.ascontiguousarray(np.broadcast_to(coefficients, (rows, 3)))
         out = np.empty((rows, self.n))
         rig_radiance(self._lamp, self._camera, self._lamp_of, self._camera_of, offsets, coefficients,
-                     self._rules[0], self._rules[1], self._ring, _DISK_WEIGHTS, out)
+                     self._rules[0], self._rules[1], self._ring, self._weights, out)
         if all(np.ndim(v) == 0 for v in (*params.values(), *alignment.values())):
             return out[0]
         return out
