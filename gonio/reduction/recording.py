@@ -57,9 +57,7 @@ def _reference(rows: Readings, protocol, aperture) -> _Reference | None:
     shared = {n: labels[ref] for n, labels in rows.shared.items() if n != "prnu"}  # a window per geometry
     jacobian = None if rows.linearity_jacobian is None else rows.linearity_jacobian[ref]
     readings = _ReferenceReadings(e0, components, shared, jacobian)
-    mean, parts, chi2, varying = combine(np.arange(ref.size), e0, components, shared)
-    weights = 1.0 / varying**2 if np.all(varying > 0) else np.ones(ref.size)  # as combine weights them
-    weights = weights / weights.sum()
+    mean, parts, chi2, _, weights = combine(np.arange(ref.size), e0, components, shared)
     planned = np.round(np.asarray(p["theta_i"], float)[ref], 6)
     incidences = tuple(readings.at(np.flatnonzero(planned == t), float(t), weights) for t in np.unique(planned))
     within = np.zeros(ref.size)
@@ -74,7 +72,7 @@ def _reference(rows: Readings, protocol, aperture) -> _Reference | None:
     consistency = {"reference_reduced_chi2": chi2 / (ref.size - 1)} if ref.size > 1 else {}
     total = mean * math.sqrt(sum(v**2 for v in relative.values()))
     return _Reference(float(mean), float(total), {k: float(v) for k, v in relative.items()}, consistency, record,
-                      incidences, readings.linearity(np.arange(ref.size)))
+                      incidences, readings.linearity(np.arange(ref.size), weights))
 
 
 def _check_incidences(incidences: tuple[IncidenceCalibration, ...], sample_theta_i, warnings: list[str]) -> None:
@@ -120,19 +118,17 @@ class _ReferenceReadings:
     shared: dict[str, np.ndarray]
     jacobian: np.ndarray | None
 
-    def linearity(self, members: np.ndarray) -> np.ndarray | None:
-        """The combined readings' sensitivity to the linearity coefficients (their weights)."""
-        if self.jacobian is None:
-            return None
-        return np.array([combine(members, column, self.components, self.shared)[0] for column in self.jacobian.T])
+    def linearity(self, members: np.ndarray, weights: np.ndarray) -> np.ndarray | None:
+        """The sensitivity to the linearity coefficients of the readings ``members``
+        combined with ``weights``."""
+        return None if self.jacobian is None else weights @ self.jacobian[members]
 
     def at(self, members: np.ndarray, theta_i: float, weights: np.ndarray) -> IncidenceCalibration:
         """The irradiance from the readings ``members`` (those at one lamp polar angle)."""
-        mean, parts, _, varying = combine(members, self.e0, self.components, self.shared)
-        own = 1.0 / varying**2 if np.all(varying > 0) else np.ones(members.size)
+        mean, parts, _, _, own = combine(members, self.e0, self.components, self.shared)
         return IncidenceCalibration(theta_i, float(mean), float(math.sqrt(sum(v**2 for v in parts.values())) / mean),
                                     float(weights[members].sum()), tuple(int(m) for m in members),
-                                    tuple(float(w) for w in own / own.sum()), self.linearity(members))
+                                    tuple(float(w) for w in own), self.linearity(members, own))
 
 
 def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = True) -> Reduced:
