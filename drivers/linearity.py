@@ -58,8 +58,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["LinearityResult", "correction_factor", "correction_slope", "correction_jacobian", "fit_linearity", "linearity_error",
-           "series_exposures", "acquire_linearity"]
+__all__ = ["LinearityResult", "correction_factor", "correction_slope", "correction_jacobian", "fit_linearity",
+           "linearity_error", "series_exposures", "acquire_linearity"]
 
 #: Lowest level of the series as a fraction of its top exposure (EMVA 1288: 5 % of saturation).
 LOWEST_LEVEL = 0.05
@@ -167,7 +167,8 @@ def _powers(signal: np.ndarray, signal_range: float) -> np.ndarray:
     return np.stack([x, x * x], axis=-1)
 
 
-def correction_factor(signal: np.ndarray | float, coefficients: Sequence[float], signal_range: float) -> np.ndarray:
+def correction_factor(signal: np.ndarray | float, coefficients: Sequence[float],
+                      signal_range: float) -> np.ndarray:
     """``S_linear / S = 1 + c1 x + c2 x^2`` for signals ``S`` [DN above the dark level].
 
     Examples

@@ -102,7 +102,7 @@ class LinearityCorrection:
     ``S`` [DN above the dark level] (:mod:`drivers.linearity`, which measures and fits it).
     The error of (c1, c2) is common to every reading of the recording: a reading's
     relative error is ``jacobian(S) @ dc``, so the correction's uncertainty is a
-    covariance between values (:meth:`covariance`), not a per-reading noise.
+    covariance between values (:meth:`value_covariance`), not a per-reading noise.
 
     Attributes
     ----------
@@ -161,13 +161,13 @@ class LinearityCorrection:
         return correction_jacobian(signal, self.coefficients, self.signal_range)
 
     @staticmethod
-    def covariance(values: np.ndarray, jacobian: np.ndarray, coefficient_covariance: np.ndarray) -> np.ndarray:
+    def value_covariance(values: np.ndarray, jacobian: np.ndarray, coefficient_covariance: np.ndarray) -> np.ndarray:
         """Covariance of ``values`` from the correction's coefficients: ``(v J) C (v J)^T``.
 
         Examples
         --------
         >>> J = np.array([[0.5, 0.25], [0.25, 0.0625]])
-        >>> LinearityCorrection.covariance(np.array([2.0, 1.0]), J, np.diag([1e-8, 1e-8])).round(12).tolist()
+        >>> LinearityCorrection.value_covariance(np.array([2.0, 1.0]), J, np.diag([1e-8, 1e-8])).round(12).tolist()
         [[1.25e-08, 2.812e-09], [2.812e-09, 6.64e-10]]
         """
         scaled = np.asarray(values, float)[:, None] * np.asarray(jacobian, float)

@@ -93,7 +93,11 @@ def test_the_series_is_recorded_and_its_uncertainty_is_a_covariance(recordings):
     reduced = acquisition.reduce_recording(recordings["nonlinear"])
     assert reduced.linearity_jacobian.shape == (len(reduced.radiance), 2)
     linear = reduced.budget["linearity"]
-    assert np.all(linear > 0) and np.all(linear < reduced.radiance_sigma)
+    # the component is |x| sqrt(d C d^T) of the recorded series (d relative to E_0's)
+    d = reduced.linearity_jacobian - reduced.reference_linearity
+    expected = np.abs(reduced.radiance) * np.sqrt(np.einsum("ni,ij,nj->n", d, np.array(series["covariance"]), d))
+    np.testing.assert_allclose(linear, expected, rtol=1e-12)
+    assert np.all(linear > 0)
     covariance = reduced.covariance()
     np.testing.assert_allclose(np.sqrt(np.diag(covariance)), reduced.radiance_sigma, rtol=1e-12)
     assert np.linalg.eigvalsh(covariance).min() > 0

@@ -6,7 +6,10 @@ import sys
 import time
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # loaded on use: the command line starts without the fitting stack
+    from gonio.fitting import Dataset, Prior
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -212,7 +215,8 @@ class _Progress:
         print(f"  mcmc: step {steps}/{max_steps}, max tau = {tau:.1f}{need}", file=sys.stderr, flush=True)
 
 
-def _load(path: Path, quantity: str | None, calibration: str = "common", linearity: bool = True):
+def _load(path: Path, quantity: str | None, calibration: str = "common",
+          linearity: bool = True) -> tuple[Dataset, dict[str, Prior]]:
     """A CSV file, or a recording folder written by 'gonio run' (reduced here).
 
     Returns the dataset and the priors it implies: for a calibrated recording fitted as

@@ -555,7 +555,10 @@ class FitProblem:
         elif not self.jitter:
             # L^-1 once, then one matrix product per batch: LAPACK's triangular solve of a
             # few dozen right-hand sides is threaded and took 10 ms on a loaded 2-core machine
-            # (the product 0.01 ms); the same whitened residuals to rounding
+            # (the product 0.01 ms); the same whitened residuals to rounding. An explicit
+            # inverse loses about cond(L) times the rounding of a solve: harmless for the
+            # reduction's covariances (a diagonal dominated by each value's own noise), to
+            # be revisited for a covariance near singular.
             if self._whitener is None:
                 from scipy.linalg import solve_triangular
 

@@ -90,7 +90,8 @@ def combine(members: np.ndarray, value: np.ndarray, budget: Mapping[str, np.ndar
 
 
 def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarray, resolution: Mapping[int, float],
-                   carried: np.ndarray | None = None):
+                   carried: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], np.ndarray, list[dict], np.ndarray | None]:
     """Combine the readings of each planned geometry at their mean readback geometry.
 
     Repeats of a geometry sit at slightly different real angles (the stage's

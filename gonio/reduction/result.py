@@ -4,11 +4,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
 from ..uncertainty import COMPONENTS, LinearityCorrection
+
+if TYPE_CHECKING:  # gonio.fitting imports the reduction's results: imported where used
+    from ..fitting import Dataset, Prior
 
 __all__ = ["Reduced", "IncidenceCalibration", "CALIBRATIONS", "COMMON_CALIBRATION", "ANGULAR_BEHAVIOUR",
            "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT"]
@@ -203,8 +206,8 @@ class Reduced:
         np.fill_diagonal(covariance, total**2 - linear**2)
         if self.linearity_jacobian is not None:
             reference = 0.0 if linearity_reference is None else linearity_reference
-            covariance += LinearityCorrection.covariance(self.radiance, self.linearity_jacobian - reference,
-                                                         self.linearity_covariance)
+            covariance += LinearityCorrection.value_covariance(self.radiance, self.linearity_jacobian - reference,
+                                                               self.linearity_covariance)
         return covariance
 
     # -- the calibration per incidence -----------------------------------------------------
@@ -370,7 +373,7 @@ class Reduced:
             )
 
     # -- datasets --------------------------------------------------------------------------
-    def relative_radiance(self, calibration: str = "common"):
+    def relative_radiance(self, calibration: str = "common") -> Dataset:
         """Dataset of relative radiance (quantity ``'radiance'``: fit with a free scale).
 
         With ``calibration="per-incidence"`` every value is brought to the common level by
@@ -392,7 +395,7 @@ class Reduced:
         return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
                        quantity="radiance", label=self.label, metadata=metadata, covariance=covariance)
 
-    def normalised_radiance(self):
+    def normalised_radiance(self) -> Dataset:
         """Dataset of L(theta_r)/L(0) per incidence (Oren & Nayar section 5, Figs 16-22).
 
         Each lamp direction is normalised by its own normal-view measurement (planned
@@ -433,7 +436,7 @@ class Reduced:
                        quantity="normalised_radiance", label=self.label, metadata=self._dataset_metadata(),
                        covariance=covariance)
 
-    def brdf(self, calibration: str = "common"):
+    def brdf(self, calibration: str = "common") -> Dataset:
         """Dataset of absolute BRDF [1/sr], calibrated by the reference standard.
 
         ``f = L / (E_0 cos theta_i)``; the covariance adds the calibration's relative
@@ -469,11 +472,11 @@ class Reduced:
         return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
                        quantity="brdf", label=self.label, metadata=self._dataset_metadata(), covariance=covariance)
 
-    def best_dataset(self):
+    def best_dataset(self) -> Dataset:
         """Absolute BRDF when calibrated, else normalised radiance."""
         return self.brdf() if self.reference_irradiance is not None else self.normalised_radiance()
 
-    def fit_inputs(self, calibration: str = "common"):
+    def fit_inputs(self, calibration: str = "common") -> tuple[Dataset, dict[str, Prior]]:
         """The dataset and priors a fit of this recording should use.
 
         With a reference standard: relative radiance, whose ``scale`` (the lamp irradiance
