@@ -2,35 +2,36 @@
 
 The emulated rig measures the Oren & Nayar Fig 16 (plane of incidence, theta_i = 30, 45,
 60 deg) and Fig 19 (off-plane, theta_i = 60 and 75 deg) protocols as shipped, each with
-its diffuse reflectance standard, on a sample of the fitted model's own family
-(``oren-nayar``, sigma = 30 deg, rho = 0.9, ir_weight = 1), so that what a fit gets
-wrong is the systematic's doing.  Each condition switches on one systematic error of
-the ``lab`` preset (docs/emulator.md, "Systematic errors") with its seeded magnitude, or
-all of them (``lab``), or none (``ideal``); the two recordings are reduced and joined,
-and ``oren-nayar`` (ir_weight fixed at 1) is fitted twice with the dataset and
-calibration prior of ``Reduced.fit_inputs()``:
+its diffuse reflectance standard (read at every lamp polar angle), on a sample of the
+fitted model's own family (``oren-nayar``, sigma = 30 deg, rho = 0.9, ir_weight = 1), so
+that what a fit gets wrong is the systematic's doing.  Each condition switches on one
+systematic error of the ``lab`` preset (docs/emulator.md, "Systematic errors") with its
+seeded magnitude, or all of them (``lab``), or none (``ideal``); the two recordings are
+reduced and joined, and ``oren-nayar`` (ir_weight fixed at 1) is fitted twice with the
+relative radiance and calibration prior of ``Reduced.fit_inputs()``:
 
-- **ignored**: the plain fit, as ``gonio fit RECORDING`` does it;
-- **modelled**: what gonio can do about that systematic (:data:`CONDITIONS`): the
-  alignment parameters for zero offsets and sample tilt, the stray-light parameter for
-  stray light, a relative extra-noise term (``rel_jitter``) for the camera's
-  non-linearity (which gonio does not model: the term only makes the intervals honest
-  about the scatter it adds), normalised radiance for the beam profile (each
-  incidence's level divided out), all of these together for ``lab``.
+- **ignored**: nothing done about any systematic: the readings as read (no linearity
+  correction), one common calibration, no rig-error parameter (the plain fit
+  ``gonio fit RECORDING --no-linearity-correction``);
+- **modelled**: what gonio does about it (:data:`CONDITIONS`), on the reduction's default
+  readings (corrected by the camera's linearity series): the alignment parameters for zero
+  offsets and sample tilt, the stray-light parameter for stray light, the linearity
+  correction alone for the camera's non-linearity, the calibration per lamp polar angle
+  for the beam profile, all of these for ``lab``; on the ideal rig all of them too (their
+  price), the rig-error parameters alone, and the calibration per incidence alone (its
+  price on a uniform beam).
 
-Both fits are least squares with the Laplace (Gaussian) interval of the posterior mode,
-value +- 1.96 standard errors, unless ``--mcmc``; by default the ``offsets`` modelled fit
-of the first seed is also sampled with MCMC (emcee, gonio's convergence rule) to compare
-its 95 % intervals with the Laplace ones.
-Recorded per fit: value, standard error, z = (value - truth) / error, whether the 95 %
-interval holds the truth, reduced chi-square and the goodness-of-fit verdict, the fitted
-rig errors against the truth.  The speed of the alignment parameters is measured as the
-time of one likelihood evaluation of 32 walkers with free alignment against the plain
-fixed-geometry path, on the same dataset in the same run.
+The ignored fits are least squares with the Laplace (Gaussian) interval of the posterior
+mode, value +- 1.96 standard errors; the modelled fits are sampled with MCMC (emcee,
+gonio's convergence rule: 50 tau, R-hat < 1.01), their Laplace numbers kept beside
+(``--no-mcmc``: Laplace everywhere).  Recorded per fit: value, standard error (half the
+16-84 % range for MCMC), z = (value - truth) / error, whether the 95 % interval holds the
+truth, reduced chi-square and the goodness-of-fit verdict, the fitted rig errors against
+the truth, the seconds it took.
 
 Writes docs/benchmarks/systematics.json and systematics.png.
-Run: ``python benchmarks/bench_systematics.py`` (about ten minutes of CPU on one core);
-``--seeds N`` (default 3), ``--mcmc`` (every fit with MCMC: hours).
+Run: ``python benchmarks/bench_systematics.py`` (about half an hour on the 2-core machine);
+``--seeds N`` (default 3), ``--no-mcmc``, ``--chart-only``.
 """
 from __future__ import annotations
 
@@ -73,8 +74,8 @@ class Condition:
     modelled: str
     alignment: tuple[str, ...] = ()
     stray_light: bool = False
-    jitter: str | None = None
-    quantity: str | None = None  # None: the fit_inputs() dataset
+    calibration: str = "common"
+    short: str = ""  # the label on the chart's axis, when shorter than ``label``
 
     def realism(self, seed: int):
         """The rig's systematics: the lab preset of ``seed`` with only these switched on."""
@@ -84,27 +85,34 @@ class Condition:
         return lab.only(*self.switched_on) if self.switched_on else realism("ideal", seed)
 
     def fit_options(self) -> dict[str, Any]:
-        return {"alignment": self.alignment, "stray_light": self.stray_light, "jitter": self.jitter or False}
+        return {"alignment": self.alignment, "stray_light": self.stray_light}
 
 
+LAB = ANGULAR + ("stray_light", "nonlinearity", "beam_falloff")
 CONDITIONS = (
-    Condition("ideal", "ideal rig", (), "all rig errors as parameters (the price of modelling them)", ANGULAR, True),
+    Condition("ideal", "ideal rig", (), "every remedy (their price): the six rig-error parameters, the calibration "
+              "per incidence, the linearity correction", ANGULAR, True, "per-incidence"),
+    Condition("ideal_rig_errors", "ideal rig, rig-error parameters", (),
+              "the six rig-error parameters alone (their price)", ANGULAR, True, short="ideal: rig errors"),
+    Condition("ideal_per_incidence", "ideal rig, per-incidence calibration", (),
+              "the calibration per incidence alone (its price on a uniform beam)", calibration="per-incidence",
+              short="ideal: per incidence"),
     Condition("offsets", "axis zero offsets", ANGULAR[:3], "view_offset, theta_i_offset, phi_i_offset", ANGULAR[:3]),
     Condition("tilt", "sample tilt", ANGULAR[3:], "tilt_x, tilt_y", ANGULAR[3:]),
     Condition("stray", "stray light", ("stray_light",), "stray_light", stray_light=True),
     Condition("nonlinearity", "camera non-linearity", ("nonlinearity",),
-              "not modelled; relative extra noise (rel_jitter) for its scatter", jitter="relative"),
-    Condition("beam", "lamp beam profile", ("beam_falloff",),
-              "not modelled; normalised radiance divides each incidence's level out", quantity="normalised_radiance"),
-    Condition("lab", "lab preset (all)", ANGULAR + ("stray_light", "nonlinearity", "beam_falloff"),
-              "alignment and stray_light parameters, rel_jitter, normalised radiance", ANGULAR, True, "relative",
-              "normalised_radiance"),
+              "the camera's linearity series: every reading corrected"),
+    Condition("beam", "lamp beam profile", ("beam_falloff",), "calibration per lamp polar angle",
+              calibration="per-incidence"),
+    Condition("lab", "lab preset (all)", LAB, "all of the above: alignment and stray_light parameters, the "
+              "calibration per incidence, the linearity correction", ANGULAR, True, "per-incidence"),
 )
 
 
 # --------------------------------------------------------------------------- measuring
 def measure(condition: Condition, seed: int, scratch: Path):
-    """Record both protocols on one emulated rig with the condition's systematics; reduced."""
+    """Record both protocols on one emulated rig with the condition's systematics; reduced
+    with the readings as read (key False) and corrected by the linearity series (True)."""
     from gonio import acquisition, protocols
     from gonio.cli.realism import realism_metadata
     from gonio.cli.run import emulated_rig
@@ -122,19 +130,13 @@ def measure(condition: Condition, seed: int, scratch: Path):
             acquisition.run_protocol(protocol, rig, folder, metadata=metadata, clock=emulator.control.now,
                                      change_sample=lambda which, r=reflectance: change_sample(which, r))
             folders.append(folder)
-    reduced = acquisition.combine_reduced([acquisition.reduce_recording(f) for f in folders])
+    reduced = {linear: acquisition.combine_reduced([acquisition.reduce_recording(f, linearity=linear)
+                                                    for f in folders]) for linear in (False, True)}
     shutil.rmtree(scratch / f"{condition.key}-{seed}", ignore_errors=True)
     return reduced, systematics
 
 
 # --------------------------------------------------------------------------- fitting
-def dataset_of(reduced, quantity: str | None):
-    """The dataset and priors of a fit: fit_inputs(), or another quantity without priors."""
-    if quantity is None:
-        return reduced.fit_inputs()
-    return {"normalised_radiance": reduced.normalised_radiance, "brdf": reduced.brdf}[quantity](), {}
-
-
 def summarise(result, systematics, seconds: float) -> dict[str, Any]:
     """The numbers of one fit against the truth (module docstring)."""
     ls = result.least_squares
@@ -166,40 +168,21 @@ def summarise(result, systematics, seconds: float) -> dict[str, Any]:
     return out
 
 
-def fit_both(condition: Condition, reduced, systematics, seed: int, mcmc_modelled: bool, mcmc_all: bool):
-    """The ignored and the modelled fit of one recording."""
+def fit_both(condition: Condition, reduced, systematics, seed: int, mcmc: bool):
+    """The ignored and the modelled fit of one recording (module docstring)."""
     from gonio.fitting import ConvergenceWarning, fit
 
-    dataset, priors = reduced.fit_inputs()
     out = {}
-    arms = (("ignored", dataset, priors, {}, mcmc_all),
-            ("modelled", *dataset_of(reduced, condition.quantity), condition.fit_options(), mcmc_all or mcmc_modelled))
-    for arm, data, arm_priors, options, mcmc in arms:
+    arms = (("ignored", *reduced[False].fit_inputs(), {}, False),
+            ("modelled", *reduced[True].fit_inputs(condition.calibration), condition.fit_options(), mcmc))
+    for arm, data, priors, options, sample in arms:
         start = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)  # recorded: "converged"
-            result = fit(data, MODEL, FIXED, priors=arm_priors, mcmc=mcmc, seed=seed, **options)
+            result = fit(data, MODEL, FIXED, priors=priors, mcmc=sample, seed=seed, **options)
         out[arm] = summarise(result, systematics, time.perf_counter() - start)
+        out[arm]["calibration"] = data.metadata.get("calibration", "common")
     return out
-
-
-# --------------------------------------------------------------------------- speed
-def likelihood_speed(reduced, repeats: int = 5) -> dict[str, Any]:
-    """One likelihood evaluation of 32 walkers: free alignment against the plain path."""
-    from _common import best_time
-    from gonio.fitting import FitProblem
-
-    dataset, _ = reduced.fit_inputs()
-    plain = FitProblem(MODEL, dataset, FIXED)
-    aligned = FitProblem(MODEL, dataset, FIXED, alignment="all")
-    rng = np.random.default_rng(0)
-    centre = [0.9, 30.0, reduced.reference_irradiance]
-    walkers = np.array([centre] * 32) * (1 + 1e-4 * rng.standard_normal((32, 3)))
-    with_offsets = np.column_stack([walkers, rng.normal(0.0, 0.2, (32, 5))])
-    t_plain = best_time(lambda: plain.log_likelihood_batch(walkers), repeats)
-    t_aligned = best_time(lambda: aligned.log_likelihood_batch(with_offsets), repeats)
-    return {"walkers": 32, "n_data": dataset.n, "plain_seconds": t_plain, "aligned_seconds": t_aligned,
-            "ratio_aligned_over_plain": t_aligned / t_plain}
 
 
 # --------------------------------------------------------------------------- summary
@@ -250,7 +233,7 @@ def chart(records: list[dict[str, Any]], path: Path) -> None:
         bottom.set_yscale("log")
         bottom.axhline(1.0, color="0.5", lw=0.8)
         bottom.set_title(f"{name}: standard error / the ideal rig's plain fit")
-        bottom.set_xticks(range(len(keys)), [c.label for c in CONDITIONS], rotation=30, ha="right")
+        bottom.set_xticks(range(len(keys)), [c.short or c.label for c in CONDITIONS], rotation=30, ha="right")
         for ax in (top, bottom):
             ax.grid(axis="y", alpha=0.3)
     axes[0, 0].set_ylabel("z (symmetric log scale)")
@@ -265,7 +248,6 @@ def chart(records: list[dict[str, Any]], path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=3, help="emulator seeds per condition (default 3)")
-    parser.add_argument("--mcmc", action="store_true", help="sample every fit with MCMC (hours)")
     parser.add_argument("--no-mcmc", action="store_true", help="no MCMC at all (Laplace intervals only)")
     parser.add_argument("--chart-only", action="store_true", help="redraw the chart from the JSON of the last run")
     args = parser.parse_args(argv)
@@ -278,21 +260,18 @@ def main(argv: list[str] | None = None) -> int:
     began, cpu_began, load_before = time.perf_counter(), time.process_time(), os.getloadavg()[0]
     scratch = Path(tempfile.mkdtemp(prefix="gonio-systematics-"))
     records: list[dict[str, Any]] = []
-    speed = None
     try:
         for condition in CONDITIONS:
             for seed in range(args.seeds):
                 start = time.perf_counter()
                 reduced, systematics = measure(condition, seed, scratch)
-                mcmc_modelled = condition.key == "offsets" and seed == 0 and not args.no_mcmc
-                fits = fit_both(condition, reduced, systematics, seed, mcmc_modelled, args.mcmc)
+                fits = fit_both(condition, reduced, systematics, seed, not args.no_mcmc)
                 records.append({"condition": condition.key, "seed": seed, "systematics": systematics.to_dict(),
                                 **fits, "seconds": time.perf_counter() - start})
                 line = ", ".join(f"{arm} sigma z={fits[arm]['params']['sigma']['z']:+.2g}" for arm in fits
                                  if "sigma" in fits[arm]["params"])
-                print(f"{condition.key:<13} seed {seed}: {line} ({time.perf_counter() - start:.0f} s)", flush=True)
-                if condition.key == "lab" and seed == 0:
-                    speed = likelihood_speed(reduced)
+                print(f"{condition.key:<20} seed {seed}: {line} ({time.perf_counter() - start:.0f} s, modelled "
+                      f"{fits['modelled']['seconds']:.0f} s)", flush=True)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     OUT.mkdir(parents=True, exist_ok=True)
@@ -304,7 +283,9 @@ def main(argv: list[str] | None = None) -> int:
         "seeds": args.seeds,
         "conditions": [{"key": c.key, "label": c.label, "switched_on": list(c.switched_on), "modelled": c.modelled}
                        for c in CONDITIONS],
-        "coverage": coverage(records), "likelihood_speed": speed, "records": records,
+        "coverage": coverage(records), "records": records,
+        "fit_seconds": {arm: {c.key: [r[arm]["seconds"] for r in records if r["condition"] == c.key]
+                              for c in CONDITIONS} for arm in ("ignored", "modelled")},
         "wall_seconds": time.perf_counter() - began, "cpu_seconds": time.process_time() - cpu_began,
         "load_average_before_after": [load_before, os.getloadavg()[0]], "machine": machine(),
     }

@@ -11,7 +11,9 @@ Besides the protocol's points a run records what the reduction needs to state ho
 uncertainties (:mod:`gonio.reduction`, docs/acquisition.md):
 
 - the camera's photon-transfer characterisation (EMVA 1288: system gain, dark noise,
-  PRNU), measured once per recording at the first point;
+  PRNU), measured once per recording at the first point, and its linearity (a series of
+  exposures at constant irradiance, with the correction the reduction applies) at the
+  same geometry after the last point;
 - with a lamp monitor, its dark offset and noise, measured once per recording with the
   lamp off; every exposure then carries the monitor's reading;
 - without one, the protocol's lamp checks: a fixed geometry re-measured with several
@@ -33,6 +35,8 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import numpy as np
+
+from drivers.errors import DriverError
 
 from . import __version__
 from .data import RecordingError, RecordingWriter, point_key
@@ -330,7 +334,8 @@ def characterise_camera(rig, point: PlannedPoint, protocol: Protocol) -> dict[st
     The automatic exposure at the point sets the brightest exposure; six exposures from
     10 % to 100 % of it give pairs of light and dark ROI frames
     (:func:`drivers.ptc.acquire_photon_transfer`). Returns the system gain, the temporal
-    dark variance law and the PRNU for metadata["camera"].
+    dark variance law and the PRNU for metadata["camera"] (the linearity is measured at
+    the end of the run, :func:`characterise_linearity`).
     """
     from drivers.ptc import acquire_photon_transfer
 
@@ -349,6 +354,46 @@ def characterise_camera(rig, point: PlannedPoint, protocol: Protocol) -> dict[st
     }
 
 
+#: What makes a linearity series fail without stopping the run (recorded as the series'
+#: ``error``; a resume measures it again): an instrument's error or timeout, and a series
+#: the fit refuses (too few levels, no signal, a singular design). Anything else is a
+#: fault of the program and stops the run like one.
+SERIES_FAILURES = (DriverError, OSError, ValueError)
+
+
+def characterise_linearity(rig, camera: Mapping[str, Any], protocol: Protocol,
+                           monitor_offset: float = 0.0) -> dict[str, Any]:
+    """The camera's linearity series at the photon transfer's geometry (EMVA 1288), or why it failed.
+
+    Measured once per recording after its last point, on the sample, at the geometry and
+    from the brightest exposure of the photon transfer ``camera`` (metadata["camera"]):
+    exposures from 5 % to 100 % of the longest unsaturated one give the correction the
+    reduction applies (:func:`drivers.linearity.acquire_linearity`). After the points, so
+    that a seeded emulated run measures its points with the same random draws as
+    without the series.
+    """
+    from drivers.linearity import acquire_linearity
+
+    try:
+        theta_i, phi_i, view = camera["geometry"]
+        gain, dark, rate = (float(camera[k]) for k in ("system_gain_dn_per_e", "dark_variance_dn2",
+                                                         "dark_variance_rate_dn2_per_s"))
+        start = max(float(t) for t in camera["exposures_s"])
+        rig.measure(theta_i, phi_i, view, exposure=start, settle_time=protocol.rig.settle_time)
+        result = acquire_linearity(rig, start, gain, lambda t: dark + max(rate, 0.0) * t,
+                                   max_exposure=protocol.exposure.max_time, monitor_offset=monitor_offset)
+    except SERIES_FAILURES as error:  # the instrument, or a series the fit refuses: readings not corrected
+        return {"error": f"linearity series failed ({type(error).__name__}: {error})"}
+    return result.to_dict()
+
+
+def _series_missing(camera: Mapping[str, Any]) -> bool:
+    """Whether a recording's ``camera`` metadata lacks a linearity series, or holds only
+    one that failed (its ``error``): the series a run measures after its last point."""
+    series = camera.get("linearity")
+    return not isinstance(series, Mapping) or "error" in series
+
+
 class _Run:
     """State of one session of :func:`run_protocol` (what was measured, darks, sample mounted)."""
 
@@ -360,6 +405,7 @@ class _Run:
         self.measured_since_dark: int | None = None
         self.consecutive_errors = 0
         self.on_reference = False
+        self.prepared = False
         self.start_wall = time.perf_counter()
         self.start_instrument = clock()
 
@@ -367,6 +413,7 @@ class _Run:
     def prepare(self, lamp_voltage: float, warm_up: bool, first: PlannedPoint | None) -> None:
         """Motion settings, monitor dark, lamp on and warm, camera characterisation."""
         rig, stored = self.rig, self.writer.stored_metadata
+        self.prepared = True
         limits = self.protocol.rig
         if limits.velocity is not None or limits.acceleration is not None:
             rig.set_motion(limits.velocity, limits.acceleration)
@@ -380,6 +427,21 @@ class _Run:
             rig.wait_lamp_stable()
         if "camera" not in stored and first is not None and hasattr(rig, "roi_frame"):
             self.writer.update(camera=self._characterise(first))
+
+    def characterise_linearity(self, lamp_voltage: float, warm_up: bool) -> None:
+        """The camera's linearity series once per recording, after the last point
+        (:func:`characterise_linearity`): when the photon transfer succeeded and the
+        recording has no series yet, or only one that failed. A resumed session with no
+        point left to measure did not :meth:`prepare` the rig: the lamp is switched on
+        (and warmed) first."""
+        camera = self.writer.stored_metadata.get("camera", {})
+        if "system_gain_dn_per_e" not in camera or not _series_missing(camera):
+            return
+        if not self.prepared:
+            self.prepare(lamp_voltage, warm_up, None)
+        offset = self.writer.stored_metadata.get("monitor_dark", {}).get("offset_v", 0.0)
+        self.writer.update(camera={**camera, "linearity": characterise_linearity(self.rig, camera, self.protocol,
+                                                                                 offset)})
 
     def _characterise(self, point: PlannedPoint) -> dict[str, Any]:
         """The camera characterisation, or why it failed (the reduction then falls back)."""
@@ -575,6 +637,7 @@ def run_protocol(
             run.do(count, len(todo), job)
         if run.on_reference:
             change_sample("sample")
+        run.characterise_linearity(lamp_voltage, warm_up)
     except KeyboardInterrupt:
         run.finish("interrupted")
         raise

@@ -32,6 +32,7 @@ __all__ = [
     "LAMP_SOLID_ANGLE_SR",
     "CAMERA_SOLID_ANGLE_SR",
     "cone_half_angle",
+    "cone_offsets",
     "cone_quadrature",
     "aperture_averaged",
 ]
@@ -53,6 +54,22 @@ def cone_half_angle(solid_angle_sr: float) -> float:
     return math.degrees(math.acos(1.0 - solid_angle_sr / (2.0 * math.pi)))
 
 
+def cone_offsets(solid_angle_sr: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cubature points of a cone about its axis (Stroud S2:3-1 on the equal-area disk):
+    each point's angle from the axis [rad], its angle around the axis [rad] and its weight,
+    shapes (7,), the weights summing to 1 (:func:`cone_quadrature` places them about axes).
+
+    Examples
+    --------
+    >>> beta, around, weights = cone_offsets(0.003)
+    >>> float(beta[0]), round(float(np.degrees(beta[1])), 4), float(weights.sum())
+    (0.0, 1.4457, 1.0)
+    """
+    half = math.radians(cone_half_angle(solid_angle_sr))
+    r = _DISK_RADII * 2.0 * math.sin(half / 2.0)  # equal-area disk radius of the rim
+    return 2.0 * np.arcsin(r / 2.0), _DISK_ANGLES.copy(), _DISK_WEIGHTS.copy()
+
+
 def cone_quadrature(theta: ArrayLike, phi: ArrayLike, solid_angle_sr: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quadrature directions and weights averaging over cones about many axes.
 
@@ -72,16 +89,14 @@ def cone_quadrature(theta: ArrayLike, phi: ArrayLike, solid_angle_sr: float) -> 
     """
     t = np.radians(np.ravel(np.asarray(theta, float)))[:, None]
     p = np.radians(np.ravel(np.asarray(phi, float)))[:, None]
-    half = math.radians(cone_half_angle(solid_angle_sr))
-    r = _DISK_RADII * 2.0 * math.sin(half / 2.0)  # equal-area disk radius of the rim
-    beta = 2.0 * np.arcsin(r / 2.0)  # angle from the cone axis
+    beta, around, weights = cone_offsets(solid_angle_sr)
     cb, sb = np.cos(beta), np.sin(beta)
-    ca, sa = cb * 0 + np.cos(_DISK_ANGLES), np.sin(_DISK_ANGLES)
+    ca, sa = cb * 0 + np.cos(around), np.sin(around)
     axis = (np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t))
     e1 = (np.cos(t) * np.cos(p), np.cos(t) * np.sin(p), -np.sin(t))
     e2 = (-np.sin(p), np.cos(p), 0.0 * t)
     x, y, z = (cb * a + sb * ca * b + sb * sa * c for a, b, c in zip(axis, e1, e2))
-    return np.degrees(np.arctan2(np.hypot(x, y), z)), np.degrees(np.arctan2(y, x)), _DISK_WEIGHTS.copy()
+    return np.degrees(np.arctan2(np.hypot(x, y), z)), np.degrees(np.arctan2(y, x)), weights
 
 
 def aperture_averaged(

@@ -24,6 +24,7 @@ import numpy as np
 __all__ = [
     "COMPONENTS",
     "CameraModel",
+    "LinearityCorrection",
     "ccd_components",
     "pooled_excess_variance",
     "interpolate_drift",
@@ -42,6 +43,8 @@ COMPONENTS: dict[str, str] = {
     "lamp_flicker": "lamp flicker of the exposure (unmonitored; measured from checks or repeats)",
     "lamp_drift": "uncertainty of the lamp drift interpolated between checks (unmonitored)",
     "angle": "stage readback uncertainty times the local slope of the measured curve",
+    "linearity": "camera linearity correction's uncertainty, relative to the reference standard's readings "
+                 "(correlated between values)",
 }
 
 
@@ -89,6 +92,86 @@ class CameraModel:
         """
         scale = (np.asarray(gain, float) / self.gain_factor) ** 2
         return scale * (self.dark_variance + self.dark_variance_rate * np.asarray(exposure, float))
+
+
+@dataclass(frozen=True)
+class LinearityCorrection:
+    """The camera's linearity correction as characterised during a run (EMVA 1288 series).
+
+    ``S_linear = S (1 + c1 x + c2 x^2)``, ``x = S / signal_range``, for a reading's signal
+    ``S`` [DN above the dark level] (:mod:`drivers.linearity`, which measures and fits it).
+    The error of (c1, c2) is common to every reading of the recording: a reading's
+    relative error is ``jacobian(S) @ dc``, so the correction's uncertainty is a
+    covariance between values (:meth:`value_covariance`), not a per-reading noise.
+
+    Attributes
+    ----------
+    coefficients : numpy.ndarray
+        (c1, c2) [-].
+    covariance_matrix : numpy.ndarray
+        Their 2 x 2 covariance [-].
+    signal_range : float
+        ``S_ref``, the top of the series [DN].
+    """
+
+    coefficients: np.ndarray
+    covariance_matrix: np.ndarray
+    signal_range: float
+
+    @classmethod
+    def from_metadata(cls, camera: Mapping) -> "LinearityCorrection | None":
+        """From ``metadata["camera"]["linearity"]``; None when the series is missing or
+        failed (its ``error``).
+
+        Raises
+        ------
+        ValueError
+            A series record that cannot be read, naming what is wrong with it.
+        """
+        from drivers.linearity import LinearityResult
+
+        series = camera.get("linearity")
+        if series is None or (isinstance(series, Mapping) and "error" in series):
+            return None
+        try:
+            result = LinearityResult.from_dict(series)
+        except (KeyError, TypeError, ValueError) as error:
+            reason = f"no {error}" if isinstance(error, KeyError) else str(error)
+            raise ValueError(f"metadata camera.linearity cannot be read ({type(error).__name__}: {reason}); "
+                             "expected the record drivers.linearity.LinearityResult.to_dict writes") from None
+        return cls(result.coefficients, result.covariance, result.signal_range)
+
+    def factor(self, signal: np.ndarray) -> np.ndarray:
+        """``S_linear / S`` of signals [DN] (:func:`drivers.linearity.correction_factor`)."""
+        from drivers.linearity import correction_factor
+
+        return correction_factor(signal, self.coefficients, self.signal_range)
+
+    def slope(self, signal: np.ndarray) -> np.ndarray:
+        """``dS_linear / dS`` of signals [DN]: the factor of their errors
+        (:func:`drivers.linearity.correction_slope`)."""
+        from drivers.linearity import correction_slope
+
+        return correction_slope(signal, self.coefficients, self.signal_range)
+
+    def jacobian(self, signal: np.ndarray) -> np.ndarray:
+        """Relative sensitivity of corrected signals to (c1, c2), shape signal.shape + (2,)."""
+        from drivers.linearity import correction_jacobian
+
+        return correction_jacobian(signal, self.coefficients, self.signal_range)
+
+    @staticmethod
+    def value_covariance(values: np.ndarray, jacobian: np.ndarray, coefficient_covariance: np.ndarray) -> np.ndarray:
+        """Covariance of ``values`` from the correction's coefficients: ``(v J) C (v J)^T``.
+
+        Examples
+        --------
+        >>> J = np.array([[0.5, 0.25], [0.25, 0.0625]])
+        >>> LinearityCorrection.value_covariance(np.array([2.0, 1.0]), J, np.diag([1e-8, 1e-8])).round(12).tolist()
+        [[1.25e-08, 2.812e-09], [2.812e-09, 6.64e-10]]
+        """
+        scaled = np.asarray(values, float)[:, None] * np.asarray(jacobian, float)
+        return scaled @ np.asarray(coefficient_covariance, float) @ scaled.T
 
 
 def ccd_components(camera: CameraModel, signal: np.ndarray, exposure: np.ndarray, gain: np.ndarray,

@@ -6,7 +6,10 @@ import sys
 import time
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # loaded on use: the command line starts without the fitting stack
+    from gonio.fitting import Dataset, Prior
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -50,6 +53,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--stray-light", action="store_true",
                         help="fit the rig's stray light as a nuisance parameter: stray_light, the stray radiance as a "
                              "fraction of a white Lambertian's at normal incidence (uniform prior on [0, 0.05])")
+    parser.add_argument("--calibration", choices=["common", "per-incidence"], default="common",
+                        help="a recording's calibration by its reference standard: one lamp irradiance for every "
+                             "value ('common', the default: a uniform beam) or the irradiance the standard gave at "
+                             "each value's lamp polar angle ('per-incidence': a beam whose irradiance changes with "
+                             "the lamp's angle; needs the standard measured at every polar angle of the sample)")
+    parser.add_argument("--linearity-correction", action=argparse.BooleanOptionalAction, default=True,
+                        help="correct a recording's readings by its camera linearity series (default: yes)")
     parser.add_argument("--walkers", type=int, default=None,
                         help="number of emcee walkers (default 32, for every model: gonio.fitting.mcmc.default_walkers, chosen by measurement)")
     parser.add_argument("--max-steps", type=int, default=20000, help="step limit of the chain (default 20000)")
@@ -205,24 +215,36 @@ class _Progress:
         print(f"  mcmc: step {steps}/{max_steps}, max tau = {tau:.1f}{need}", file=sys.stderr, flush=True)
 
 
-def _load(path: Path, quantity: str | None):
+def _load(path: Path, quantity: str | None, calibration: str = "common",
+          linearity: bool = True) -> tuple[Dataset, dict[str, Prior]]:
     """A CSV file, or a recording folder written by 'gonio run' (reduced here).
 
     Returns the dataset and the priors it implies: for a calibrated recording fitted as
     it comes, relative radiance with the reference-standard prior on ``scale``
-    (gonio.acquisition.Reduced.fit_inputs).
+    (gonio.acquisition.Reduced.fit_inputs), calibrated as ``calibration`` says.
     """
+    from gonio.cli import CLIError
     from gonio.fitting import Dataset
 
     if not path.is_dir():
+        if calibration != "common" or not linearity:
+            raise CLIError(f"{path}: --calibration and --no-linearity-correction apply to recording folders, not "
+                           "to a CSV file of values")
         return Dataset.from_csv(path, quantity=quantity), {}
     from gonio.acquisition import reduce_recording
 
-    reduced = reduce_recording(path)
-    if quantity is None:
-        return reduced.fit_inputs()
-    return {"brdf": reduced.brdf, "normalised_radiance": reduced.normalised_radiance,
-            "radiance": reduced.relative_radiance}[quantity](), {}
+    reduced = reduce_recording(path, linearity=linearity)
+    try:
+        if quantity is None:
+            return reduced.fit_inputs(calibration)
+        if quantity == "normalised_radiance":
+            if calibration != "common":
+                raise ValueError("--calibration does not apply to normalised radiance (each incidence's level is "
+                                 "divided out, the calibration with it)")
+            return reduced.normalised_radiance(), {}
+        return {"brdf": reduced.brdf, "radiance": reduced.relative_radiance}[quantity](calibration), {}
+    except ValueError as error:
+        raise CLIError(f"{path}: {error}") from None
 
 
 def _alignment(items: list[str]) -> tuple[str, ...]:
@@ -246,7 +268,7 @@ def _run(args: argparse.Namespace) -> int:
     from gonio.fitting.results import EXIT_INADEQUATE
 
     data_path = Path(args.data)
-    dataset, priors = _load(data_path, args.quantity)
+    dataset, priors = _load(data_path, args.quantity, args.calibration, args.linearity_correction)
     fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
     options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
     alignment = _alignment(args.alignment)

@@ -20,7 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Reduce a recording written by 'gonio run': every measured geometry (repeats combined, at the "
             "geometry the stage read back) with its uncertainty split into components (shot and read noise, "
-            "dark, PRNU, lamp, angle) and the reference standard's calibration. Prints the budget table and "
+            "dark, PRNU, lamp, angle, linearity correction) and the reference standard's calibration (with its "
+            "irradiance at each lamp polar angle). Prints the budget table and "
             "writes reduced.csv and budget.json (docs/acquisition.md)."
         ),
     )
@@ -29,6 +30,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--lamp", choices=["auto", "monitor", "checks", "repeats", "none"], default="auto",
                         help="how lamp flicker and drift are handled (default: the monitor if recorded, "
                              "else the lamp checks, else the scatter of repeats)")
+    parser.add_argument("--linearity-correction", action=argparse.BooleanOptionalAction, default=True,
+                        help="correct the readings by the camera's linearity series of the recording (default: yes)")
     parser.add_argument("--overwrite", action="store_true", help="replace an earlier 'gonio reduce' output in --out")
     parser.set_defaults(func=_run)
 
@@ -59,7 +62,7 @@ def _run(args: argparse.Namespace) -> int:
         raise CLIError(f"{recording}: not a recording folder (expected the folder 'gonio run --out' wrote)")
     out = check_output_folder(args.out, "reduction") if args.out else recording.with_name(f"{recording.name}.reduced")
     _check_earlier_output(out, args.overwrite)
-    reduced = reduce_recording(recording, lamp=args.lamp)
+    reduced = reduce_recording(recording, lamp=args.lamp, linearity=args.linearity_correction)
     print(reduced.budget_table())
     if reduced.reference_irradiance is not None:
         print(f"reference irradiance E_0 = {reduced.reference_irradiance:.7g} +/- "

@@ -49,6 +49,10 @@ QUANTITY_LABELS = {
 CSV_COLUMNS = ("theta_i", "phi_i", "theta_r", "phi_r", "value", "sigma")
 
 _ANGLE_FIELDS = ("theta_i", "phi_i", "theta_r", "phi_r")
+#: Metadata entries with one item per value (a subset keeps its values' items): the
+#: planned lamp polar angle whose reference readings calibrated each value
+#: (gonio.reduction, a calibration per incidence).
+PER_VALUE_METADATA = ("incidence_theta_i",)
 # Two measurements belong to the same incidence when their source angles agree to this
 # tolerance [deg]; a manual source set-up (Oren & Nayar section 5) is repeatable to far
 # better than a tenth of a degree in the recorded value.
@@ -232,7 +236,7 @@ class Dataset:
             *(getattr(self, name)[select] for name in (*_ANGLE_FIELDS, "value", "sigma")),
             quantity=self.quantity,
             label=self.label,
-            metadata=self.metadata,
+            metadata={k: ([v[i] for i in select] if k in PER_VALUE_METADATA else v) for k, v in self.metadata.items()},
             covariance=None if self.covariance is None else self.covariance[np.ix_(select, select)],
         )
 

@@ -34,7 +34,16 @@ true signal (the same misalignment and stray light act on it) to the one the red
 assumed at its ``k``-th reading, and ``w_k`` the weights that combined the readings into
 ``E_0`` (``dataset.metadata["reference_standard"]``).  ``scale`` keeps its meaning, the
 lamp irradiance as the reference measured it, so its calibration prior stays the
-reference's measurement itself.
+reference's measurement itself.  With a calibration per incidence
+(``metadata["calibration"] == "per-incidence"``, gonio.reduction) each value was divided
+by the irradiance of the readings at its own lamp polar angle, and its ``c`` sums over
+those readings only, with their weights in that angle's irradiance
+(:func:`incidence_weights`).
+
+A fit with free alignment parameters evaluates ``oren-nayar`` and ``lambert`` through the
+rig's apertures with the compiled loop of :mod:`gonio.fitting.compiled_rig` (the same
+values to rounding, tested); other models, and one-off predictions, take the numpy path
+(:func:`~drivers.rig_geometry.misaligned_angles`, then the aperture-averaged model).
 
 Default priors: normal, N(0, 0.5 deg) within the +/-5 deg range, for the alignment
 (:data:`DEFAULT_PRIOR_SD`).  A rig aligned by eye and an alignment laser is off by a few
@@ -52,13 +61,14 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from drivers.rig_geometry import ALIGNMENT_ERRORS, misaligned_angles
+from gonio import models
 from gonio.models import Model, Param
 
 from .priors import Normal
 
 __all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG", "STRAY_LIGHT",
-           "RIG_ERROR_NAMES", "parse_alignment", "alignment_prior", "reference_calibration", "RigPrediction",
-           "is_identity"]
+           "RIG_ERROR_NAMES", "COMPILED_MODELS", "parse_alignment", "alignment_prior",
+           "reference_calibration", "incidence_weights", "RigPrediction", "is_identity"]
 
 #: Range of every alignment parameter [deg]: beyond it the rig is not misaligned but mis-built.
 ALIGNMENT_BOUND_DEG = 5.0
@@ -81,6 +91,8 @@ STRAY_LIGHT = Param("stray_light", "-", 0.0, (0.0, 0.05),
                     "stray radiance over the image as a fraction of E_0 / pi (a white Lambertian at normal incidence)")
 #: Every rig-error parameter.
 RIG_ERROR_NAMES = ALIGNMENT_NAMES + (STRAY_LIGHT.name,)
+#: Models whose misaligned aperture average has a compiled path (gonio.fitting.compiled_rig).
+COMPILED_MODELS = ("oren-nayar", "lambert")
 
 
 def parse_alignment(names: str | Iterable[str] | None) -> tuple[str, ...]:
@@ -155,6 +167,52 @@ def reference_calibration(metadata: Mapping[str, Any]) -> tuple[np.ndarray, np.n
     return geometry, weights / weights.sum(), reflectance
 
 
+def incidence_weights(metadata: Mapping[str, Any]) -> np.ndarray:
+    """Each value's weights of the reference readings under a calibration per incidence.
+
+    ``metadata["reference_standard"]`` holds, per reading, its planned lamp polar angle
+    (``incidence``) and its weight in that angle's irradiance (``incidence_weights``);
+    ``metadata["incidence_theta_i"]`` holds, per value, the planned angle of the readings
+    that calibrated it (both written by :mod:`gonio.reduction`): a value takes the readings
+    planned at its angle, as the reduction divided it by them.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (N, K), each row summing to 1.
+
+    Raises
+    ------
+    ValueError
+        A record without the per-reading angles and weights or the per-value angles, or a
+        value whose angle no reading shares (naming it).
+
+    Examples
+    --------
+    >>> record = {"geometry": [[30, 0, 10, 180], [60, 0, 10, 180], [60, 0, 10, 180]], "weights": [1, 1, 1],
+    ...           "reflectance": [0.99] * 3, "incidence": [30, 60, 60], "incidence_weights": [1, 0.4, 0.6]}
+    >>> incidence_weights({"reference_standard": record, "incidence_theta_i": [60.0, 30.0]}).tolist()
+    [[0.0, 0.4, 0.6], [1.0, 0.0, 0.0]]
+    """
+    record = metadata.get("reference_standard")
+    if isinstance(record, str):
+        record = json.loads(record)
+    try:
+        angle = np.round(np.asarray(record["incidence"], float).reshape(-1), 6)
+        within = np.asarray(record["incidence_weights"], float).reshape(-1)
+        theta = np.round(np.asarray(metadata["incidence_theta_i"], float).reshape(-1), 6)
+    except (TypeError, KeyError, ValueError):
+        raise ValueError("dataset metadata: a calibration per incidence needs reference_standard's 'incidence' "
+                         "(planned theta_i of each reading [deg]) and 'incidence_weights', and each value's "
+                         "'incidence_theta_i' (written by gonio.reduction)") from None
+    matched = theta[:, None] == angle[None, :]
+    unmatched = ~matched.any(axis=1)
+    if unmatched.any():
+        raise ValueError(f"calibration per incidence: no reference reading at theta_i = {theta[unmatched][0]:g} deg "
+                         f"(the readings are at {sorted(set(angle.tolist()))} deg)")
+    return np.where(matched, within[None, :], 0.0)
+
+
 class RigPrediction:
     """The measured quantity of a misaligned rig with stray light at recorded geometries
     (module docstring).
@@ -172,17 +230,25 @@ class RigPrediction:
         Model options.
     metadata : mapping
         The dataset's metadata (``reference_standard``, ``aperture_sr``).
+    compiled : bool
+        Evaluate misaligned geometries with the compiled kernel
+        (:mod:`gonio.fitting.compiled_rig`) when the model is one it knows (``oren-nayar``,
+        ``lambert``) seen through the rig's apertures: the same values to rounding, about
+        15 times faster, after loading numba (worth it for a fit, which evaluates the rig
+        thousands of times; not for one prediction).
     """
 
     def __init__(self, model: Model, quantity: str, geometry, options: Mapping[str, Any],
-                 metadata: Mapping[str, Any]) -> None:
-        from .problem import combine_prediction, evaluated_model  # problem imports this module
+                 metadata: Mapping[str, Any], compiled: bool = False) -> None:
+        from .problem import apertures_of, combine_prediction, evaluated_model  # problem imports this module
         from .dataset import Dataset
 
         self.model = model
         self.quantity = quantity
         self.options = dict(options)
         self._combine = combine_prediction
+        self._kernel = _kernel_model(model, self.options, apertures_of(metadata)) if compiled else None
+        self._compiled: dict[str, Any] = {}  # compiled rig radiance per geometry, built on first use
         self.geometry = tuple(np.asarray(g, float).reshape(-1) for g in np.broadcast_arrays(*geometry))
         self.cos_recorded = np.cos(np.radians(self.geometry[0]))
         ti, pi_ = self.geometry[0], self.geometry[1]
@@ -197,6 +263,14 @@ class RigPrediction:
                 lambert = evaluated_model("lambert", probe)  # the reduction's model of the standard
                 recorded = reflectance * self._signal(lambert, tuple(geometry_k.T))
                 self.reference = (lambert, tuple(geometry_k.T), weights, reflectance, recorded)
+        #: With a calibration per incidence (``metadata["calibration"]``), each value's
+        #: weights of the reference readings, (N, K): those of its lamp polar angle.
+        self.value_weights = None
+        if self.reference is not None and metadata.get("calibration") == "per-incidence":
+            self.value_weights = incidence_weights(metadata)
+            if self.value_weights.shape[0] != self.geometry[0].size:
+                raise ValueError(f"dataset metadata incidence_theta_i: {self.value_weights.shape[0]} angles for "
+                                 f"{self.geometry[0].size} values; expected one per value")
 
     @staticmethod
     def _signal(lambert: Model, geometry) -> np.ndarray:
@@ -205,13 +279,37 @@ class RigPrediction:
 
     def calibration_factor(self, alignment: Mapping[str, Any], stray_light: Any = 0.0) -> np.ndarray | float:
         """``c = 1 / sum_k w_k r_k``: what misalignment and stray light did to ``E_0`` (1
-        without a reference standard); shape (W, 1) for parameter columns of shape (W, 1)."""
+        without a reference standard); shape (W, 1) for parameter columns of shape (W, 1).
+        With a calibration per incidence, each value's ``c`` from the readings at its lamp
+        polar angle (:attr:`value_weights`): shape (N,) or (W, N)."""
         if self.reference is None:
             return 1.0
         lambert, geometry, weights, reflectance, recorded = self.reference
-        moved = geometry if is_identity(alignment) else misaligned_angles(*geometry, **alignment)
-        true = reflectance * self._signal(lambert, moved) + np.asarray(stray_light) / np.pi
+        if is_identity(alignment):
+            signal = self._signal(lambert, geometry)
+        elif self._kernel is not None:
+            signal = self._compiled_radiance("reference", alignment, {"rho": 1.0})
+        else:
+            signal = self._signal(lambert, misaligned_angles(*geometry, **alignment))
+        true = reflectance * signal + np.asarray(stray_light) / np.pi
+        if self.value_weights is not None:
+            return 1.0 / ((true / recorded) @ self.value_weights.T)
         return 1.0 / np.sum(weights * true / recorded, axis=-1, keepdims=True)
+
+    def _compiled_radiance(self, which: str, alignment: Mapping[str, Any], params: Mapping[str, Any]) -> np.ndarray:
+        """The compiled ``<f cos theta_i>`` at the true geometry of the recorded ``which``
+        ('data', 'normal' view or 'reference' standard) geometries [1/sr]."""
+        from .compiled_rig import CompiledRigRadiance
+
+        rig = self._compiled.get(which)
+        if rig is None:
+            base, apertures = self._kernel
+            if which == "reference":
+                base, recorded = models.get("lambert"), self.reference[1]
+            else:
+                recorded = self.geometry if which == "data" else self.normal_geometry
+            rig = self._compiled[which] = CompiledRigRadiance(base, recorded, apertures)
+        return rig(params, alignment)
 
     def _model_at(self, which: str, params: Mapping[str, Any], alignment: Mapping[str, Any]) -> np.ndarray:
         """``f cos(theta_i)`` at the true geometry of the recorded ``which`` ('data' or
@@ -221,6 +319,8 @@ class RigPrediction:
             if which not in self._fixed:
                 self._fixed[which] = self.model.at(*recorded, **self.options)
             return self._fixed[which].unchecked(**params) * self.cos_recorded
+        if self._kernel is not None:
+            return self._compiled_radiance(which, alignment, params)
         true = misaligned_angles(*recorded, **alignment)
         return self.model(*true, **params, **self.options) * np.clip(np.cos(np.radians(true[0])), 0.0, None)
 
@@ -247,6 +347,16 @@ class RigPrediction:
         params = {p.name: values.get(p.name, p.default) for p in self.model.params}
         alignment = {name: values[name] for name in ALIGNMENT_NAMES if name in values}
         return self(params, alignment, values.get("scale", 1.0), values.get(STRAY_LIGHT.name, 0.0))
+
+
+def _kernel_model(model: Model, options: Mapping[str, Any], apertures) -> tuple[Model, tuple[float, float]] | None:
+    """(base model, apertures) when ``model`` is a model of the compiled kernel averaged over
+    the dataset's apertures (``NAME@aperture``, :func:`gonio.fitting.problem.evaluated_model`)
+    without options; else None."""
+    name, _, through = model.name.partition("@")
+    if through != "aperture" or name not in COMPILED_MODELS or options or not apertures:
+        return None
+    return models.get(name), (float(apertures[0]), float(apertures[1]))
 
 
 def is_identity(alignment: Mapping[str, Any]) -> bool:

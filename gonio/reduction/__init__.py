@@ -14,8 +14,13 @@ docs/acquisition.md; in short:
   the protocol's check measurements and the flicker measured from their frames (or, with
   neither, from repeats); with none of these the budget says the lamp was not measured;
 - angle: the readback's quantisation times the local slope of the measured curve;
+- linearity: every reading corrected by the camera's linearity series (measured after the
+  run's last point, :mod:`drivers.linearity`); the correction's uncertainty is common to
+  the readings, a covariance between values relative to the reference standard's;
 - calibration: the reference standard reduced exactly like the sample (same budget, the
-  same aperture average the fit uses), its certificate and its departure from Lambertian.
+  same aperture average the fit uses), its certificate and its departure from Lambertian;
+  one ``E_0`` for every value, or (``calibration="per-incidence"`` of the datasets) the
+  irradiance the standard gave at each lamp polar angle, for a beam that is not uniform.
 
 Nothing is dropped silently: saturated points are excluded and counted, points with
 little or negative signal are kept with their uncertainty and flagged ``low_signal``.
@@ -32,7 +37,8 @@ from __future__ import annotations
 
 from .readings import CHECK_BLOCK, REFERENCE_BLOCK, Readings, read_readings
 from .recording import combine_reduced, reduce_recording
-from .result import LOW_SIGNAL_SIGMAS, REDUCTION_FORMAT, SATURATED_MAJORITY, Reduced
+from .result import CALIBRATIONS, LOW_SIGNAL_SIGMAS, REDUCTION_FORMAT, SATURATED_MAJORITY, IncidenceCalibration, Reduced
 
-__all__ = ["Reduced", "Readings", "reduce_recording", "read_readings", "combine_reduced", "REFERENCE_BLOCK",
-           "CHECK_BLOCK", "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT"]
+__all__ = ["Reduced", "IncidenceCalibration", "Readings", "reduce_recording", "read_readings", "combine_reduced",
+           "REFERENCE_BLOCK", "CHECK_BLOCK", "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT",
+           "CALIBRATIONS"]

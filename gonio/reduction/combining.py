@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Mapping, NamedTuple
 
 import numpy as np
 
@@ -12,7 +12,7 @@ from .geometry import AXES, DEFAULT_RESOLUTION, geometry_slopes
 if TYPE_CHECKING:
     from .readings import Readings
 
-__all__ = ["scatter_fraction", "combine", "combine_groups"]
+__all__ = ["scatter_fraction", "Combined", "combine", "combine_groups"]
 
 def scatter_fraction(labels: np.ndarray) -> float:
     """Share of a component's variance that shows in the scatter of readings about their mean.
@@ -29,8 +29,25 @@ def scatter_fraction(labels: np.ndarray) -> float:
     return float((n - np.sum(sizes**2) / n) / (n - 1))
 
 
+class Combined(NamedTuple):
+    """Readings combined by :func:`combine`."""
+
+    #: The inverse-variance mean.
+    mean: float
+    #: Standard uncertainty of the mean by component.
+    components: dict[str, float]
+    #: Chi-square of the readings about the mean with the part of the budget that varies
+    #: between them (:func:`scatter_fraction`).
+    chi2: float
+    #: That part per reading (the repeat scatter it predicts).
+    varying: np.ndarray
+    #: Each reading's weight in the mean (summing to 1): any other quantity of the readings
+    #: (e.g. their sensitivity to a correction) is averaged as ``weights @ quantity``.
+    weights: np.ndarray
+
+
 def combine(members: np.ndarray, value: np.ndarray, budget: Mapping[str, np.ndarray],
-             shared: Mapping[str, np.ndarray] | None = None) -> tuple[float, dict[str, float], float, np.ndarray]:
+             shared: Mapping[str, np.ndarray] | None = None) -> Combined:
     """Inverse-variance mean of readings with each component combined by its correlations.
 
     Parameters
@@ -50,14 +67,9 @@ def combine(members: np.ndarray, value: np.ndarray, budget: Mapping[str, np.ndar
 
     Returns
     -------
-    mean : float
-    components : dict of float
-        Standard uncertainty of the mean by component.
-    chi2 : float
-        Chi-square of the readings about the mean with the part of the budget that
-        varies between them (:func:`scatter_fraction`).
-    varying : numpy.ndarray
-        That part per reading (the repeat scatter it predicts).
+    Combined
+        The mean, its components, the chi-square, the varying part of each reading's
+        budget and each reading's weight.
     """
     shared = shared or {}
     fractions = {name: scatter_fraction(shared[name][members]) if name in shared else 1.0 for name in budget}
@@ -74,10 +86,12 @@ def combine(members: np.ndarray, value: np.ndarray, budget: Mapping[str, np.ndar
             contribution = np.bincount(block.ravel(), weights=contribution)
         out[name] = float(np.sqrt(np.sum(contribution**2)))
     chi2 = float(np.sum(((value[members] - mean) / np.where(varying > 0, varying, np.inf)) ** 2)) if len(members) > 1 else 0.0
-    return mean, out, chi2, varying
+    return Combined(mean, out, chi2, varying, weights)
 
 
-def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarray, resolution: Mapping[int, float]):
+def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarray, resolution: Mapping[int, float],
+                   carried: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], np.ndarray, list[dict], np.ndarray | None]:
     """Combine the readings of each planned geometry at their mean readback geometry.
 
     Repeats of a geometry sit at slightly different real angles (the stage's
@@ -88,13 +102,17 @@ def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarra
     What remains of the angles is the readback's quantisation, which enters every
     reading's budget as ``angle = |slope| * resolution / sqrt(12)`` per axis.
 
+    ``carried`` (rows, m), e.g. the readings' sensitivity to the linearity correction, is
+    averaged with the weights of the values.
+
     Returns
     -------
-    geometry, values, budget, counts, repeat_statistics
+    geometry, values, budget, counts, repeat_statistics, carried
+        ``carried`` per value, shape (groups, m) (None when not given).
     """
     geometry = np.array([readback[m].mean(axis=0) for m in groups])
     counts = np.array([len(m) for m in groups], int)
-    first = np.array([combine(m, rows.value, rows.budget, rows.shared)[0] for m in groups])
+    first = np.array([combine(m, rows.value, rows.budget, rows.shared).mean for m in groups])
     slopes = geometry_slopes(geometry, first)
     q = np.array([quantisation_sigma(resolution.get(axis, DEFAULT_RESOLUTION)) for _, axis in AXES])
     budget = dict(rows.budget, angle=np.zeros(len(rows.value)))
@@ -102,14 +120,16 @@ def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarra
     for g, members in enumerate(groups):
         corrected[members] -= (readback[members] - geometry[g]) @ slopes[g]
         budget["angle"][members] = math.sqrt(float(np.sum((slopes[g] * q) ** 2)))
-    values, parts, stats = [], [], []
+    values, parts, stats, means = [], [], [], []
     for g, members in enumerate(groups):
-        mean, components, chi2, varying = combine(members, corrected, budget, rows.shared)
+        mean, components, chi2, varying, weights = combine(members, corrected, budget, rows.shared)
         values.append(mean)
         parts.append(components)
+        if carried is not None:
+            means.append(weights @ np.asarray(carried, float)[members])
         if len(members) > 1:
             stats.append({"geometry": geometry[g].tolist(), "n": int(len(members)), "chi2": chi2,
                           "observed_std": float(np.std(corrected[members], ddof=1)),
                           "stated_std": float(np.sqrt(np.mean(varying**2)))})
     combined = {name: np.array([p[name] for p in parts]) for name in budget}
-    return geometry, np.array(values), combined, counts, stats
+    return geometry, np.array(values), combined, counts, stats, None if carried is None else np.array(means)

@@ -11,6 +11,7 @@ import numpy as np
 from ..data import read_metadata, read_points
 from ..uncertainty import (
     CameraModel,
+    LinearityCorrection,
     ccd_components,
     interpolate_drift,
     interpolation_excess,
@@ -49,6 +50,11 @@ class Readings:
     shared : dict of numpy.ndarray
         Block label per row of the components that are common to several readings
         (see :func:`combine`).
+    linearity : LinearityCorrection or None
+        The camera's linearity correction applied to every row (None: not applied).
+    linearity_jacobian : numpy.ndarray or None
+        Relative sensitivity of every row's value to the correction's coefficients, shape
+        (rows, 2) (:meth:`~gonio.uncertainty.LinearityCorrection.jacobian`).
     """
 
     points: dict[str, np.ndarray]
@@ -59,6 +65,8 @@ class Readings:
     consistency: dict[str, float]
     unit: str
     shared: dict[str, np.ndarray] = field(default_factory=dict)
+    linearity: LinearityCorrection | None = None
+    linearity_jacobian: np.ndarray | None = None
 
     def column(self, name: str) -> np.ndarray:
         """A points.csv column at the usable readings."""
@@ -220,7 +228,7 @@ def _flicker_from_repeats(points, rows, value, budget, exposure, warnings) -> di
     return out
 
 
-def read_readings(folder: str | Path, lamp: str = "auto") -> Readings:
+def read_readings(folder: str | Path, lamp: str = "auto", linearity: bool = True) -> Readings:
     """Every usable reading of a recording, lamp-normalised, with its own budget.
 
     Parameters
@@ -231,13 +239,55 @@ def read_readings(folder: str | Path, lamp: str = "auto") -> Readings:
         How the lamp's flicker and drift are handled: ``"auto"`` uses the monitor when the
         recording has its readings, else the lamp checks, else the scatter of repeats;
         the others force one way (``"none"``: the budget has no lamp term).
+    linearity : bool
+        Correct every reading by the camera's linearity characterisation when the
+        recording has one (:func:`correct_linearity`).
     """
     folder = Path(folder)
-    return readings_of(read_metadata(folder), read_points(folder), lamp)
+    return readings_of(read_metadata(folder), read_points(folder), lamp, linearity)
 
 
-def readings_of(meta: Mapping[str, Any], points: dict[str, np.ndarray], lamp: str = "auto") -> Readings:
-    """Lamp-normalised values and budgets of every ok, unsaturated row (sample, reference, checks)."""
+def correct_linearity(meta: Mapping[str, Any], points, rate: np.ndarray, budget: dict[str, np.ndarray],
+                      usable: np.ndarray, warnings: list[str], apply: bool = True
+                      ) -> tuple[np.ndarray, dict[str, np.ndarray], LinearityCorrection | None, np.ndarray | None]:
+    """Every reading corrected by the camera's linearity (:class:`~gonio.uncertainty.LinearityCorrection`).
+
+    The correction acts on each reading's signal ``S = roi_mean - dark_mean`` [DN]: the
+    rate is multiplied by ``1 + c1 x + c2 x^2`` and every budget component, an error of
+    ``S`` (shot and read noise, dark level, PRNU), by the correction's slope
+    ``dS_linear / dS = 1 + 2 c1 x + 3 c2 x^2``. Returns the
+    rate, the budget, the correction (None when the recording has none or ``apply`` is
+    False, both said in ``warnings``) and the rows' sensitivity to its coefficients.
+    Readings above the series' top are corrected by extrapolation and counted in a warning.
+    """
+    camera = meta.get("camera", {})
+    series = camera.get("linearity")
+    reason = series.get("error") if isinstance(series, Mapping) else None  # why a series failed
+    try:
+        correction = LinearityCorrection.from_metadata(camera) if apply else None
+    except ValueError as error:  # a record that cannot be read: said as such, not as a missing one
+        correction, reason = None, str(error)
+    if correction is None:
+        if not apply:
+            warnings.append("the camera's linearity correction was left out on request")
+        elif reason is not None or (camera and "system_gain_dn_per_e" in camera):
+            warnings.append("readings not corrected for the camera's non-linearity: "
+                            f"{reason or 'the recording has no linearity series'}")
+        return rate, budget, None, None
+    signal = np.asarray(points["roi_mean"], float) - np.asarray(points["dark_mean"], float)
+    factor = correction.factor(signal)
+    above = usable & (signal > 1.05 * correction.signal_range)
+    if above.any():
+        warnings.append(f"{int(above.sum())} reading(s) above the top of the linearity series "
+                        f"({correction.signal_range:.0f} DN): their correction is extrapolated")
+    slope = correction.slope(signal)
+    return rate * factor, {name: c * slope for name, c in budget.items()}, correction, correction.jacobian(signal)
+
+
+def readings_of(meta: Mapping[str, Any], points: dict[str, np.ndarray], lamp: str = "auto",
+                linearity: bool = True) -> Readings:
+    """Lamp-normalised values and budgets of every ok, unsaturated row (sample, reference, checks),
+    corrected for the camera's linearity (unless ``linearity`` is False)."""
     if lamp not in ("auto", "monitor", "checks", "repeats", "none"):
         raise ValueError(f"lamp={lamp!r} is not one of 'auto', 'monitor', 'checks', 'repeats', 'none'")
     ok = points["status"] == "ok"
@@ -253,6 +303,7 @@ def readings_of(meta: Mapping[str, Any], points: dict[str, np.ndarray], lamp: st
         warnings.append("no camera characterisation in the recording: the CCD noise is estimated from the ROI "
                         "statistics of each frame (component 'ccd')")
     budget = _ccd_budget(points, np.arange(len(rate)), camera)
+    rate, budget, correction, jacobian = correct_linearity(meta, points, rate, budget, usable, warnings, linearity)
     monitored = "monitor_dark" in meta and np.isfinite(points["monitor"][usable]).all() and usable.any()
     checked = (usable & (points["block"] == CHECK_BLOCK)).any()
     sessions = np.where(points["session"] >= 0, points["session"], 0)
@@ -278,7 +329,8 @@ def readings_of(meta: Mapping[str, Any], points: dict[str, np.ndarray], lamp: st
     shared = {"prnu": np.zeros(len(rate), int), "dark": _dark_labels(points), "angle": _arrival_labels(points)}
     if lamp == "checks":
         shared["lamp_drift"] = drift_labels
-    return Readings(points, np.flatnonzero(usable), value, budget, warnings, consistency, unit, shared)
+    return Readings(points, np.flatnonzero(usable), value, budget, warnings, consistency, unit, shared,
+                    correction, jacobian)
 
 
 def _labels(keys: list) -> np.ndarray:

@@ -4,13 +4,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
-from ..uncertainty import COMPONENTS
+from ..uncertainty import COMPONENTS, LinearityCorrection
 
-__all__ = ["Reduced", "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT"]
+if TYPE_CHECKING:  # gonio.fitting imports the reduction's results: imported where used
+    from ..fitting import Dataset, Prior
+
+__all__ = ["Reduced", "IncidenceCalibration", "CALIBRATIONS", "COMMON_CALIBRATION", "ANGULAR_BEHAVIOUR",
+           "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT"]
 
 #: A fit is refused when more than this fraction of the sample points saturated.
 SATURATED_MAJORITY = 0.5
@@ -22,6 +26,62 @@ LOW_SIGNAL_SIGMAS = 3.0
 
 #: Marks a budget.json written by :meth:`Reduced.write`.
 REDUCTION_FORMAT = "gonio reduction 1"
+
+
+#: How a recording is calibrated by its reference standard (:meth:`Reduced.fit_inputs`):
+#: one lamp irradiance E_0 for every value, or the irradiance measured at each value's
+#: lamp polar angle.
+CALIBRATIONS = ("common", "per-incidence")
+#: The standard's departure from Lambertian (a component of :attr:`Reduced.calibration`):
+#: common to every value under one ``E_0``; under a calibration per incidence each ``E_k``
+#: carries the departure at its own angle, an error of that angle's values alone.
+ANGULAR_BEHAVIOUR = "angular behaviour"
+#: Components of the calibration budget common to the values of every recording: the
+#: standard's certificate and its departure from Lambertian, as opposed to its readings'
+#: noise (joined recordings do not average them down).
+COMMON_CALIBRATION = ("certificate", ANGULAR_BEHAVIOUR)
+#: Opening of the reduction's warning that the standard's irradiance differs between lamp
+#: polar angles (gonio.reduction.recording): a dataset calibrated per incidence drops it.
+INCONSISTENT_INCIDENCES = "the reference standard's irradiance differs between lamp polar angles"
+
+
+@dataclass(frozen=True)
+class IncidenceCalibration:
+    """The reference standard's readings at one lamp polar angle: the irradiance there.
+
+    A lamp beam that is not uniform lights the camera's window with an irradiance that
+    depends on the lamp's polar angle (its footprint stretches by 1/cos(theta_i));
+    the standard measured at the same polar angle calibrates it (docs/acquisition.md,
+    "Calibration per incidence").
+
+    Attributes
+    ----------
+    theta_i : float
+        The lamp's planned polar angle [deg].
+    irradiance : float
+        ``E_k`` from the readings at this angle [radiance unit per sr].
+    sigma : float
+        Relative standard uncertainty of ``E_k`` from its readings' budget [-] (the
+        certificate and the standard's departure from Lambertian are not in it:
+        :meth:`Reduced._incidence_deviations`).
+    weight : float
+        Weight of these readings in the common ``E_0`` [-].
+    readings : tuple of int
+        The readings (indices into ``metadata["reference_standard"]``) and
+    reading_weights : tuple of float
+        their weights in ``E_k``.
+    linearity : numpy.ndarray or None
+        Sensitivity of ``E_k`` to the camera's linearity coefficients (as
+        :attr:`Reduced.linearity_jacobian`).
+    """
+
+    theta_i: float
+    irradiance: float
+    sigma: float
+    weight: float
+    readings: tuple[int, ...]
+    reading_weights: tuple[float, ...]
+    linearity: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -70,6 +130,19 @@ class Reduced:
         ``1/N - 1/N_max`` of each value's camera window (N its pixel count, N_max the
         largest window of the recording) [1/pixel]: the PRNU errors of two values are
         correlated as ``sqrt(min/max)`` of their window terms (:meth:`covariance`).
+    linearity_jacobian : numpy.ndarray or None
+        Relative sensitivity of each value to the coefficients of the camera's linearity
+        corrections (two per recording), shape (n, P); None when no correction was applied.
+    linearity_covariance : numpy.ndarray or None
+        Covariance of those coefficients, (P, P).
+    reference_linearity : numpy.ndarray or None
+        Sensitivity of ``E_0`` to them, (P,): the budget's ``linearity`` component and the
+        covariance take each value's sensitivity relative to it (the part common to the
+        values and the standard cancels in the calibration).
+    incidences : tuple of IncidenceCalibration
+        The reference standard's irradiance at each lamp polar angle it was measured at.
+    incidence : numpy.ndarray or None
+        For each value, its entry in ``incidences`` (-1: no reference at its polar angle).
     """
 
     theta_i: np.ndarray
@@ -93,22 +166,36 @@ class Reduced:
     unit: str = "DN/s"
     repeat_statistics: tuple = ()
     window: np.ndarray | None = None
+    linearity_jacobian: np.ndarray | None = None
+    linearity_covariance: np.ndarray | None = None
+    reference_linearity: np.ndarray | None = None
+    incidences: tuple[IncidenceCalibration, ...] = ()
+    incidence: np.ndarray | None = None
 
     # -- correlations --------------------------------------------------------------------
     def covariance(self) -> np.ndarray:
         """Covariance matrix of the values' errors [``unit``^2].
 
-        Every component is independent between values except PRNU: the camera windows
-        of a recording are centred and nested (they shrink with cos(theta_r) along one
-        image axis), so the PRNU error of a window relative to the largest one is a random
-        walk in the window size: values i and j share ``p^2 x_i x_j min(a_i, a_j)`` with
-        ``a = 1/N - 1/N_max`` (:func:`gonio.uncertainty.ccd_components`); values measured
-        through the same window (the same |view|) share all of it. Without window terms
-        the matrix is diagonal.
+        Every component is independent between values except PRNU and the linearity
+        correction. The camera windows of a recording are centred and nested (they shrink
+        with cos(theta_r) along one image axis), so the PRNU error of a window relative to
+        the largest one is a random walk in the window size: values i and j share
+        ``p^2 x_i x_j min(a_i, a_j)`` with ``a = 1/N - 1/N_max``
+        (:func:`gonio.uncertainty.ccd_components`); values measured through the same window
+        (the same |view|) share all of it. The linearity correction's coefficients are
+        common to every reading: values share ``(x_i d_i) C (x_j d_j)^T`` with ``d`` their
+        sensitivity relative to the reference standard's (:attr:`reference_linearity`).
+        Without window terms and correction the matrix is diagonal.
         """
+        return self._covariance(self.reference_linearity)
+
+    def _covariance(self, linearity_reference) -> np.ndarray:
+        """:meth:`covariance` with the linearity sensitivities taken relative to
+        ``linearity_reference`` ((P,) or one row per value)."""
         total = np.asarray(self.radiance_sigma, float)
         prnu = np.asarray(self.budget.get("prnu", np.zeros_like(total)), float)
-        covariance = np.diag(total**2 - prnu**2)
+        linear = np.asarray(self.budget.get("linearity", np.zeros_like(total)), float)
+        covariance = np.diag(total**2 - prnu**2 - linear**2)
         if self.window is not None and np.any(prnu > 0):
             a = np.asarray(self.window, float)
             with np.errstate(invalid="ignore", divide="ignore"):
@@ -116,8 +203,65 @@ class Reduced:
             correlation = np.nan_to_num(correlation)  # a window with a = 0 has no PRNU term
             sign = np.sign(self.radiance)
             covariance += np.outer(sign * prnu, sign * prnu) * correlation
-        np.fill_diagonal(covariance, total**2)
+        np.fill_diagonal(covariance, total**2 - linear**2)
+        if self.linearity_jacobian is not None:
+            reference = 0.0 if linearity_reference is None else linearity_reference
+            covariance += LinearityCorrection.value_covariance(self.radiance, self.linearity_jacobian - reference,
+                                                               self.linearity_covariance)
         return covariance
+
+    # -- the calibration per incidence -----------------------------------------------------
+    def _incidence_groups(self) -> np.ndarray:
+        """Each value's entry in :attr:`incidences`; ``ValueError`` when a value's lamp polar
+        angle has no reference reading (naming the angles, and those that have one)."""
+        group = self.incidence if self.incidence is not None else np.full(len(self.radiance), -1)
+        if self.reference_irradiance is None or not self.incidences:
+            raise ValueError("no reference standard was measured in this recording: it cannot be calibrated per "
+                             "incidence (use normalised_radiance() or relative_radiance())")
+        missing = sorted({round(float(t), 2) for t in self.theta_i[group < 0]})
+        if missing:
+            raise ValueError(
+                f"calibration per incidence: no reference reading at theta_i = {missing} deg (the standard was "
+                f"measured at {sorted(c.theta_i for c in self.incidences)} deg); add [reference] geometries at "
+                "those lamp angles to the protocol, or calibrate with one common E_0 (calibration='common')")
+        return group
+
+    def _per_incidence(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each value's factor ``E_0 / E_k``, its group, and the values' covariance with each
+        value's linearity sensitivity relative to its own incidence's readings."""
+        group = self._incidence_groups()
+        factor = self.reference_irradiance / np.array([c.irradiance for c in self.incidences])[group]
+        reference = None
+        if self.linearity_jacobian is not None:
+            reference = np.array([c.linearity for c in self.incidences])[group]
+        return factor, group, self._covariance(reference)
+
+    def _incidence_variances(self) -> np.ndarray:
+        """Relative variance of each ``E_k`` [-]: its readings' budget and the standard's
+        departure from Lambertian at its angle (:data:`ANGULAR_BEHAVIOUR`, taken
+        independent between angles: the departure the calibration per incidence absorbs
+        into each angle's irradiance)."""
+        angular = self.calibration.get(ANGULAR_BEHAVIOUR, 0.0)
+        return np.array([c.sigma for c in self.incidences]) ** 2 + angular**2
+
+    def _incidence_deviations(self) -> np.ndarray:
+        """Covariance of the relative errors of ``E_k / E_0`` between incidences, (K, K):
+        ``delta_kl u_k^2 - W_l u_l^2 - W_k u_k^2 + sum_m W_m^2 u_m^2`` (``W`` the weights of
+        the incidences' readings in ``E_0``, ``u`` the relative uncertainties of the ``E_k``,
+        :meth:`_incidence_variances`).
+
+        Approximation (docs/acquisition.md, "Calibration per incidence"): the ``E_k`` are
+        taken as independent, and ``W`` as their inverse-variance weights, which makes
+        these errors uncorrelated with ``E_0``'s, so that the prior on the scale keeps its
+        width (:meth:`fit_inputs`). Both hold to first order only: readings at different
+        angles can share a dark frame (the same exposure and window) and a lamp-drift
+        interval between checks, and ``E_0`` weights its readings by their independent
+        components only (:func:`~gonio.reduction.combining.combine`) while ``u_k`` counts
+        the shared ones in full."""
+        u2 = self._incidence_variances()
+        w = np.array([c.weight for c in self.incidences])
+        w = w / w.sum()
+        return np.diag(u2) - np.add.outer(w * u2, w * u2) + np.sum(w**2 * u2)
 
     # -- the budget ----------------------------------------------------------------------
     def budget_summary(self) -> dict[str, Any]:
@@ -130,6 +274,8 @@ class Reduced:
                                   "meaning": COMPONENTS.get(name, "")} for name, r in rel.items()},
             "total_median_relative": _nanmedian(self.radiance_sigma / np.where(level > 0, level, np.nan)),
             "calibration_relative": dict(self.calibration),
+            "reference_per_incidence": [{"theta_i": c.theta_i, "irradiance": c.irradiance, "sigma_relative": c.sigma,
+                                         "weight": c.weight} for c in self.incidences],
             "excluded": dict(self.excluded),
             "low_signal": int(np.sum(self.flags == "low_signal")) if self.flags is not None else 0,
             "consistency": dict(self.consistency),
@@ -147,6 +293,10 @@ class Reduced:
         if self.calibration:
             parts = ", ".join(f"{k} {v:.2e}" for k, v in self.calibration.items())
             lines.append(f"calibration (E_0, common to every value): {parts}")
+        if len(self.incidences) > 1:
+            parts = ", ".join(f"{c.theta_i:g} deg {c.irradiance / self.reference_irradiance - 1:+.2e} "
+                              f"+/- {c.sigma:.1e}" for c in self.incidences)
+            lines.append(f"reference per lamp polar angle (E_k / E_0 - 1): {parts}")
         for key, value in self.consistency.items():
             lines.append(f"consistency: {key} = {value:.3g}")
         for key, count in self.excluded.items():
@@ -193,15 +343,23 @@ class Reduced:
         json_path = write_atomic(folder / "budget.json", json.dumps(summary, indent=2, default=float) + "\n")
         return csv_path, json_path
 
-    def _dataset_metadata(self) -> dict[str, Any]:
-        out = {k: v for k, v in self.metadata.items() if k != "planned_view"}
+    def _dataset_metadata(self, calibration: str = "common", group: np.ndarray | None = None) -> dict[str, Any]:
+        """The metadata a dataset carries; calibrated per incidence, with each value's
+        ``incidence_theta_i``: the planned lamp polar angle [deg] of the reference readings
+        that calibrate it (``group``, its entries in :attr:`incidences`), which a fit of the
+        rig's errors calibrates it by (:func:`gonio.fitting.rig_errors.incidence_weights`)."""
+        out = {k: v for k, v in self.metadata.items() if k not in ("planned_view", "planned_theta_i")}
+        if calibration != "common":
+            out["calibration"] = calibration
+            out["incidence_theta_i"] = [float(self.incidences[g].theta_i) for g in group]
         out["uncertainty_budget"] = {k: v["median_relative"] for k, v in self.budget_summary()["components"].items()}
         if self.calibration:
             out["calibration_budget"] = dict(self.calibration)
         if self.excluded:
             out["excluded"] = dict(self.excluded)
-        if self.warnings:
-            out["reduction_warnings"] = list(self.warnings)
+        warnings = [w for w in self.warnings if calibration == "common" or not w.startswith(INCONSISTENT_INCIDENCES)]
+        if warnings:
+            out["reduction_warnings"] = warnings
         return out
 
     def _require_usable(self) -> None:
@@ -215,16 +373,29 @@ class Reduced:
             )
 
     # -- datasets --------------------------------------------------------------------------
-    def relative_radiance(self):
-        """Dataset of relative radiance (quantity ``'radiance'``: fit with a free scale)."""
+    def relative_radiance(self, calibration: str = "common") -> Dataset:
+        """Dataset of relative radiance (quantity ``'radiance'``: fit with a free scale).
+
+        With ``calibration="per-incidence"`` every value is brought to the common level by
+        the reference standard read at its lamp polar angle, ``L E_0 / E_k``; the
+        covariance adds the errors of ``E_k / E_0`` (common to the values of one angle,
+        :meth:`_incidence_deviations`), so that a prior on the scale from ``E_0``
+        (:meth:`fit_inputs`) keeps its meaning.
+        """
         from ..fitting import Dataset
 
         self._require_usable()
-        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, self.radiance,
-                       self.radiance_sigma, quantity="radiance", label=self.label, metadata=self._dataset_metadata(),
-                       covariance=self.covariance())
+        value, covariance, metadata = self.radiance, self.covariance(), self._dataset_metadata()
+        if _calibration(calibration) == "per-incidence":
+            factor, group, covariance = self._per_incidence()
+            value = self.radiance * factor
+            covariance = covariance * np.outer(factor, factor)
+            covariance += np.outer(value, value) * self._incidence_deviations()[np.ix_(group, group)]
+            metadata = self._dataset_metadata(calibration, group)
+        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
+                       quantity="radiance", label=self.label, metadata=metadata, covariance=covariance)
 
-    def normalised_radiance(self):
+    def normalised_radiance(self) -> Dataset:
         """Dataset of L(theta_r)/L(0) per incidence (Oren & Nayar section 5, Figs 16-22).
 
         Each lamp direction is normalised by its own normal-view measurement (planned
@@ -265,13 +436,16 @@ class Reduced:
                        quantity="normalised_radiance", label=self.label, metadata=self._dataset_metadata(),
                        covariance=covariance)
 
-    def brdf(self):
+    def brdf(self, calibration: str = "common") -> Dataset:
         """Dataset of absolute BRDF [1/sr], calibrated by the reference standard.
 
         ``f = L / (E_0 cos theta_i)``; the covariance adds the calibration's relative
         uncertainty as an error common to all points (``f_i f_j u_cal^2``), so a fit of
         this dataset does not average it away (:meth:`fit_inputs` puts it into one prior
-        on the scale instead, which is equivalent).
+        on the scale instead, which is equivalent). With ``calibration="per-incidence"``,
+        ``f = L / (E_k cos theta_i)`` with the irradiance ``E_k`` the standard gave at the
+        value's lamp polar angle: its readings' error and the standard's departure from
+        Lambertian there are common to the values of that angle, the certificate to all.
         """
         from ..fitting import Dataset
 
@@ -280,6 +454,17 @@ class Reduced:
                              "is not available (use normalised_radiance() or relative_radiance())")
         self._require_usable()
         cos_i = np.cos(np.radians(self.theta_i))
+        if _calibration(calibration) == "per-incidence":
+            factor, group, covariance = self._per_incidence()
+            scale = self.reference_irradiance / factor * cos_i
+            value = self.radiance / scale
+            common = sum(self.calibration.get(k, 0.0) ** 2 for k in COMMON_CALIBRATION if k != ANGULAR_BEHAVIOUR)
+            u2 = self._incidence_variances()
+            shared = np.where(np.equal.outer(group, group), u2[group][:, None], 0.0) + common
+            covariance = covariance / np.outer(scale, scale) + np.outer(value, value) * shared
+            return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
+                           quantity="brdf", label=self.label, metadata=self._dataset_metadata(calibration, group),
+                           covariance=covariance)
         scale = self.reference_irradiance * cos_i
         value = self.radiance / scale
         rel_cal = self.reference_irradiance_sigma / self.reference_irradiance
@@ -287,11 +472,11 @@ class Reduced:
         return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
                        quantity="brdf", label=self.label, metadata=self._dataset_metadata(), covariance=covariance)
 
-    def best_dataset(self):
+    def best_dataset(self) -> Dataset:
         """Absolute BRDF when calibrated, else normalised radiance."""
         return self.brdf() if self.reference_irradiance is not None else self.normalised_radiance()
 
-    def fit_inputs(self):
+    def fit_inputs(self, calibration: str = "common") -> tuple[Dataset, dict[str, Prior]]:
         """The dataset and priors a fit of this recording should use.
 
         With a reference standard: relative radiance, whose ``scale`` (the lamp irradiance
@@ -301,6 +486,16 @@ class Reduced:
         parameter, not in per-point uncertainties (which would let many points average it
         away). Without a reference: normalised radiance L(theta_r)/L(0) and no prior.
 
+        Parameters
+        ----------
+        calibration : {"common", "per-incidence"}
+            ``"common"`` (the default): every value divided by one lamp irradiance, right
+            for a uniform beam. ``"per-incidence"``: each value brought to the common level
+            by the standard read at its lamp polar angle (:meth:`relative_radiance`), for a
+            beam whose irradiance over the window changes with the lamp's angle; the prior
+            on the scale is the same. Needs a reference reading at every sample polar angle
+            (``ValueError`` otherwise, and without a reference standard).
+
         Returns
         -------
         dataset : gonio.fitting.Dataset
@@ -309,9 +504,18 @@ class Reduced:
         from ..fitting import Normal
 
         if self.reference_irradiance is None:
+            if _calibration(calibration) == "per-incidence":
+                self._incidence_groups()  # refused, as the command line refuses it, naming why
             return self.normalised_radiance(), {}
-        return self.relative_radiance(), {
+        return self.relative_radiance(calibration), {
             "scale": Normal(self.reference_irradiance, self.reference_irradiance_sigma, 0.0, math.inf)}
+
+
+def _calibration(calibration: str) -> str:
+    """``calibration`` checked against :data:`CALIBRATIONS`."""
+    if calibration not in CALIBRATIONS:
+        raise ValueError(f"calibration={calibration!r}: expected one of {list(CALIBRATIONS)}")
+    return calibration
 
 
 def _nanmedian(values) -> float:

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from drivers.emulator.systematics import Systematics
-from gonio import acquisition, protocols
+from gonio import acquisition
 from gonio.cli import main
-from gonio.cli.run import emulated_rig
 from gonio.fitting import FitProblem, FitResult, compare_models, fit
 from gonio.fitting.rig_errors import ALIGNMENT_NAMES, DEFAULT_PRIOR_SD, parse_alignment, reference_calibration
 from gonio.fitting.mcmc import SERIAL_WALKERS, default_walkers
 from gonio.fitting.priors import Normal
+from tests.emulated_recording import record
 
 #: Fig 16's plane-of-incidence sweeps at 10-degree steps with the reference standard at
 #: each incidence, and one off-plane sweep: enough to pin the offsets, quick to measure.
@@ -45,11 +45,7 @@ TRUTH = {"view_offset": 0.3, "theta_i_offset": -0.2}
 
 
 def _record(folder, systematics: str):
-    protocol = protocols.loads(PROTOCOL, source="alignment.toml")
-    with emulated_rig(SAMPLE, 6, name=f"align-{folder.name}", realism=systematics) as (rig, emulator, change, meta):
-        acquisition.run_protocol(protocol, rig, folder, metadata=meta, clock=emulator.control.now, warm_up=False,
-                                 change_sample=lambda which: change(which, 0.99))
-    return folder
+    return record(folder, PROTOCOL, SAMPLE, 6, systematics)
 
 
 @pytest.fixture(scope="module")

@@ -35,7 +35,7 @@ from .._compiled import JIT_OPTIONS, evaluate_in_chunks
 from .._compiled import domain as _domain
 from .functional import C2_AMPLITUDE, C3_AMPLITUDE, _oren_nayar_coefficients, _qualitative_coefficients
 
-__all__ = ["oren_nayar_plain", "qualitative_plain"]
+__all__ = ["eq33_35", "oren_nayar_plain", "qualitative_plain"]
 
 _DEGREE = math.pi / 180.0
 _TWO_OVER_PI = 2.0 / math.pi
@@ -60,6 +60,31 @@ def _arguments(theta_i, phi_i, theta_r, phi_r, buffer):
             buffer[3, k] = (alpha + beta) * 0.5
 
 
+@njit(**JIT_OPTIONS, inline="always")
+def eq33_35(cos_dphi: float, sin_alpha: float, tan_beta: float, alpha: float, beta: float,
+            tan_half_sum: float, a: float, b: float, c: float) -> float:
+    """Eq 33-35 at one geometry from its trigonometric values: ``max(a + b direct_shape +
+    c ir_shape, 0)`` [1/sr], with ``alpha``, ``beta`` [rad], ``tan_half_sum`` =
+    ``tan((alpha + beta) / 2)`` and (a, b, c) of ``_oren_nayar_coefficients`` (the shapes of
+    :func:`~gonio.models.oren_nayar.functional._oren_nayar_shapes`). The one scalar form of
+    the arithmetic: :func:`_combine` and the compiled rig radiance
+    (:mod:`gonio.fitting.compiled_rig`) call it with values computed their own ways."""
+    two_beta = beta * _TWO_OVER_PI
+    ir_shape = two_beta * two_beta
+    angular_c2 = sin_alpha - (ir_shape * two_beta if cos_dphi < 0.0 else 0.0)
+    ir_shape *= cos_dphi
+    direct_shape = tan_beta * cos_dphi * angular_c2 * C2_AMPLITUDE
+    c3 = alpha * beta * _FOUR_OVER_PI_SQ
+    c3 *= c3
+    c3 *= 1.0 - abs(cos_dphi)
+    c3 *= tan_half_sum
+    c3 *= C3_AMPLITUDE
+    direct_shape += c3
+    value = direct_shape * b + c * ir_shape
+    value += a
+    return max(value, 0.0)
+
+
 @njit(**JIT_OPTIONS)
 def _combine(theta_i, phi_i, theta_r, phi_r, tangent, a, b, c, out):
     """Eq 33-35 from the tangents: max(a + b direct_shape + c ir_shape, 0) [1/sr]."""
@@ -74,20 +99,7 @@ def _combine(theta_i, phi_i, theta_r, phi_r, tangent, a, b, c, out):
         cos_dphi = (1.0 - t) / (1.0 + t)
         t = tangent[1, k]
         sin_alpha = 2.0 * t / (1.0 + t * t)
-        two_beta = beta * _TWO_OVER_PI
-        ir_shape = two_beta * two_beta
-        angular_c2 = sin_alpha - (ir_shape * two_beta if cos_dphi < 0.0 else 0.0)
-        ir_shape *= cos_dphi
-        direct_shape = tangent[2, k] * cos_dphi * angular_c2 * C2_AMPLITUDE
-        c3 = alpha * beta * _FOUR_OVER_PI_SQ
-        c3 *= c3
-        c3 *= 1.0 - abs(cos_dphi)
-        c3 *= tangent[3, k]
-        c3 *= C3_AMPLITUDE
-        direct_shape += c3
-        value = direct_shape * b + c * ir_shape
-        value += a
-        out[k] = max(value, 0.0)
+        out[k] = eq33_35(cos_dphi, sin_alpha, tangent[2, k], alpha, beta, tangent[3, k], a, b, c)
 
 
 @njit(**JIT_OPTIONS)

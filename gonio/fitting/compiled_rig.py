@@ -1,0 +1,271 @@
+"""Compiled radiance of a misaligned rig through its apertures, for fits of the alignment.
+
+A fit with free alignment parameters (:mod:`gonio.fitting.rig_errors`) gives every walker
+its own true geometry, so the aperture average of the model (the 7 x 7 sub-rays of
+:func:`gonio.instrument.aperture_averaged` about each true lamp and camera axis) cannot be
+prepared once.  Done with numpy arrays, every walker's W x N x 49 sub-rays go through
+:func:`drivers.rig_geometry.misaligned_angles`, :func:`gonio.instrument.cone_quadrature`
+and the model, each writing temporaries in degrees and back (about 0.6 ms per walker on
+the Fig 16 recording).  This module computes the same number in one compiled loop:
+
+- the true lamp axis of each walker and each distinct recorded lamp direction, and the
+  true camera axis of each walker and each distinct recorded camera direction, as unit
+  vectors (the rotations of :func:`~drivers.rig_geometry.misaligned_angles`: axis zero
+  offsets, then the sample's tilt);
+- the 7 sub-rays of each axis in the frame of that axis (the cubature of
+  :func:`~gonio.instrument.cone_quadrature`, Stroud's S2:3-1 on the equal-area disk),
+  each with its polar angle, ``sin``, ``cos`` and ``tan`` and the cosine and sine of its
+  azimuth computed once;
+- for every value, the 49 (lamp, camera) pairs: the Oren-Nayar BRDF of eq 33-35 written
+  with per-direction sines and cosines (``sin(alpha)`` is the larger of the two sines,
+  ``tan(beta)`` the smaller tangent, ``cos(dphi)`` the dot product of the two azimuths'
+  unit vectors, ``tan((alpha + beta)/2) = (sin a + sin b)/(cos a + cos b)``), floored at 0,
+  weighted by the cubature and the lamp sub-ray's ``cos(theta_i)``.
+
+Lambert is the same loop with the coefficients (rho/pi, 0, 0).  The lamp sub-rays depend on
+the lamp direction only and the camera sub-rays on the camera direction only, so a
+recording's three lamp directions cost 3 x 7 sub-rays per walker, not N x 7.
+
+The arithmetic of eq 33-35 is the models' own scalar form
+(:func:`gonio.models.oren_nayar.compiled.eq33_35`), the cubature's points those of
+:func:`gonio.instrument.cone_offsets`; the rotations are those of
+:func:`~drivers.rig_geometry.misaligned_angles` and the sub-ray frame that of
+:func:`~gonio.instrument.cone_quadrature` in scalar form: any change there must be made
+here too (tests/fitting/test_compiled_rig.py compares the two paths on random alignments,
+the normal view, a lamp pushed through the normal and grazing axes).
+
+References
+----------
+M. Oren, S. K. Nayar, IJCV 14(3), 1995, eq 33-35 (the model), section 5 (the apertures).
+A. H. Stroud, *Approximate Calculation of Multiple Integrals*, 1971, formula S2:3-1.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+from numba import njit
+
+from drivers.rig_geometry import ALIGNMENT_ERRORS
+from gonio.instrument import cone_offsets
+from gonio.models import Model
+from gonio.models._compiled import JIT_OPTIONS
+from gonio.models.oren_nayar.compiled import eq33_35
+
+from .rig_errors import COMPILED_MODELS
+
+__all__ = ["CompiledRigRadiance", "rig_radiance"]
+
+_RAD = math.pi / 180.0
+#: cos(theta_i) of an axis at or below which the aperture average is not weighted by the
+#: sub-rays' cosines (as :class:`gonio.instrument._SubRays` does at grazing incidence).
+_GRAZING_COS = 1e-12
+# The fields of a sub-ray in the kernel's scratch arrays (7, 6): theta [rad], cos(phi),
+# sin(phi), sin(theta), cos(theta), tan(theta).
+
+
+@njit(**JIT_OPTIONS)
+def _to_sample(x: float, y: float, z: float, ca: float, sa: float, cb: float, sb: float):
+    """A lab direction in the tilted sample's frame: ``R^T d`` with ``R = R_y(a) R_x(-b)``."""
+    x1, z1 = x * ca - z * sa, x * sa + z * ca
+    return x1, y * cb - z1 * sb, y * sb + z1 * cb
+
+
+@njit(**JIT_OPTIONS)
+def _cone_rays(vx: float, vy: float, vz: float, cos_beta, sin_beta, cos_ring, sin_ring, rays) -> float:
+    """The 7 sub-rays about the axis ``v`` into ``rays`` (7, 6: theta [rad], cos and sin of
+    phi, sin, cos and tan of theta); returns cos(theta) of the axis.
+
+    The frame of :func:`gonio.instrument.cone_quadrature`: ``e1`` along increasing polar
+    angle, ``e2`` along increasing azimuth (the azimuth of an axis on the normal is
+    ``atan2(y, x)`` of its components, as the angles' path takes it).
+    """
+    norm = math.sqrt(vx * vx + vy * vy + vz * vz)
+    ax, ay, az = vx / norm, vy / norm, vz / norm
+    rho = math.hypot(ax, ay)
+    if rho > 0.0:
+        cp, sp = ax / rho, ay / rho
+    else:
+        p = math.atan2(ay, ax)
+        cp, sp = math.cos(p), math.sin(p)
+    e1x, e1y, e1z = az * cp, az * sp, -rho
+    for j in range(7):
+        u = sin_beta[j] * cos_ring[j]
+        w = sin_beta[j] * sin_ring[j]
+        x = cos_beta[j] * ax + u * e1x - w * sp
+        y = cos_beta[j] * ay + u * e1y + w * cp
+        z = cos_beta[j] * az + u * e1z
+        r = math.hypot(x, y)
+        theta = math.atan2(r, z)
+        rays[j, 0] = theta
+        if r > 0.0:
+            rays[j, 1] = x / r
+            rays[j, 2] = y / r
+        else:  # on the normal: beta = 0 and no term of the model depends on the azimuth
+            rays[j, 1] = 1.0
+            rays[j, 2] = 0.0
+        rays[j, 3] = r
+        rays[j, 4] = z
+        rays[j, 5] = math.tan(theta)
+    return az
+
+
+@njit(**JIT_OPTIONS)
+def _oren_nayar(t_i: float, cp_i: float, sp_i: float, s_i: float, c_i: float, tan_i: float,
+                t_r: float, cp_r: float, sp_r: float, s_r: float, c_r: float, tan_r: float,
+                a: float, b: float, c: float) -> float:
+    """``max(a + b direct_shape + c ir_shape, 0)`` of one (lamp, camera) sub-ray pair, each
+    given by theta [rad], cos and sin of phi, sin, cos and tan of theta: the arguments of
+    eq 33-35 (:func:`~gonio.models.oren_nayar.compiled.eq33_35`) from these per-direction
+    values."""
+    cos_dphi = min(max(cp_i * cp_r + sp_i * sp_r, -1.0), 1.0)
+    if t_i >= t_r:
+        alpha, beta, sin_alpha, tan_beta = t_i, t_r, s_i, tan_r
+    else:
+        alpha, beta, sin_alpha, tan_beta = t_r, t_i, s_r, tan_i
+    cosines = c_i + c_r
+    half = (s_i + s_r) / cosines if cosines > 0.0 else math.tan(0.5 * (alpha + beta))
+    return eq33_35(cos_dphi, sin_alpha, tan_beta, alpha, beta, half, a, b, c)
+
+
+@njit(**JIT_OPTIONS)
+def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignment, coefficients,
+                 lamp_rule, camera_rule, ring, weights, out) -> None:
+    """``<f cos theta_i>`` through the apertures at the true geometry of every alignment [1/sr].
+
+    Parameters
+    ----------
+    lamp_directions, camera_directions : numpy.ndarray
+        Distinct recorded lamp and camera directions (theta, phi) [deg], shapes (L, 2), (C, 2).
+    lamp_of, camera_of : numpy.ndarray of int
+        For each of the N values, its lamp and camera direction.
+    alignment : numpy.ndarray
+        (W, 5) view_offset, theta_i_offset, phi_i_offset, tilt_x, tilt_y [deg].
+    coefficients : numpy.ndarray
+        (W, 3) the model's a, b, c (:func:`_oren_nayar`).
+    lamp_rule, camera_rule : numpy.ndarray
+        (2, 7) cos and sin of each cubature point's angle from its cone's axis.
+    ring, weights : numpy.ndarray
+        (2, 7) cos and sin of the points' angles around the axis; (7,) their weights.
+    out : numpy.ndarray
+        (W, N), written: 0 where a true axis lies below the horizon.
+    """
+    lamp_rays = np.empty((lamp_directions.shape[0], 7, 6))
+    camera_rays = np.empty((camera_directions.shape[0], 7, 6))
+    lamp_cos = np.empty(lamp_directions.shape[0])
+    camera_cos = np.empty(camera_directions.shape[0])
+    for w in range(alignment.shape[0]):
+        swing = alignment[w, 0] * _RAD
+        cs, ss = math.cos(swing), math.sin(swing)
+        ta, tb = alignment[w, 3] * _RAD, alignment[w, 4] * _RAD
+        ca, sa, cb, sb = math.cos(ta), math.sin(ta), math.cos(tb), math.sin(tb)
+        for k in range(lamp_directions.shape[0]):
+            t = (lamp_directions[k, 0] + alignment[w, 1]) * _RAD
+            p = (lamp_directions[k, 1] + alignment[w, 2]) * _RAD
+            x, y, z = _to_sample(math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t), ca, sa, cb, sb)
+            lamp_cos[k] = _cone_rays(x, y, z, lamp_rule[0], lamp_rule[1], ring[0], ring[1], lamp_rays[k])
+        for k in range(camera_directions.shape[0]):
+            t, p = camera_directions[k, 0] * _RAD, camera_directions[k, 1] * _RAD
+            cx, cy, cz = math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)
+            x, y, z = _to_sample(cx * cs + cz * ss, cy, cz * cs - cx * ss, ca, sa, cb, sb)
+            camera_cos[k] = _cone_rays(x, y, z, camera_rule[0], camera_rule[1], ring[0], ring[1], camera_rays[k])
+        a, b, c = coefficients[w, 0], coefficients[w, 1], coefficients[w, 2]
+        for n in range(lamp_of.shape[0]):
+            lamp, camera = lamp_of[n], camera_of[n]
+            if lamp_cos[lamp] < 0.0 or camera_cos[camera] < 0.0:  # an axis below the horizon
+                out[w, n] = 0.0
+                continue
+            grazing = lamp_cos[lamp] <= _GRAZING_COS
+            total = 0.0
+            for i in range(7):
+                c_i = lamp_rays[lamp, i, 4]
+                if c_i < 0.0:  # a sub-ray below the horizon reflects nothing
+                    continue
+                t_i, cp_i, sp_i = lamp_rays[lamp, i, 0], lamp_rays[lamp, i, 1], lamp_rays[lamp, i, 2]
+                s_i, tan_i = lamp_rays[lamp, i, 3], lamp_rays[lamp, i, 5]
+                weight = weights[i] * (1.0 if grazing else c_i)
+                for j in range(7):
+                    c_r = camera_rays[camera, j, 4]
+                    if c_r < 0.0:
+                        continue
+                    total += weight * weights[j] * _oren_nayar(
+                        t_i, cp_i, sp_i, s_i, c_i, tan_i, camera_rays[camera, j, 0], camera_rays[camera, j, 1],
+                        camera_rays[camera, j, 2], camera_rays[camera, j, 3], c_r, camera_rays[camera, j, 5], a, b, c)
+            out[w, n] = total * lamp_cos[lamp] if grazing else total
+
+
+def _rule(solid_angle_sr: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cubature of a cone (:func:`gonio.instrument.cone_offsets`) as the kernel takes it:
+    cos and sin of the points' angles from the axis, (2, 7); cos and sin of their angles
+    around it, (2, 7); their weights, (7,)."""
+    beta, around, weights = cone_offsets(solid_angle_sr)
+    return np.stack([np.cos(beta), np.sin(beta)]), np.stack([np.cos(around), np.sin(around)]), weights
+
+
+class CompiledRigRadiance:
+    """The compiled :func:`rig_radiance` at fixed recorded geometries, for any alignments.
+
+    Parameters
+    ----------
+    base : Model
+        ``oren-nayar`` or ``lambert`` (:data:`gonio.fitting.rig_errors.COMPILED_MODELS`:
+        eq 33-35 and its sigma = 0 limit).
+    geometry : tuple of numpy.ndarray
+        Recorded (theta_i, phi_i, theta_r, phi_r) [deg], flat, equal length.
+    apertures : (float, float)
+        Lamp and camera solid angles [sr].
+
+    Examples
+    --------
+    >>> import gonio
+    >>> rig = CompiledRigRadiance(gonio.models.get("lambert"), (np.array([30.0]), np.zeros(1),
+    ...                           np.array([10.0]), np.full(1, 180.0)), (0.003, 0.0009))
+    >>> value = rig({"rho": 0.9}, {"view_offset": np.array([[0.0], [0.5]])})   # two alignments
+    >>> value.shape, bool(np.allclose(value * np.pi / 0.9, np.cos(np.radians(30)), rtol=1e-3))
+    ((2, 1), True)
+    """
+
+    def __init__(self, base: Model, geometry, apertures: tuple[float, float]) -> None:
+        if base.name not in COMPILED_MODELS:
+            raise ValueError(f"the compiled rig radiance knows {list(COMPILED_MODELS)}, not {base.name!r}")
+        self.base = base
+        ti, pi_, tr, pr = (np.asarray(g, float).reshape(-1) for g in geometry)
+        self.n = ti.size
+        self._lamp, self._lamp_of = _distinct(ti, pi_)
+        self._camera, self._camera_of = _distinct(tr, pr)
+        (lamp_rule, self._ring, self._weights), (camera_rule, _, _) = _rule(apertures[0]), _rule(apertures[1])
+        self._rules = (lamp_rule, camera_rule)
+        probe = base.at(30.0, 0.0, 10.0, 180.0).linear_form()
+        self._coefficients = probe.coefficients
+
+    def coefficients(self, params: Mapping[str, Any]) -> np.ndarray:
+        """The model's (a, b, c) of :func:`_oren_nayar` per parameter row, shape (W, 3)."""
+        terms = self._coefficients(**params)
+        rows = max([np.size(t) for t in terms] + [1])
+        columns = [np.broadcast_to(np.reshape(np.asarray(t, float), -1), (rows,)) for t in terms]
+        columns += [np.zeros(rows)] * (3 - len(columns))  # lambert: (rho / pi, 0, 0)
+        return np.ascontiguousarray(np.stack(columns, axis=1))
+
+    def __call__(self, params: Mapping[str, Any], alignment: Mapping[str, Any]) -> np.ndarray:
+        """``<f cos theta_i>`` [1/sr], shape (W, N) for parameter and alignment columns of
+        W rows (shape (W, 1)), (N,) when every value is a scalar."""
+        coefficients = self.coefficients(params)
+        rows = max([coefficients.shape[0]] + [np.size(v) for v in alignment.values()])
+        offsets = np.zeros((rows, len(ALIGNMENT_ERRORS)))
+        for k, name in enumerate(ALIGNMENT_ERRORS):
+            if name in alignment:
+                offsets[:, k] = np.broadcast_to(np.reshape(np.asarray(alignment[name], float), -1), (rows,))
+        coefficients = np.ascontiguousarray(np.broadcast_to(coefficients, (rows, 3)))
+        out = np.empty((rows, self.n))
+        rig_radiance(self._lamp, self._camera, self._lamp_of, self._camera_of, offsets, coefficients,
+                     self._rules[0], self._rules[1], self._ring, self._weights, out)
+        if all(np.ndim(v) == 0 for v in (*params.values(), *alignment.values())):
+            return out[0]
+        return out
+
+
+def _distinct(theta: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct directions (D, 2) [deg] and the index of each input among them."""
+    directions, index = np.unique(np.column_stack([theta, phi]), axis=0, return_inverse=True)
+    return np.ascontiguousarray(directions), np.ascontiguousarray(index.reshape(-1).astype(np.int64))
