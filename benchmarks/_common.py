@@ -37,10 +37,17 @@ def mcmc_design() -> str:
     stopping rule), for a benchmark's JSON and prose."""
     import inspect
 
+    from gonio.fitting import fit
     from gonio.fitting.mcmc import DEFAULT_WALKERS, sample_posterior
     from gonio.fitting.moves import MOVES
 
-    defaults = {name: p.default for name, p in inspect.signature(sample_posterior).parameters.items()}
+    def parameters(function) -> dict:
+        return {name: p.default for name, p in inspect.signature(function).parameters.items()
+                if p.default is not inspect.Parameter.empty}
+
+    # fit's own defaults (max_steps, tau_multiple, rhat_limit) win over those of the
+    # sampler it calls; the rest (move, tau_rtol) fit leaves to sample_posterior
+    defaults = {**parameters(sample_posterior), **parameters(fit)}
     return (f"gonio.fitting.fit defaults: moves '{defaults['moves']}' ({MOVES[defaults['moves']]}), "
             f"{DEFAULT_WALKERS} walkers, chain >= {defaults['tau_multiple']:g} tau with tau stable to "
             f"{defaults['tau_rtol']:.0%}, R-hat < {defaults['rhat_limit']:g}, max {defaults['max_steps']} steps; "

@@ -14,7 +14,8 @@ whatever else changed between them). This script pairs the coverage records of t
   Monte Carlo error of the median of a Gaussian from N effective samples is
   sqrt(pi / 2) / sqrt(N) sd, so two chains of the same posterior differ by
   sqrt(pi / 2) sqrt(1 / N1 + 1 / N2) sd rms, the figure printed beside the shift (N: each
-  record's smallest ESS, n_walkers (n_steps - burn-in) / tau); an sd from N effective
+  record's smallest ESS over its parameters, n_walkers (n_steps - burn-in) / max tau, so
+  the figure is an upper bound for a parameter that mixes faster); an sd from N effective
   samples has a relative error of 1 / sqrt(2 N), so the log of the ratio of two scatters
   by sqrt(1 / (2 N1) + 1 / (2 N2)) rms, likewise printed;
 * how many seeds changed their verdict (the truth inside the 68 % or 95 % interval);
@@ -69,6 +70,18 @@ def load_calibration(source: str) -> dict[str, Any]:
     except (OSError, subprocess.CalledProcessError) as error:
         raise ValueError(f"{source!r} is neither a file nor a git revision holding {CALIBRATION_JSON}") from error
     return json.loads(text)
+
+
+#: Design entries two runs may differ in: what the comparison is about.
+MAY_DIFFER = ("mcmc",)
+
+
+def design_differences(before: Mapping[str, Any], after: Mapping[str, Any]) -> list[str]:
+    """The design entries (protocols, noise, prior, SBC settings, candidates, ...) in which
+    two calibration.json files differ, beyond :data:`MAY_DIFFER`: pairing their seeds would
+    compare different studies."""
+    keys = (set(before["design"]) | set(after["design"])) - set(MAY_DIFFER)
+    return sorted(k for k in keys if before["design"].get(k) != after["design"].get(k))
 
 
 def paired_records(before: Mapping[str, Any], after: Mapping[str, Any]) -> dict[str, list[tuple[dict, dict]]]:
@@ -163,6 +176,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--after", default=CALIBRATION_JSON, help="the later one (default: %(default)s)")
     args = parser.parse_args(argv)
     before, after = load_calibration(args.before), load_calibration(args.after)
+    differences = design_differences(before, after)
+    if differences:
+        raise SystemExit(f"the two runs are different studies (their designs differ in {', '.join(differences)}); "
+                         "only the MCMC may differ between runs compared seed by seed")
     pairs = paired_records(before, after)
     if not pairs:
         raise SystemExit("the two runs have no coverage seed in common")

@@ -4,6 +4,7 @@ the verdict changes (docs/calibration.md, "The same seeds under both samplers").
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 from pathlib import Path
 
@@ -92,3 +93,16 @@ def test_gaussian_pit_and_ranks_fill_the_bins_they_should(paired):
 def test_unknown_source_is_a_clear_error(paired):
     with pytest.raises(ValueError, match="neither a file nor a git revision"):
         paired.load_calibration("no-such-revision-or-file")
+
+
+def test_runs_of_different_studies_are_refused(paired, tmp_path):
+    design = {"prior": {"rho": [0.5, 0.95]}, "sbc_draws": 99, "rank_bins": 10, "mcmc": "stretch"}
+    runs = {"same.json": {**design, "mcmc": "de"}, "other.json": {**design, "prior": {"rho": [0.1, 0.9]}}}
+    for name, run_design in runs.items():
+        (tmp_path / name).write_text(json.dumps(
+            {"design": run_design, "git": {"commit": "x"}, "coverage_records": [record(1, 0.5, 0.01, 1e3)]}))
+    before = {"design": design}
+    assert paired.design_differences(before, {"design": runs["same.json"]}) == []  # only the MCMC differs
+    assert paired.design_differences(before, {"design": runs["other.json"]}) == ["prior"]
+    with pytest.raises(SystemExit, match="different studies.*prior"):
+        paired.main(["--before", str(tmp_path / "same.json"), "--after", str(tmp_path / "other.json")])
