@@ -41,8 +41,9 @@ Failures:
   reported (:class:`ReportWorkerWarning`, or a ``gonio: warning:`` line from the
   command), the workers are ended, and the figures not received are drawn in the calling
   process;
-* an exception in the caller while the pool is open (Ctrl-C included) ends the workers at
-  once (:meth:`ReportPool.terminate`); they ignore SIGINT themselves, which reaches every
+* an exception in the caller while the pool is open (Ctrl-C included; SIGTERM, which is
+  turned into ``SystemExit(143)`` while the pool is open) ends the workers at once
+  (:meth:`ReportPool.terminate`); they ignore SIGINT themselves, which reaches every
   process of the terminal's group, so that the command alone reports it.
 
 The number of processes is ``$GONIO_REPORT_PROCESSES`` when set (1: everything in the
@@ -276,7 +277,8 @@ def report_pool(workers: int, method: str = START_METHOD,
             warn(f"report workers could not start ({type(error).__name__}: {error}); the figures are drawn in "
                  "this process")
     try:
-        yield pool
+        with _sigterm_as_exit(pool is not None):
+            yield pool
     except BaseException:
         if pool is not None:
             pool.terminate()
@@ -284,6 +286,30 @@ def report_pool(workers: int, method: str = START_METHOD,
     finally:
         if pool is not None:
             pool.executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _exit_on_sigterm(signum: int, frame) -> None:
+    raise SystemExit(128 + signum)
+
+
+@contextlib.contextmanager
+def _sigterm_as_exit(active: bool) -> Iterator[None]:
+    """While workers run, SIGTERM ends this process by SystemExit (exit status 143), so
+    that the workers are ended and the pool shut down on the way out (the default
+    action would end this process alone, leaving them to finish and multiprocessing's
+    resource tracker to warn of leaked semaphores). Only where this process still has
+    the default action and only in the main thread (where Python runs signal handlers)."""
+    import threading
+
+    install = (active and threading.current_thread() is threading.main_thread()
+               and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)
+    if install:
+        signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    try:
+        yield
+    finally:
+        if install:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _submit(pool: ReportPool, result: FitResult, shares: list[tuple[str, ...]],

@@ -260,6 +260,7 @@ def test_ctrl_c_ends_the_workers_at_once(saved_fit, tmp_path):
     try:
         with pytest.raises(KeyboardInterrupt):
             with report_pool(1) as pool:
+                pool.executor.submit(os.getpid).result()  # the worker started
                 signal.setitimer(signal.ITIMER_REAL, 0.5)
                 finish_report(pool, stalled, tmp_path)
     finally:
@@ -267,6 +268,23 @@ def test_ctrl_c_ends_the_workers_at_once(saved_fit, tmp_path):
         signal.signal(signal.SIGALRM, previous)
     assert started and all(process.exitcode not in (None, 0) for process in started)  # ended, not finished
     assert list(tmp_path.iterdir()) == []
+
+
+def test_sigterm_ends_the_workers_and_the_process_by_exit_status_143(saved_fit, tmp_path):
+    # SIGTERM to the command while its pool is open: SystemExit(143) on the way out of
+    # the block, the workers ended; the default action is back afterwards.
+    stalled = _with(FitResult.load(saved_fit), _StallOnArrival())
+    children = multiprocessing.active_children()
+    with pytest.raises(SystemExit) as raised:
+        with report_pool(1) as pool:
+            pool.executor.submit(os.getpid).result()
+            started = _new_children(children)
+            future = pool.executor.submit(workers._render, stalled, ("fit-geometry.png",))
+            os.kill(os.getpid(), signal.SIGTERM)
+            future.result()
+    assert raised.value.code == 143
+    assert started and all(process.exitcode not in (None, 0) for process in started)
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
 
 
 def test_a_worker_ignores_ctrl_c_and_goes_on(saved_fit, in_process, strict):
