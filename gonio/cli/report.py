@@ -15,8 +15,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Read a folder written by 'gonio fit' (result.json, chain.npz) and write report.html, a single "
             "self-contained file with every figure embedded, plus the figures as PNG files. The figures are "
-            "drawn by two processes on a machine with more than one core where workers start fast (not on "
-            "Windows); $GONIO_REPORT_PROCESSES sets the number (1 draws them all in this one)."
+            "drawn in this process; $GONIO_REPORT_PROCESSES=2 (or more) shares them with worker processes."
         ),
     )
     parser.add_argument("result_dir", metavar="RESULT_DIR", help="folder written by 'gonio fit'")

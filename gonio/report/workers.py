@@ -17,19 +17,21 @@ Two uses:
   samples, and workers forked from it after the fit start in milliseconds. The command
   then sends the saved result to the workers, which draw every figure
   (:func:`finish_report`); its own process never imports matplotlib.
-* ``write_report(..., processes=2)`` and ``gonio report`` (:func:`write_report_shared`):
-  the pool is opened first, so the server imports while this process reads the result
-  and imports matplotlib itself; this process then draws one share while a worker draws
-  the other.
+* ``write_report(..., processes=2)`` (and ``gonio report`` with
+  ``$GONIO_REPORT_PROCESSES`` of 2 or more; :func:`write_report_shared`): the pool is
+  opened first, so that the server imports while this process reads the result and
+  imports matplotlib itself; this process then draws one share while a worker draws the
+  other. The fork server stays up for later calls in the same process, whose workers
+  then start at once; a cold server's imports compete with the caller's own, which is
+  why ``gonio report`` draws in one process by default (:func:`report_processes`).
 
 Start method (:data:`START_METHOD`): ``forkserver`` where the platform has it (Linux,
 macOS), else ``spawn`` (Windows). A spawned worker is a fresh interpreter that imports
 numpy, gonio and matplotlib itself, about a second of work: the pool starts its workers
-at once so that this happens while ``gonio fit`` fits, and ``gonio report`` draws in one
-process there (:func:`report_processes`). Both methods import the calling program's main
-module in the workers: a script calling ``write_report(..., processes=2)`` needs the
-``if __name__ == "__main__":`` guard (:mod:`multiprocessing`, "Safe importing of main
-module").
+at once so that this happens while ``gonio fit`` fits. Both methods import the calling
+program's main module in the workers: a script calling ``write_report(...,
+processes=2)`` needs the ``if __name__ == "__main__":`` guard (:mod:`multiprocessing`,
+"Safe importing of main module").
 
 Failures:
 
@@ -110,14 +112,15 @@ def available_cores() -> int:
     return os.cpu_count() or 1
 
 
-def report_processes(environ: dict[str, str] | None = None, *, while_fitting: bool = False,
-                     method: str = START_METHOD) -> int:
+def report_processes(environ: dict[str, str] | None = None, *, while_fitting: bool = False) -> int:
     """Processes drawing a report: ``$GONIO_REPORT_PROCESSES``, else 2 where that pays.
 
-    Two processes pay with more than one core, when workers start fast (``forkserver``)
-    or start while a fit runs (``while_fitting``, ``gonio fit --report``). A spawned
-    worker imports numpy, gonio and matplotlib itself (about 1 s): for ``gonio report``
-    alone that costs more than it saves, and one process is the default there.
+    Two processes pay when the workers start while a fit runs (``gonio fit --report``,
+    ``while_fitting``) on more than one core: their imports (about 1 s of CPU: numpy,
+    scipy, matplotlib, gonio, in the fork server or in each spawned worker) then overlap
+    the fit. For a report drawn alone (``gonio report``) the workers' imports compete with
+    the command's own and cost more than the second process saves (benchmarks/
+    bench_report.py), so one process is the default there.
 
     Parameters
     ----------
@@ -125,8 +128,6 @@ def report_processes(environ: dict[str, str] | None = None, *, while_fitting: bo
         The environment (default ``os.environ``).
     while_fitting : bool
         Whether the workers are started before a fit (``gonio fit --report``).
-    method : str
-        multiprocessing start method of the workers.
 
     Returns
     -------
@@ -140,8 +141,7 @@ def report_processes(environ: dict[str, str] | None = None, *, while_fitting: bo
     """
     text = (os.environ if environ is None else environ).get(ENVIRONMENT_VARIABLE)
     if text is None or not text.strip():
-        pays = while_fitting or method != "spawn"
-        return min(2, available_cores()) if pays else 1
+        return min(2, available_cores()) if while_fitting else 1
     try:
         count = int(text)
     except ValueError:

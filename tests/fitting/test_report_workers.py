@@ -111,20 +111,19 @@ def test_shares_cover_every_figure_once_balanced_lightest_first():
     assert heavy - light <= min(cost.values()) + 1e-12
 
 
-def test_number_of_processes_from_the_environment_affinity_and_start_method(monkeypatch):
+def test_number_of_processes_from_the_environment_and_the_cores(monkeypatch):
     assert report_processes({"GONIO_REPORT_PROCESSES": "3"}) == 3
     for bad in ("0", "two", "-1", "1.5"):
         with pytest.raises(ValueError, match="GONIO_REPORT_PROCESSES.*whole number"):
             report_processes({"GONIO_REPORT_PROCESSES": bad})
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3}, raising=False)
-    assert report_processes({}, method="forkserver") == 2
-    # Spawned workers pay only when they start while a fit runs (gonio fit --report).
-    assert report_processes({}, method="spawn") == 1
-    assert report_processes({}, method="spawn", while_fitting=True) == 2
-    assert report_processes({"GONIO_REPORT_PROCESSES": "2"}, method="spawn") == 2
+    # Two processes by default only where the workers start while a fit runs.
+    assert report_processes({}, while_fitting=True) == 2
+    assert report_processes({}) == 1
+    assert report_processes({"GONIO_REPORT_PROCESSES": "2"}) == 2
     # A process allowed on one core only (taskset, a container's CPU set) draws alone.
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {5}, raising=False)
-    assert report_processes({}, method="forkserver") == 1
+    assert report_processes({}, while_fitting=True) == 1
 
 
 def test_a_pickled_result_leaves_its_cached_problem_behind():
