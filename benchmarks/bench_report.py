@@ -411,7 +411,7 @@ def chart(scaling: list[dict], command: dict, path: Path) -> None:
     left.set_xlabel("measurements, each at its own incidence")
     left.set_ylabel("wall time [s]")
     left.set_title("Fit report against the number of measurements", fontsize=10)
-    left.legend(fontsize=8)
+    left.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
     left.grid(alpha=0.3, which="both")
     phases = command["phases_s"]
     start = 0.0
