@@ -96,10 +96,13 @@ def test_a_fit_with_mcmc_and_its_files_loads_neither_arviz_nor_xarray():
     assert _loaded_after(code) == ["emcee", "scipy"]
 
 
-@pytest.mark.parametrize("processes, loaded", [("2", ["emcee", "scipy"]), ("1", ["emcee", "matplotlib", "scipy"])])
-def test_fit_with_report_leaves_matplotlib_to_the_report_workers(tmp_path, monkeypatch, processes, loaded):
+@pytest.mark.parametrize("processes, overwrite, loaded", [("2", False, ["emcee", "scipy"]),
+                                                         ("2", True, ["emcee", "scipy"]),
+                                                         ("1", False, ["emcee", "matplotlib", "scipy"])])
+def test_fit_with_report_leaves_matplotlib_to_the_report_workers(tmp_path, monkeypatch, processes, overwrite, loaded):
     # `gonio fit --report`: worker processes import matplotlib and draw the report while
-    # this process fits (gonio.report.workers); with one process it is drawn here.
+    # this process fits (gonio.report.workers); with one process it is drawn here. With
+    # --overwrite the command also removes the earlier report (by name, without matplotlib).
     monkeypatch.setenv("GONIO_REPORT_PROCESSES", processes)
     code = ("import numpy as np\n"
             "from gonio.cli import main\n"
@@ -107,7 +110,10 @@ def test_fit_with_report_leaves_matplotlib_to_the_report_workers(tmp_path, monke
             "theta = np.arange(0.0, 80.0, 5.0)\n"
             "data = Dataset(30.0, 0.0, theta, 0.0, 0.16 + 0.001 * np.cos(np.radians(theta)), 0.002)\n"
             f"csv = data.to_csv({str(tmp_path / 'd.csv')!r})\n"
-            "main(['fit', str(csv), '--model', 'lambert', '--walkers', '8', '--max-steps', '300', '--report',\n"
-            "      '--quiet', '--rhat-limit', '1.2'])\n")
+            "arguments = ['fit', str(csv), '--model', 'lambert', '--walkers', '8', '--max-steps', '300', '--report',\n"
+            "             '--quiet', '--rhat-limit', '1.2']\n"
+            "main(arguments)\n"
+            f"if {overwrite}:\n"
+            "    assert main(arguments + ['--overwrite', '--seed', '1']) not in (1, 2)  # replaced, no error\n")
     assert _loaded_after(code) == loaded
     assert (tmp_path / "d.fit-lambert" / "report.html").stat().st_size > 10_000

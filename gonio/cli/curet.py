@@ -584,7 +584,7 @@ def check_fit_folder(out: Path, overwrite: bool, folders: Sequence[str]) -> bool
 def _run_fit(args: argparse.Namespace) -> int:
     from gonio.fitting import ConvergenceWarning, compare_models, fit
 
-    from .fit import remove_stale_results, written_names
+    from .fit import remove_stale_results
 
     candidates = _parse_candidates(args.model or DEFAULT_CANDIDATES)
     dataset, noise = _dataset_from_args(args)
@@ -610,12 +610,12 @@ def _run_fit(args: argparse.Namespace) -> int:
                          rhat_limit=args.rhat_limit,
                          seed=args.seed)
         result.save(folder)
+        if replacing:
+            remove_stale_results(folder, result.saved_files())  # the earlier report too, before drawing
         if args.report:
             from gonio.report.fit_report import write_report
 
             write_report(folder)
-        if replacing:
-            remove_stale_results(folder, written_names(result, args.report))
         seconds = time.perf_counter() - start
         summary_rows.append((label, folder, result, seconds))
         if result.converged is False:

@@ -119,7 +119,7 @@ def check_result_folder(out: Path, overwrite: bool, argument: str = "--out") -> 
 def result_file_names() -> tuple[str, ...]:
     """Every file name a fit result folder may hold from FitResult.save and write_report."""
     from gonio.fitting.results import CHAIN_FILE, RESULT_FILE, SUMMARY_FILE
-    from gonio.report.fit_report import REPORT_FILES
+    from gonio.report.fit_html import REPORT_FILES  # the names without matplotlib
 
     return (RESULT_FILE, CHAIN_FILE, SUMMARY_FILE) + REPORT_FILES
 
@@ -128,7 +128,10 @@ def remove_stale_results(out: Path, written: tuple[str, ...]) -> list[Path]:
     """Delete the result and report files of an earlier fit that the new one did not rewrite.
 
     Only the names FitResult.save and write_report write are considered (a chain left
-    from an earlier MCMC run, a report of an earlier fit); every other file stays.
+    from an earlier MCMC run, a report of an earlier fit); every other file stays. Called
+    right after the new result is saved, before its report is drawn (with
+    ``written = result.saved_files()``): a report that then fails leaves no report of the
+    earlier fit beside the new result.
 
     Parameters
     ----------
@@ -149,16 +152,6 @@ def remove_stale_results(out: Path, written: tuple[str, ...]) -> list[Path]:
             path.unlink()
             removed.append(path)
     return removed
-
-
-def written_names(result, report: bool) -> tuple[str, ...]:
-    """The file names a saved ``result`` (plus its report, when written) occupies."""
-    names = result.saved_files()
-    if report:
-        from gonio.report.fit_report import REPORT_FILES
-
-        names += REPORT_FILES
-    return names
 
 
 def _pairs(items: list[str], what: str) -> dict[str, str]:
@@ -259,9 +252,6 @@ def _alignment(items: list[str]) -> tuple[str, ...]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from gonio.report.workers import finish_report, start_report_workers
-
-    workers = start_report_workers() if args.report and len(args.model) == 1 else None  # import while we fit
     from gonio import models
     from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
     from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
@@ -296,19 +286,22 @@ def _run(args: argparse.Namespace) -> int:
     replacing = check_result_folder(out, args.overwrite)
     if not args.quiet:
         print(f"fitting {name} to {dataset.n} {dataset.quantity} values from {data_path}", file=sys.stderr)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
-        result = fit(
-            dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=args.jitter or False, options=options,
-            n_walkers=args.walkers, max_steps=args.max_steps, rhat_limit=args.rhat_limit, seed=args.seed,
-            progress=_Progress(args.quiet), alignment=alignment, stray_light=args.stray_light,
-        )
-    path = result.save(out)
-    print(result.summary())
-    if args.report:
-        print(f"report: {finish_report(workers, out)}")
-    if replacing:
-        remove_stale_results(out, written_names(result, args.report))
+    with _report_workers(args.report) as pool:  # they import matplotlib while this process fits
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
+            result = fit(
+                dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=args.jitter or False,
+                options=options, n_walkers=args.walkers, max_steps=args.max_steps, rhat_limit=args.rhat_limit,
+                seed=args.seed, progress=_Progress(args.quiet), alignment=alignment, stray_light=args.stray_light,
+            )
+        path = result.save(out)
+        if replacing:
+            remove_stale_results(out, result.saved_files())  # the earlier fit's report too, before drawing
+        print(result.summary())
+        if args.report:
+            from gonio.report.workers import finish_report
+
+            print(f"report: {finish_report(pool, result, out)}")
     print(f"result: {path}")
     if result.converged is False:
         print("gonio: WARNING: the MCMC chain did NOT converge (step limit reached); "
@@ -319,3 +312,16 @@ def _run(args: argparse.Namespace) -> int:
     if result.adequate is False:
         print(f"gonio: {result.adequacy.headline()}", file=sys.stderr)
     return result.exit_code()
+
+
+def _report_workers(report: bool):
+    """The report's worker pool (gonio.report.workers.report_pool) for ``gonio fit``, or an
+    empty context: none without ``--report`` or with one report process."""
+    import contextlib
+
+    if not report:
+        return contextlib.nullcontext(None)
+    from gonio.report.workers import print_warning, report_pool, report_processes
+
+    processes = report_processes(while_fitting=True)
+    return report_pool(processes if processes > 1 else 0, warn=print_warning)

@@ -221,6 +221,14 @@ class FitResult:
             self.__dict__["_problem"] = cached
         return cached[1]
 
+    def __getstate__(self) -> dict[str, Any]:
+        """The result for pickling (e.g. to a report worker), without the cached
+        FitProblem of :meth:`problem`: it holds the model's prepared functions, which do
+        not pickle, and is rebuilt on demand."""
+        state = self.__dict__.copy()
+        state.pop("_problem", None)
+        return state
+
     @property
     def converged(self) -> bool | None:
         """Whether the chain converged (None without MCMC)."""

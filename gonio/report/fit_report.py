@@ -3,240 +3,39 @@
 :func:`write_report` reads a fit result folder (``result.json`` + ``chain.npz``, written
 by :meth:`gonio.fitting.FitResult.save`) and writes, into the same folder or another one,
 ``report.html`` (every figure embedded as a base64 PNG, no external reference) and the
-figures as ``fit-*.png``.  The report reads top to bottom: warnings first, then what was
-measured, data against the posterior predictive band, residuals, the parameter table,
-the posterior (corner plot), the chain (traces), sampler diagnostics, correlations and
-the plain-text summary.
+figures as ``fit-*.png``. The figures are drawn here (:func:`render_figures`, matplotlib);
+the page and the files are written by :mod:`gonio.report.fit_html`, which holds the list
+of figures (:data:`FIGURES`) and needs no matplotlib.
 """
 from __future__ import annotations
 
-import base64
-import html
 import io
-import math
 from pathlib import Path
-from typing import Any, Callable
 
-import numpy as np
 from matplotlib.figure import Figure
 
-from gonio.files import write_atomic
 from gonio.fitting.results import FitResult
-from gonio.models import get as get_model
 
 from . import fit_figures
+from .fit_html import FIGURE_NAMES, FIGURES, REPORT_FILE, REPORT_FILES, write_html, write_report_files
 
-__all__ = ["write_report", "write_figures", "write_html", "load_source", "FIGURES", "REPORT_FILE", "REPORT_FILES"]
-
-#: The HTML file :func:`write_report` writes.
-REPORT_FILE = "report.html"
-
-#: (file name, section title, figure function, caption) in report order.
-FIGURES: tuple[tuple[str, str, Callable[[FitResult], Figure], str], ...] = (
-    ("fit-geometry.png", "What was measured", fit_figures.geometry_figure,
-     "Viewing directions (dots) and source directions (stars) on the hemisphere."),
-    ("fit-data.png", "Data and model", fit_figures.data_figure,
-     "Measurements with one-sigma error bars; the model's posterior median with its 68 % and 95 % "
-     "posterior predictive bands (spread of the model over posterior draws, measurement noise not added)."),
-    ("fit-residuals.png", "Residuals", fit_figures.residual_figure,
-     "Normalised residuals; about 68 % should fall in the dark band and 95 % within the light one."),
-    ("fit-corner.png", "Posterior", fit_figures.corner_figure,
-     "One- and two-dimensional marginal posteriors of the free parameters."),
-    ("fit-traces.png", "Chain", fit_figures.trace_figure,
-     "Every walker's position at every step; the shaded start is discarded as burn-in."),
-)
-
-#: Every file :func:`write_report` writes into its output folder.
-REPORT_FILES: tuple[str, ...] = (REPORT_FILE,) + tuple(name for name, *_ in FIGURES)
-
-_STYLE = """
-body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; max-width: 1100px;
-       margin: 2em auto; padding: 0 1em; color: #222; line-height: 1.45; }
-h1 { font-size: 1.6em; margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 1.8em; }
-table { border-collapse: collapse; margin: 0.8em 0; font-size: 0.92em; }
-th, td { border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }
-th { background: #f2f2f2; } td.name, th.name { text-align: left; }
-.flags { background: #fff3f0; border: 2px solid #d9534f; padding: 0.6em 1em; border-radius: 4px; }
-.ok { background: #f0fff3; border: 1px solid #5cb85c; padding: 0.6em 1em; border-radius: 4px; }
-.verdict { font-size: 1.1em; margin: 0.6em 0 1em 0; }
-figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #eee; }
-figcaption { font-size: 0.9em; color: #555; }
-pre { background: #f7f7f7; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
-.meta { color: #555; }
-"""
-
+__all__ = ["write_report", "render_figures", "write_html", "write_report_files", "load_source", "FIGURES",
+           "FIGURE_NAMES", "REPORT_FILE", "REPORT_FILES"]
 
 #: zlib level of the PNG files: 1 makes files 2 to 5 % larger than 3 or the default 6 in
 #: 70 % (trace figure) to 90 % of the time of 3 and half that of 6 (measured on the
 #: figures of a Fig 16 fit).
 _PNG_COMPRESSION = 1
 
+#: Resolution of the PNG files [dots per inch].
+_DPI = 110
 
-def _png(fig: Figure, path: Path) -> bytes:
+
+def _png(fig: Figure) -> bytes:
+    """The figure encoded as PNG."""
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110, pil_kwargs={"compress_level": _PNG_COMPRESSION})
-    data = buffer.getvalue()
-    write_atomic(path, data)
-    return data
-
-
-def _number(x: Any, digits: int = 4) -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "&ndash;"
-    if isinstance(x, (int, np.integer)):
-        return str(x)
-    return f"{x:.{digits}g}"
-
-
-def _parameter_table(result: FitResult) -> str:
-    sampled = bool(result.posterior)
-    head = ["parameter", "unit", "range", "least squares", "std. error"]
-    if sampled:
-        head += ["median", "&minus;1&sigma;", "+1&sigma;", "2.5 %", "97.5 %", "MAP", "prior"]
-    rows = ["<tr>" + "".join(f"<th{' class=name' if i == 0 else ''}>{h}</th>" for i, h in enumerate(head)) + "</tr>"]
-    for r in result.parameter_rows():
-        lo, hi = r["bounds"]
-        cells = [f"<td class=name><b>{html.escape(r['name'])}</b></td>", f"<td>{html.escape(r['unit'])}</td>",
-                 f"<td>[{lo:g}, {hi:g}]</td>"]
-        if r["fixed"]:
-            cells += [f"<td>{_number(r['value'])}</td>", "<td>fixed</td>"]
-            cells += ["<td></td>"] * (7 if sampled else 0)
-        else:
-            cells += [f"<td>{_number(r['value'])}</td>", f"<td>{_number(r['stderr'], 3)}</td>"]
-            if sampled:
-                cells += [f"<td><b>{_number(r['median'])}</b></td>", f"<td>{_number(r['median'] - r['p16'], 3)}</td>",
-                          f"<td>{_number(r['p84'] - r['median'], 3)}</td>", f"<td>{_number(r['p2_5'])}</td>",
-                          f"<td>{_number(r['p97_5'])}</td>", f"<td>{_number(r['map'])}</td>",
-                          f"<td class=name>{html.escape(r['prior'])}</td>"]
-        rows.append("<tr>" + "".join(cells) + "</tr>")
-    return "<table>" + "".join(rows) + "</table>"
-
-
-def _diagnostics_table(result: FitResult) -> str:
-    ls = result.least_squares
-    info = result.information()
-    items = [
-        ("data points", result.dataset.n),
-        ("free parameters", len(result.free)),
-        ("chi-square", ls.chi2),
-        ("reduced chi-square", ls.redchi),
-        ("AIC / BIC", f"{_number(info['aic'])} / {_number(info['bic'])}"),
-        ("least-squares status", html.escape(ls.message)),
-    ]
-    if result.mcmc is not None:
-        m = result.mcmc
-        items += [
-            ("walkers &times; steps", f"{m.n_walkers} &times; {m.n_steps} (limit {m.max_steps})"),
-            ("burn-in / thin", f"{m.burn_in} / {m.thin}"),
-            ("converged", "yes (length &ge; %g &tau;, stable &tau;, R-hat &lt; %g)" % (m.tau_multiple, m.rhat_limit)
-             if m.converged else "<b style='color:#d9534f'>NO: step limit reached</b>"),
-            ("mean acceptance fraction", f"{float(m.acceptance_fraction.mean()):.3f} "
-             f"(walkers {float(m.acceptance_fraction.min()):.2f}&ndash;{float(m.acceptance_fraction.max()):.2f})"),
-            ("sampling time", f"{m.wall_seconds:.2f} s, of which model evaluation {m.model_seconds:.2f} s"),
-        ]
-    items += _adequacy_items(result)
-    rows = "".join(f"<tr><th class=name>{k}</th><td>{v if isinstance(v, str) else _number(v)}</td></tr>" for k, v in items)
-    table = f"<table>{rows}</table>"
-    if result.mcmc is not None:
-        table += _chain_table(result)
-    return table
-
-
-def _adequacy_items(result: FitResult) -> list[tuple[str, Any]]:
-    """Goodness-of-fit rows of the diagnostics table (gonio.fitting.adequacy)."""
-    a = result.adequacy
-    if a is None:
-        return []
-    items = [("chi-square p-value (least-squares optimum)", _number(a.chi2_p, 3)),
-             ("posterior predictive p-value", _number(a.ppc_p, 3))]
-    if math.isfinite(a.extra_noise_ratio):
-        items.append(("fitted extra noise / stated uncertainty", _number(a.extra_noise_ratio, 3)))
-    verdict = "adequate" if a.adequate else "<b style='color:#d9534f'>MODEL INADEQUATE</b>"
-    items.append(("goodness of fit", f"{verdict} (limits: p &ge; {a.alpha:g}, extra noise &le; stated)"))
-    return items
-
-
-def _chain_table(result: FitResult) -> str:
-    """Per parameter: autocorrelation time, chain length in tau, R-hat, bulk and tail ESS."""
-    m = result.mcmc
-    head = ("<tr><th class=name>parameter</th><th>&tau; [steps]</th><th>chain length / &tau;</th>"
-            "<th>effective samples (emcee)</th><th>R-hat (rank, split)</th><th>ESS bulk</th><th>ESS tail</th></tr>")
-    body = ""
-    for name, tau, ess in zip(result.free, m.tau, m.ess):
-        length = m.n_steps / tau if math.isfinite(tau) and tau > 0 else math.nan
-        d = m.diagnostics.get(name, {})
-        r_hat = d.get("r_hat", math.nan)
-        style = " style='color:#d9534f;font-weight:bold'" if not r_hat < m.rhat_limit else ""
-        body += (f"<tr><td class=name>{html.escape(name)}</td><td>{_number(float(tau), 3)}</td>"
-                 f"<td>{_number(length, 3)}</td><td>{_number(float(ess), 4)}</td>"
-                 f"<td{style}>{_number(r_hat, 4)}</td><td>{_number(d.get('ess_bulk'), 4)}</td>"
-                 f"<td>{_number(d.get('ess_tail'), 4)}</td></tr>")
-    return (f"<table>{head}{body}</table><p class=meta>R-hat and ESS (Vehtari et al. 2021) computed by ArviZ with "
-            "each walker as one chain, after burn-in and thinning. The posterior is in posterior.nc (ArviZ "
-            "InferenceData) for use in other tools.</p>")
-
-
-def _verdict(result: FitResult) -> str:
-    """The report's opening lines: goodness of fit and convergence."""
-    parts, bad = [], False
-    if result.adequacy is not None:
-        parts.append(html.escape(result.adequacy.headline()))
-        bad = not result.adequacy.adequate
-    if result.mcmc is not None:
-        if result.mcmc.converged:
-            parts.append("chain converged (length &ge; %g &tau; and R-hat &lt; %g)"
-                         % (result.mcmc.tau_multiple, result.mcmc.rhat_limit))
-        else:
-            parts.append("CHAIN NOT CONVERGED: posterior numbers are unreliable")
-            bad = True
-    if not parts:
-        return ""
-    return f"<div class='{'flags' if bad else 'ok'} verdict'>" + "<br>".join(parts) + "</div>"
-
-
-def _budget_table(result: FitResult) -> str:
-    """The measurement's uncertainty budget (from the reduction of a recording), if any."""
-    from gonio.uncertainty import COMPONENTS
-
-    meta = result.dataset.metadata
-    budget = meta.get("uncertainty_budget")
-    if not isinstance(budget, dict) or not budget:
-        return "<p>The data carry no uncertainty budget (they do not come from a reduced recording).</p>"
-    rows = "".join(f"<tr><td class=name>{html.escape(name)}</td><td>{_number(value, 3)}</td>"
-                   f"<td class=name>{html.escape(COMPONENTS.get(name, ''))}</td></tr>" for name, value in budget.items())
-    table = ("<table><tr><th class=name>component</th><th>median relative size</th><th class=name>what it is</th></tr>"
-             f"{rows}</table>")
-    calibration = meta.get("calibration_budget")
-    if isinstance(calibration, dict) and calibration:
-        items = ", ".join(f"{html.escape(k)} {_number(v, 2)}" for k, v in calibration.items())
-        table += f"<p class=meta>Calibration (relative, common to every value; the prior on the scale): {items}.</p>"
-    notes = []
-    excluded = meta.get("excluded")
-    if isinstance(excluded, dict):
-        notes += [f"{count} {html.escape(str(reason))} point(s) excluded from the fit" for reason, count in excluded.items()]
-    warnings = meta.get("reduction_warnings")
-    if isinstance(warnings, list):
-        notes += [html.escape(str(w)) for w in warnings]
-    if notes:
-        table += "<ul>" + "".join(f"<li>{n}</li>" for n in notes) + "</ul>"
-    return table + "<p class=meta>How each component is estimated: docs/acquisition.md.</p>"
-
-
-def _correlation_table(result: FitResult) -> str:
-    matrix = np.asarray(result.posterior["correlation"] if result.posterior else result.least_squares.correlation, float)
-    names = list(result.free)
-    if len(names) < 2:
-        return "<p>One free parameter: no correlations.</p>"
-    head = "<tr><th></th>" + "".join(f"<th>{html.escape(n)}</th>" for n in names) + "</tr>"
-    body = ""
-    for i, name in enumerate(names):
-        cells = ""
-        for j in range(len(names)):
-            r = matrix[i, j]
-            shade = "" if not math.isfinite(r) or i == j else f" style='background: rgba({'217,83,79' if r > 0 else '49,130,189'},{min(abs(r), 1) * 0.6:.2f})'"
-            cells += f"<td{shade}>{_number(float(r), 3)}</td>"
-        body += f"<tr><th class=name>{html.escape(name)}</th>{cells}</tr>"
-    return f"<table>{head}{body}</table>"
+    fig.savefig(buffer, format="png", dpi=_DPI, pil_kwargs={"compress_level": _PNG_COMPRESSION})
+    return buffer.getvalue()
 
 
 def load_source(source: str | Path | FitResult, out: str | Path | None = None) -> tuple[FitResult, Path]:
@@ -273,93 +72,31 @@ def load_source(source: str | Path | FitResult, out: str | Path | None = None) -
     return result, out
 
 
-def write_figures(result: FitResult, out: Path, filenames: tuple[str, ...] | None = None) -> dict[str, bytes]:
-    """Draw figures of :data:`FIGURES` and write them as PNG files into ``out``.
+def render_figures(result: FitResult, filenames: tuple[str, ...] = FIGURE_NAMES) -> dict[str, bytes]:
+    """Draw figures of :data:`FIGURES` and encode them as PNG (nothing is written).
 
     Parameters
     ----------
     result : FitResult
         The fit drawn.
-    out : pathlib.Path
-        Existing output folder.
-    filenames : tuple of str, optional
+    filenames : tuple of str
         File names of the figures to draw (default: all, in report order).
 
     Returns
     -------
     dict of str to bytes
-        The PNG file contents by file name.
+        The PNG bytes by file name.
+
+    Raises
+    ------
+    ValueError
+        A name is not one of the report's figures.
     """
-    makers = {filename: make for filename, _, make, _ in FIGURES}
-    unknown = sorted(set(filenames or ()) - set(makers))
+    makers = {figure.file: getattr(fit_figures, figure.function) for figure in FIGURES}
+    unknown = sorted(set(filenames) - set(makers))
     if unknown:
-        raise ValueError(f"write_figures: unknown figure file(s) {unknown}; expected names of {list(makers)}")
-    return {filename: _png(makers[filename](result), out / filename) for filename in (filenames or tuple(makers))}
-
-
-def write_html(result: FitResult, out: Path, pngs: dict[str, bytes] | None = None) -> Path:
-    """Write ``report.html`` with every figure embedded.
-
-    Parameters
-    ----------
-    result : FitResult
-        The fit reported.
-    out : pathlib.Path
-        Output folder; the figures' PNG files are read from it unless given.
-    pngs : dict of str to bytes, optional
-        PNG contents by file name (:func:`write_figures`); missing ones are read from ``out``.
-
-    Returns
-    -------
-    pathlib.Path
-        The HTML file.
-    """
-    pngs = dict(pngs or {})
-    model = get_model(result.model)
-    data = result.dataset
-    sections = []
-    for filename, title, _, caption in FIGURES:
-        png = pngs[filename] if filename in pngs else (out / filename).read_bytes()
-        encoded = base64.b64encode(png).decode("ascii")
-        sections.append(
-            (title, f"<figure><img alt='{html.escape(title)}' src='data:image/png;base64,{encoded}'>"
-                    f"<figcaption>{html.escape(caption)}</figcaption></figure>")
-        )
-    figures = dict(sections)
-    if result.flags:
-        flags = "<div class=flags><b>Warnings</b><ul>" + "".join(f"<li>{html.escape(f)}</li>" for f in result.flags) + "</ul></div>"
-    else:
-        flags = "<div class=ok>No warnings: parameters determined, none at a bound" + (
-            ", chain converged." if result.mcmc is not None else " (least squares only, no MCMC).") + "</div>"
-    fixed = ", ".join(f"{k} = {v:g}" for k, v in result.fixed.items()) or "none"
-    title = f"Fit of {html.escape(result.model)} to {html.escape(data.label or 'data')}"
-    body = f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>{title}</title><style>{_STYLE}</style></head><body>
-<h1>{title}</h1>
-{_verdict(result)}
-<p class=meta>Model <b>{html.escape(model.name)}</b>: {html.escape(model.description)}.
-Reference: {html.escape(model.reference)}.<br>
-Data: {data.n} measurements of {html.escape(data.quantity)} [{html.escape(data.unit)}] at {len(data.incidences()[0])} incidences.
-Fixed parameters: {html.escape(fixed)}. Created {html.escape(result.created)} with gonio {html.escape(result.gonio_version)}.</p>
-{flags}
-<h2>What was measured</h2>{figures['What was measured']}
-<h2>Uncertainty budget of the data</h2>{_budget_table(result)}
-<h2>Data and model</h2>{figures['Data and model']}
-<h2>Residuals</h2>{figures['Residuals']}
-<h2>Parameters</h2>{_parameter_table(result)}
-<p class=meta>Least squares: weighted by the measurement uncertainties, bounded by the physical ranges; standard errors from the
-Jacobian. Posterior: median with the 16th/84th percentiles (&plusmn;1&sigma;) and 2.5th/97.5th percentiles; MAP is the highest posterior
-density found.</p>
-<h2>Posterior</h2>{figures['Posterior']}
-<h2>Chain</h2>{figures['Chain']}
-<h2>Diagnostics</h2>{_diagnostics_table(result)}
-<h2>Correlations</h2>{_correlation_table(result)}
-<h2>Summary</h2><pre>{html.escape(result.summary())}</pre>
-</body></html>
-"""
-    path = out / REPORT_FILE
-    write_atomic(path, body)
-    return path
+        raise ValueError(f"render_figures: unknown figure file(s) {unknown}; expected names of {list(makers)}")
+    return {filename: _png(makers[filename](result)) for filename in filenames}
 
 
 def write_report(source: str | Path | FitResult, out: str | Path | None = None, *, processes: int = 1) -> Path:
@@ -373,10 +110,13 @@ def write_report(source: str | Path | FitResult, out: str | Path | None = None, 
         Output folder (default: the result folder; required for an in-memory result).
     processes : int
         Processes drawing the figures: 1 draws them all here; more start
-        ``processes - 1`` worker processes (:mod:`gonio.report.workers`) that draw their
-        share while this process draws its own. The files are the same either way; if a
-        worker fails, a :class:`gonio.report.workers.ReportWorkerWarning` says why and its
-        figures are drawn here.
+        ``processes - 1`` worker processes (:func:`gonio.report.workers.write_report_shared`)
+        that draw their share while this process draws its own. The files are the same
+        either way. A worker that dies or cannot start is reported by a
+        :class:`gonio.report.workers.ReportWorkerWarning` and its figures are drawn here;
+        an error in a figure is raised as it would be here. With more than one process the
+        calling script needs the ``if __name__ == "__main__":`` guard of
+        :mod:`multiprocessing` (the workers import the main module).
 
     Returns
     -------
@@ -390,9 +130,9 @@ def write_report(source: str | Path | FitResult, out: str | Path | None = None, 
     """
     if processes < 1:
         raise ValueError(f"write_report: processes = {processes}; expected 1 or more")
-    result, out = load_source(source, out)
     if processes == 1:
-        return write_html(result, out, write_figures(result, out))
+        result, out = load_source(source, out)
+        return write_report_files(result, out, render_figures(result))
     from .workers import write_report_shared
 
-    return write_report_shared(result, out, processes)
+    return write_report_shared(source, out, processes)

@@ -1,87 +1,133 @@
 """The report's figures drawn by worker processes, on the machine's other cores.
 
-A report is five matplotlib figures (:data:`gonio.report.fit_report.FIGURES`), each
-drawn and PNG-encoded on its own: they can be drawn side by side. Two uses:
+A report is five matplotlib figures (:data:`gonio.report.fit_html.FIGURES`), each drawn
+and PNG-encoded on its own: they can be drawn side by side. The workers are a
+:class:`concurrent.futures.ProcessPoolExecutor` (:class:`ReportPool`); each job draws a
+share of the figures (:func:`share_figures`) and returns their PNG bytes. Workers write
+no file: the calling process writes the PNG files and ``report.html`` from the bytes it
+received (:func:`gonio.report.fit_html.write_report_files`), so a worker that is stopped
+or dies leaves nothing behind, and the page embeds exactly the figures of this report.
 
-* :func:`start_report_workers` is called at the start of ``gonio fit ... --report``:
-  the workers import matplotlib, :mod:`gonio.report` and the scipy parts the figures use
-  while the command's own process reads, fits and samples; once the result is saved,
-  :meth:`ReportWorkers.write_report` has them draw their shares of the figures from the
-  saved result and one of them write ``report.html`` (:func:`finish_report`). The
-  command's process never imports matplotlib.
-* ``write_report(..., processes=2)`` (:func:`write_report_shared`) draws part of the
-  figures in a worker started for the purpose while the calling process draws the rest.
+Two uses:
 
-The files are the same whichever process draws them (one implementation,
-:func:`gonio.report.fit_report.write_figures` and ``write_html``; tested byte for byte).
+* ``gonio fit ... --report`` opens a pool (:func:`report_pool`) once its input is checked
+  and before it fits. With the ``forkserver`` start method the fork server is started at
+  once with :data:`PRELOAD` (matplotlib, :mod:`gonio.report.fit_report`, the scipy parts
+  the figures use): it imports them on another core while the command reads, fits and
+  samples, and workers forked from it after the fit start in milliseconds. The command
+  then sends the saved result to the workers, which draw every figure
+  (:func:`finish_report`); its own process never imports matplotlib.
+* ``write_report(..., processes=2)`` (and ``gonio report`` with
+  ``$GONIO_REPORT_PROCESSES`` of 2 or more; :func:`write_report_shared`): the pool is
+  opened first, so that the server imports while this process reads the result and
+  imports matplotlib itself; this process then draws one share while a worker draws the
+  other. The fork server stays up for later calls in the same process, whose workers
+  then start at once; a cold server's imports compete with the caller's own, which is
+  why ``gonio report`` draws in one process by default (:func:`report_processes`).
 
-Start method: ``fork`` on Linux (the worker starts with the parent's modules already
-imported and costs a few milliseconds to start), ``spawn`` elsewhere (macOS, where
-``fork`` is unsafe with the system's frameworks, and Windows, which has no ``fork``): a
-spawned worker starts a fresh interpreter and imports numpy and gonio itself, which adds
-about a second of work on another core; that pays for ``gonio fit --report``, whose fit
-takes longer, but hardly for ``write_report(..., processes=2)`` of a small report.
+Start method (:data:`START_METHOD`): ``forkserver`` where the platform has it (Linux,
+macOS), else ``spawn`` (Windows). A spawned worker is a fresh interpreter that imports
+numpy, gonio and matplotlib itself, about a second of work: the pool starts its workers
+at once so that this happens while ``gonio fit`` fits. Both methods import the calling
+program's main module in the workers: a script calling ``write_report(...,
+processes=2)`` needs the ``if __name__ == "__main__":`` guard (:mod:`multiprocessing`,
+"Safe importing of main module").
 
-Failures: an exception in a worker comes back as :class:`ReportWorkerError` with the
-worker's traceback; a worker that dies or cannot be started is an error too. Callers
-fall back to drawing the figures in their own process and say so
-(:class:`ReportWorkerWarning`, or a ``gonio: warning:`` line from the command): the
-report is never silently missing, and the result files, saved before the report is
-drawn, are never touched by the workers (they write only the report's files, each
-atomically).
+Failures:
+
+* an error in a figure (a bug, a result that cannot be drawn) is raised in the caller as
+  the worker raised it (its traceback is the exception's cause): drawing it again here
+  would fail the same way;
+* a worker that dies (:class:`concurrent.futures.process.BrokenProcessPool`), a pool that
+  cannot start, or a worker that has not answered within :data:`WORKER_TIMEOUT_S` is
+  reported (:class:`ReportWorkerWarning`, or a ``gonio: warning:`` line from the
+  command), the workers are ended, and the figures not received are drawn in the calling
+  process;
+* an exception in the caller while the pool is open (Ctrl-C included; SIGTERM, which is
+  turned into ``SystemExit(143)`` while the pool is open) ends the workers at once
+  (:meth:`ReportPool.terminate`); they ignore SIGINT themselves, which reaches every
+  process of the terminal's group, so that the command alone reports it.
 
 The number of processes is ``$GONIO_REPORT_PROCESSES`` when set (1: everything in the
-calling process), else 2 on a machine with more than one core (:func:`report_processes`).
+calling process), else 2 where this pays (:func:`report_processes`).
 """
 from __future__ import annotations
 
-import atexit
-import copy
+import contextlib
 import multiprocessing
-import multiprocessing.util  # noqa: F401 - its exit hook must be registered before ours
+import multiprocessing.forkserver
 import os
 import signal
 import sys
-import traceback
+import time
 import warnings
-import weakref
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Callable, Iterator, Sequence
 
-__all__ = ["ReportWorkers", "ReportWorkerError", "ReportWorkerWarning", "start_report_workers", "finish_report",
-           "write_report_shared", "report_processes", "share_figures", "START_METHOD", "ENVIRONMENT_VARIABLE",
-           "FIGURE_COST"]
+from .fit_html import FIGURE_NAMES, FIGURES, write_report_files
+
+if TYPE_CHECKING:
+    from gonio.fitting.results import FitResult
+
+__all__ = ["ReportPool", "ReportWorkerWarning", "report_pool", "draw_figures_shared", "finish_report",
+           "print_warning", "write_report_shared", "report_processes", "available_cores", "share_figures",
+           "START_METHOD", "ENVIRONMENT_VARIABLE", "PRELOAD", "WORKER_TIMEOUT_S"]
 
 #: Environment variable setting the number of report processes.
 ENVIRONMENT_VARIABLE = "GONIO_REPORT_PROCESSES"
 
 #: multiprocessing start method of the workers (see the module notes).
-START_METHOD = "fork" if sys.platform.startswith("linux") else "spawn"
+START_METHOD = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
 
-#: Relative cost of each figure (CPU seconds to draw and encode it for the Fig 16 fit
-#: after the imports, benchmarks/bench_report.py): the shares are balanced with these.
-FIGURE_COST = {"fit-geometry.png": 0.09, "fit-data.png": 0.15, "fit-residuals.png": 0.08,
-               "fit-corner.png": 0.18, "fit-traces.png": 0.24}
+#: Modules a worker needs to draw a report, imported by the fork server before it forks
+#: workers (by each worker with ``spawn``): the report with matplotlib; scipy.linalg (the
+#: result's whitening) and scipy.ndimage (the corner plot).
+PRELOAD: tuple[str, ...] = ("scipy.linalg", "scipy.ndimage", "gonio.report.fit_report")
 
-#: Seconds between checks that a worker being waited for is still alive.
-_POLL_SECONDS = 0.2
+#: Longest wait [s] for the workers' figures once they are asked for. A report takes
+#: about 1 s of CPU (0.75 to 1.35 s for 10,000 points, benchmarks/bench_report.py) and
+#: does not grow with the data; a hundred times that allows for a heavily loaded machine.
+#: Past it the workers are taken as hung: they are ended and the figures drawn here.
+WORKER_TIMEOUT_S = 120.0
 
-
-class ReportWorkerError(RuntimeError):
-    """A report worker failed: its exception (with the worker's traceback), or its death."""
+#: Seconds to wait for an ended worker to go before it is killed.
+_END_SECONDS = 1.0
 
 
 class ReportWorkerWarning(UserWarning):
-    """A report worker failed and its figures were drawn in the calling process."""
+    """A report worker died, hung or could not start; its figures were drawn in the calling process."""
 
 
-def report_processes(environ: dict[str, str] | None = None) -> int:
-    """Processes drawing a report: ``$GONIO_REPORT_PROCESSES``, else 2 with more than one core.
+def _warn(message: str) -> None:
+    warnings.warn(message, ReportWorkerWarning, stacklevel=4)
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the platform has it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
+
+
+def report_processes(environ: dict[str, str] | None = None, *, while_fitting: bool = False) -> int:
+    """Processes drawing a report: ``$GONIO_REPORT_PROCESSES``, else 2 where that pays.
+
+    Two processes pay when the workers start while a fit runs (``gonio fit --report``,
+    ``while_fitting``) on more than one core: their imports (about 1 s of CPU: numpy,
+    scipy, matplotlib, gonio, in the fork server or in each spawned worker) then overlap
+    the fit. For a report drawn alone (``gonio report``) the workers' imports compete with
+    the command's own and cost more than the second process saves (benchmarks/
+    bench_report.py), so one process is the default there.
 
     Parameters
     ----------
     environ : dict, optional
         The environment (default ``os.environ``).
+    while_fitting : bool
+        Whether the workers are started before a fit (``gonio fit --report``).
 
     Returns
     -------
@@ -95,7 +141,7 @@ def report_processes(environ: dict[str, str] | None = None) -> int:
     """
     text = (os.environ if environ is None else environ).get(ENVIRONMENT_VARIABLE)
     if text is None or not text.strip():
-        return min(2, os.cpu_count() or 1)
+        return min(2, available_cores()) if while_fitting else 1
     try:
         count = int(text)
     except ValueError:
@@ -106,11 +152,11 @@ def report_processes(environ: dict[str, str] | None = None) -> int:
     return count
 
 
-def share_figures(count: int, filenames: Sequence[str] = tuple(FIGURE_COST)) -> list[tuple[str, ...]]:
-    """The figures split into ``count`` shares of about equal cost (:data:`FIGURE_COST`).
+def share_figures(count: int, filenames: Sequence[str] = FIGURE_NAMES) -> list[tuple[str, ...]]:
+    """The figures split into ``count`` shares of about equal cost (:attr:`ReportFigure.cost`).
 
     Longest first, each to the share of least cost so far; the lightest share comes first
-    (for the process that also writes the HTML). Each share keeps report order.
+    (for the process that also writes the files). Each share keeps report order.
 
     Parameters
     ----------
@@ -126,364 +172,280 @@ def share_figures(count: int, filenames: Sequence[str] = tuple(FIGURE_COST)) -> 
     """
     if count < 1:
         raise ValueError(f"share_figures: count = {count}; expected 1 or more")
+    cost = {figure.file: figure.cost for figure in FIGURES}
     shares: list[list[str]] = [[] for _ in range(count)]
-    costs = [0.0] * count
-    for name in sorted(filenames, key=lambda n: -FIGURE_COST.get(n, 0.1)):
-        k = costs.index(min(costs))
+    totals = [0.0] * count
+    for name in sorted(filenames, key=lambda n: -cost.get(n, 0.1)):
+        k = totals.index(min(totals))
         shares[k].append(name)
-        costs[k] += FIGURE_COST.get(name, 0.1)
+        totals[k] += cost.get(name, 0.1)
     order = {name: i for i, name in enumerate(filenames)}
-    by_cost = sorted(range(count), key=lambda k: costs[k])
+    by_cost = sorted(range(count), key=lambda k: totals[k])
     return [tuple(sorted(shares[k], key=order.__getitem__)) for k in by_cost]
 
 
-# ------------------------------------------------------------------------- the worker
-def _preload() -> None:
-    """Import what drawing a report needs: matplotlib, the report, the scipy parts the
-    figures use (scipy.linalg: the result's whitening; scipy.ndimage: the corner plot)."""
-    import scipy.linalg  # noqa: F401
-    import scipy.ndimage  # noqa: F401
-
-    from gonio.report import fit_report  # noqa: F401
-
-
-def _do(job: tuple, helpers: ReportWorkers | None, notes: list[str]) -> Any:
-    """Carry out one job: ``("figures", source, out, filenames)`` (draw those figures) or
-    ``("report", source, out)`` (the whole report, shared with this worker's helpers;
-    returns the HTML file and ``notes`` plus the texts of the warnings raised on the way)."""
-    from gonio.report.fit_report import load_source, write_figures
-
-    kind, source, out, *rest = job
-    result, out = load_source(source, out)
-    if kind == "figures":
-        return tuple(write_figures(result, out, tuple(rest[0])))
-    if kind == "report":
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ReportWorkerWarning)
-            path = write_report_shared(result, out, helpers)
-        return path, notes + [str(w.message) for w in caught if issubclass(w.category, ReportWorkerWarning)]
-    raise ValueError(f"report worker: unknown job {kind!r}; expected 'figures' or 'report'")
-
-
-def _serve(connection, inherited=None, helpers: int = 0, method: str = START_METHOD) -> None:
-    """A worker's loop: preload, start ``helpers`` workers of its own (after the preload,
-    so that forked helpers inherit it), then answer jobs until told to stop (None) or the
-    parent goes away. Every reply is ``("done", value)`` or ``("error", traceback text)``."""
-    if inherited is not None:  # the parent's end of the pipe, inherited through fork
-        inherited.close()
-    # Ctrl-C in a terminal reaches the whole process group: the command handles it and
-    # stops its workers, which would otherwise each print a KeyboardInterrupt traceback.
+# ------------------------------------------------------------------------- in the worker
+def _prepare_worker() -> None:
+    """A worker's start: leave Ctrl-C to the command (it reaches the whole process group)
+    and import what drawing needs (nothing left to do when forked from the fork server)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    pool, preload_error, notes = None, None, []
-    try:
-        _preload()
-    except Exception:
-        preload_error = traceback.format_exc()
-    if helpers and preload_error is None:
-        try:
-            pool = ReportWorkers(helpers, method)
-        except Exception as error:  # reported with the report; this worker draws everything
-            notes.append(f"report helpers could not start ({type(error).__name__}: {error}); one worker drew "
-                         "every figure")
-    try:
-        while True:
-            try:
-                job = connection.recv()
-            except (EOFError, OSError):
-                return
-            if job is None:
-                return
-            try:
-                if preload_error is not None:
-                    raise RuntimeError(f"the worker could not import the report's modules:\n{preload_error}")
-                reply = ("done", _do(job, pool, notes))
-            except BaseException:  # noqa: B036 - everything goes back to the parent, nothing is lost here
-                reply = ("error", traceback.format_exc())
-            connection.send(reply)
-    finally:
-        if pool is not None:
-            pool.close()
+    for module in PRELOAD:
+        __import__(module)
 
 
-# ------------------------------------------------------------------------- the parent
-def _shutdown(workers: list) -> None:
-    """Tell every worker to stop, wait briefly, then end those still running."""
-    for process, connection in workers:
-        try:
-            connection.send(None)
-        except (OSError, ValueError):
-            pass
-    for process, connection in workers:
-        process.join(timeout=5.0)
-        if process.is_alive():
-            process.terminate()
-            process.join(timeout=5.0)
-        connection.close()
-    workers.clear()
+def _ready() -> None:
+    """A job that only makes a spawned worker start (and import) now."""
 
 
-#: Every pool not yet closed, stopped at exit before multiprocessing joins its
-#: non-daemonic children (atexit runs the last registered first; this module registers
-#: after importing multiprocessing.util, which registers that join).
-_OPEN: weakref.WeakSet = weakref.WeakSet()
+def _render(result: FitResult, filenames: tuple[str, ...]) -> dict[str, bytes]:
+    """The job: the PNG bytes of ``filenames`` (gonio.report.fit_report.render_figures)."""
+    from .fit_report import render_figures
+
+    return render_figures(result, filenames)
 
 
-@atexit.register
-def _close_open_pools() -> None:
-    for pool in list(_OPEN):
-        pool.close()
+# ------------------------------------------------------------------------- the pool
+@dataclass
+class ReportPool:
+    """Running report workers: the executor and how many workers it has."""
 
+    executor: ProcessPoolExecutor
+    workers: int
 
-class ReportWorkers:
-    """Worker processes that draw report figures; started at once, preloading their imports.
+    @classmethod
+    def start(cls, workers: int, method: str = START_METHOD) -> ReportPool:
+        """Start ``workers`` workers; their imports begin now (see the module notes).
 
-    Parameters
-    ----------
-    count : int
-        Number of workers, at least 1.
-    method : str
-        multiprocessing start method (default :data:`START_METHOD`).
-    helpers : int
-        Workers each worker starts for itself after its preload, with which it shares a
-        ``("report", ...)`` job (forked helpers then inherit the imports instead of
-        repeating them). A worker with helpers is not daemonic (multiprocessing forbids
-        children of daemonic processes); :meth:`close`, the pool's garbage collection
-        and an exit hook stop it, and it stops by itself when its parent goes away.
-
-    Raises
-    ------
-    OSError, ValueError
-        A worker cannot be started (the started ones are stopped).
-    """
-
-    def __init__(self, count: int, method: str = START_METHOD, helpers: int = 0):
-        if count < 1 or helpers < 0:
-            raise ValueError(f"ReportWorkers: count = {count}, helpers = {helpers}; expected count >= 1, "
-                             "helpers >= 0")
+        Raises
+        ------
+        OSError, ValueError
+            The pool cannot start.
+        """
+        if workers < 1:
+            raise ValueError(f"ReportPool: workers = {workers}; expected 1 or more")
         context = multiprocessing.get_context(method)
-        self.method = method
-        self._workers: list = []
-        self._finalizer = weakref.finalize(self, _shutdown, self._workers)
-        _OPEN.add(self)
-        try:
-            for _ in range(count):
-                parent_end, child_end = context.Pipe()
-                inherited = parent_end if method == "fork" else None
-                process = context.Process(target=_serve, args=(child_end, inherited, helpers, method),
-                                          daemon=helpers == 0, name="gonio-report-worker")
-                process.start()
-                child_end.close()
-                self._workers.append((process, parent_end))
-        except BaseException:
-            self.close()
-            raise
+        if method == "forkserver":
+            context.set_forkserver_preload(list(PRELOAD))
+            multiprocessing.forkserver.ensure_running()  # starts importing; returns at once
+        pool = cls(ProcessPoolExecutor(workers, mp_context=context, initializer=_prepare_worker), workers)
+        if method == "spawn":
+            for _ in range(workers):  # a spawned worker starts on its first job
+                pool.executor.submit(_ready)
+        return pool
 
-    def __len__(self) -> int:
-        return len(self._workers)
-
-    def __enter__(self) -> ReportWorkers:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def close(self) -> None:
-        """Stop the workers (idempotent)."""
-        self._finalizer()
-
-    def submit(self, index: int, job: tuple) -> None:
-        """Send ``job`` to worker ``index``; a worker that is gone raises ReportWorkerError."""
-        process, connection = self._workers[index]
-        try:
-            connection.send(job)
-        except (OSError, ValueError) as error:
-            raise ReportWorkerError(f"report worker {process.pid} cannot take a job ({error}); "
-                                    f"exit code {process.exitcode}") from error
-
-    def wait(self, index: int) -> Any:
-        """The reply of worker ``index`` to its last job.
-
-        Raises
-        ------
-        ReportWorkerError
-            The job raised in the worker (its traceback in the message), or the worker
-            died before replying.
-        """
-        process, connection = self._workers[index]
-        while not connection.poll(_POLL_SECONDS):
-            if not process.is_alive() and not connection.poll(0):
-                raise ReportWorkerError(f"report worker {process.pid} exited (code {process.exitcode}) before "
-                                        "it replied")
-        try:
-            status, value = connection.recv()
-        except (EOFError, OSError) as error:
-            process.join(timeout=2.0)  # its exit code, when it is ending
-            raise ReportWorkerError(f"report worker {process.pid} exited (code {process.exitcode}) before it "
-                                    "replied") from error
-        if status != "done":
-            raise ReportWorkerError(f"report worker {process.pid} failed:\n{value}")
-        return value
-
-    def write_report(self, source: str | Path, out: str | Path | None = None) -> tuple[Path, list[str]]:
-        """Draw the report of a saved result in worker 0 and its helpers.
-
-        Parameters
-        ----------
-        source : path
-            A result folder written by :meth:`gonio.fitting.FitResult.save`.
-        out : path, optional
-            Output folder (default: the result folder).
-
-        Returns
-        -------
-        path : pathlib.Path
-            The HTML file.
-        warnings : list of str
-            What went wrong with the helpers on the way (their figures were then drawn
-            by worker 0).
-
-        Raises
-        ------
-        ReportWorkerError
-            The worker failed (the report may then be incomplete: draw it again in-process).
-        """
-        self.submit(0, ("report", Path(source), out))
-        path, messages = self.wait(0)
-        return Path(path), messages
+    def terminate(self) -> None:
+        """End the workers now: pending jobs are cancelled and running ones abandoned
+        (workers write no file, so nothing is left half written)."""
+        # ProcessPoolExecutor ends its workers only after their running jobs; its
+        # processes are read from the executor (Python 3.14 adds terminate_workers()).
+        processes = list((getattr(self.executor, "_processes", None) or {}).values())
+        self.executor.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            if process.is_alive():
+                process.terminate()
+        for process in processes:
+            process.join(_END_SECONDS)
+            if process.is_alive():
+                process.kill()
+                process.join(_END_SECONDS)
 
 
-def start_report_workers(processes: int | None = None, method: str = START_METHOD) -> ReportWorkers | None:
-    """Workers for a report drawn later (``gonio fit --report``), or None to draw it here.
+@contextlib.contextmanager
+def report_pool(workers: int, method: str = START_METHOD,
+                warn: Callable[[str], None] = _warn) -> Iterator[ReportPool | None]:
+    """A :class:`ReportPool` of ``workers`` workers for the ``with`` block, or None.
 
-    One worker is started now; after importing matplotlib and the report it starts
-    ``processes - 1`` helpers of its own, with which it shares the figures.
+    None when ``workers`` is 0 or the pool cannot start (``warn`` says why; the figures
+    are then drawn in the calling process). On leaving the block the pool is shut down;
+    if the block raised (Ctrl-C included) its workers are ended at once.
 
     Parameters
     ----------
-    processes : int, optional
-        Processes drawing the report (default :func:`report_processes`); below 2: none.
+    workers : int
+        Number of workers (0: none).
     method : str
         multiprocessing start method.
-
-    Returns
-    -------
-    ReportWorkers or None
-        None when one process is asked for or the worker cannot start (a
-        ``gonio: warning:`` line on stderr says why; the report is then drawn in-process).
+    warn : callable
+        Called with a one-line message when the pool cannot start (default: a
+        :class:`ReportWorkerWarning`).
     """
-    count = report_processes() if processes is None else processes
-    if count < 2:
-        return None
-    try:
-        return ReportWorkers(1, method, helpers=count - 1)
-    except Exception as error:  # the report will be drawn in this process instead
-        print(f"gonio: warning: report workers could not start ({type(error).__name__}: {error}); "
-              "the report will be drawn in this process", file=sys.stderr)
-        return None
-
-
-def finish_report(workers: ReportWorkers | None, folder: str | Path) -> Path:
-    """Write the report of the saved result in ``folder``: by ``workers`` when given,
-    else (or when they fail, with ``gonio: warning:`` lines on stderr) in this process.
-    The workers are stopped in any case.
-
-    Parameters
-    ----------
-    workers : ReportWorkers or None
-        From :func:`start_report_workers`.
-    folder : path
-        The result folder (FitResult.save); the report goes into it.
-
-    Returns
-    -------
-    pathlib.Path
-        The HTML file.
-    """
-    if workers is not None:
+    pool = None
+    if workers > 0:
         try:
-            path, messages = workers.write_report(folder)
-            for message in messages:
-                print(f"gonio: warning: {message}", file=sys.stderr)
-            return path
-        except ReportWorkerError as error:
-            print(f"gonio: warning: {error}\ngonio: warning: drawing the report in this process instead",
-                  file=sys.stderr)
-        finally:
-            workers.close()
-    from .fit_report import write_report
+            pool = ReportPool.start(workers, method)
+        except Exception as error:  # the figures will be drawn in this process
+            warn(f"report workers could not start ({type(error).__name__}: {error}); the figures are drawn in "
+                 "this process")
+    try:
+        with _sigterm_as_exit(pool is not None):
+            yield pool
+    except BaseException:
+        if pool is not None:
+            pool.terminate()
+        raise
+    finally:
+        if pool is not None:
+            pool.executor.shutdown(wait=True, cancel_futures=True)
 
-    return write_report(folder)
+
+def _exit_on_sigterm(signum: int, frame) -> None:
+    raise SystemExit(128 + signum)
 
 
-def write_report_shared(result, out: Path, workers: ReportWorkers | int | None,
-                        method: str = START_METHOD) -> Path:
-    """The figures of ``result`` drawn by this process and by workers; the HTML written here.
+@contextlib.contextmanager
+def _sigterm_as_exit(active: bool) -> Iterator[None]:
+    """While workers run, SIGTERM ends this process by SystemExit (exit status 143), so
+    that the workers are ended and the pool shut down on the way out (the default
+    action would end this process alone, leaving them to finish and multiprocessing's
+    resource tracker to warn of leaked semaphores). Only where this process still has
+    the default action and only in the main thread (where Python runs signal handlers)."""
+    import threading
 
-    A worker that cannot start or fails is reported by a :class:`ReportWorkerWarning`
-    and its share drawn here.
+    install = (active and threading.current_thread() is threading.main_thread()
+               and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)
+    if install:
+        signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    try:
+        yield
+    finally:
+        if install:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _submit(pool: ReportPool, result: FitResult, shares: list[tuple[str, ...]],
+            warn: Callable[[str], None]) -> list[Future]:
+    """One job per non-empty share; none (after ``warn``) when the workers cannot take them."""
+    futures = []
+    try:
+        for share in shares:
+            if share:
+                futures.append(pool.executor.submit(_render, result, share))
+    except Exception as error:  # a worker that cannot start, or a pool already broken
+        warn(f"report workers cannot take the figures ({type(error).__name__}: {error}); drawing them in this "
+             "process")
+        for future in futures:
+            future.cancel()
+        pool.terminate()
+        return []
+    return futures
+
+
+def _collect(pool: ReportPool, futures: list[Future], warn: Callable[[str], None]) -> dict[str, bytes]:
+    """The PNG bytes the workers return within :data:`WORKER_TIMEOUT_S`. A worker that died
+    or hung is reported and the pool ended (the figures not returned are missing); an
+    error raised by a job is raised here."""
+    pngs: dict[str, bytes] = {}
+    deadline = time.monotonic() + WORKER_TIMEOUT_S
+    try:
+        for future in futures:
+            pngs.update(future.result(timeout=max(0.0, deadline - time.monotonic())))
+    except BrokenProcessPool as error:
+        warn(f"a report worker died ({error}); drawing its figures in this process")
+        pool.terminate()
+    except TimeoutError:
+        warn(f"the report workers did not answer within {WORKER_TIMEOUT_S:g} s; ending them and drawing their "
+             "figures in this process")
+        pool.terminate()
+    return pngs
+
+
+def draw_figures_shared(result: FitResult, pool: ReportPool | None, *, draw_here: bool,
+                        warn: Callable[[str], None] = _warn) -> dict[str, bytes]:
+    """The PNG bytes of every figure of the report, drawn by ``pool``'s workers and, when
+    ``draw_here``, by this process (the lightest share, while the workers draw theirs).
+
+    Figures the workers did not return (a worker died, hung or could not start) are drawn
+    here after ``warn`` said why; without a pool every figure is drawn here.
 
     Parameters
     ----------
     result : FitResult
         The fit (sent to the workers by pickling).
-    out : pathlib.Path
-        Existing output folder.
-    workers : ReportWorkers, int or None
-        Running workers (left running), or the number of processes in all: workers are
-        started for ``workers - 1`` of them and stopped at the end. None or 1: none.
-    method : str
-        multiprocessing start method of workers started here.
+    pool : ReportPool or None
+        Running workers (left running unless they failed).
+    draw_here : bool
+        Whether this process draws a share itself.
+    warn : callable
+        Called with a one-line message when workers fail (default: a
+        :class:`ReportWorkerWarning`).
+
+    Returns
+    -------
+    dict of str to bytes
+        PNG bytes by file name, every figure of :data:`gonio.report.fit_html.FIGURES`.
+
+    Raises
+    ------
+    Exception
+        What drawing a figure raised, here or in a worker (the worker's traceback is the
+        exception's ``__cause__``).
+    """
+    from_here: tuple[str, ...] = ()
+    pngs: dict[str, bytes] = {}
+    if pool is not None:
+        shares = share_figures(pool.workers + int(draw_here))
+        from_here, for_workers = (shares[0], shares[1:]) if draw_here else ((), shares)
+        futures = _submit(pool, result, for_workers, warn)
+        pngs.update(_render_here(result, from_here))
+        pngs.update(_collect(pool, futures, warn))
+    missing = tuple(name for name in FIGURE_NAMES if name not in pngs)
+    pngs.update(_render_here(result, missing))
+    return pngs
+
+
+def _render_here(result: FitResult, filenames: tuple[str, ...]) -> dict[str, bytes]:
+    """``filenames`` drawn in this process (matplotlib is imported only when there are any)."""
+    if not filenames:
+        return {}
+    from .fit_report import render_figures
+
+    return render_figures(result, filenames)
+
+
+def print_warning(message: str) -> None:
+    """Print ``message`` as the command line prints a warning (``gonio: warning: ...``)."""
+    print(f"gonio: warning: {message}", file=sys.stderr)
+
+
+def finish_report(pool: ReportPool | None, result: FitResult, out: str | Path) -> Path:
+    """Write the report of ``result`` (saved in ``out``) into ``out``, for ``gonio fit``:
+    the workers draw every figure; without them (or when they fail, with ``gonio:
+    warning:`` lines on stderr) this process draws them.
+
+    Parameters
+    ----------
+    pool : ReportPool or None
+        From :func:`report_pool`.
+    result : FitResult
+        The fit, as saved.
+    out : path
+        The result folder; the report goes into it.
 
     Returns
     -------
     pathlib.Path
         The HTML file.
     """
-    from .fit_report import write_figures, write_html
-
-    pool = workers
-    if isinstance(workers, int):
-        pool = None
-        if workers > 1:
-            try:
-                pool = ReportWorkers(workers - 1, method)
-            except Exception as error:
-                warnings.warn(f"report workers could not start ({type(error).__name__}: {error}); drawing every "
-                              "figure in this process", ReportWorkerWarning, stacklevel=3)
-    shares = share_figures(1 + (len(pool) if pool is not None else 0))
-    submitted = []
-    try:
-        for k, share in enumerate(shares[1:]):
-            if share:
-                try:
-                    pool.submit(k, ("figures", _portable(result), out, share))
-                    submitted.append((k, share))
-                except ReportWorkerError as error:
-                    _drawn_here(error, result, out, share)
-        pngs = write_figures(result, out, shares[0])
-        for k, share in submitted:
-            try:
-                pool.wait(k)
-            except ReportWorkerError as error:
-                pngs.update(_drawn_here(error, result, out, share))
-    finally:
-        if pool is not None and pool is not workers:
-            pool.close()
-    return write_html(result, out, pngs)
+    pngs = draw_figures_shared(result, pool, draw_here=False, warn=print_warning)
+    return write_report_files(result, Path(out), pngs)
 
 
-def _portable(result):
-    """``result`` without what a process rebuilds on demand and cannot pickle (the cached
-    FitProblem of :meth:`gonio.fitting.FitResult.problem`, which holds the model's
-    prepared functions): a shallow copy, the result itself is left as it is."""
-    clone = copy.copy(result)
-    clone.__dict__.pop("_problem", None)
-    return clone
+def write_report_shared(source: str | Path | FitResult, out: str | Path | None = None, processes: int = 2,
+                        method: str = START_METHOD) -> Path:
+    """The report of ``source`` drawn by this process and ``processes - 1`` workers.
 
+    The pool is started first, so that its imports run while this process reads the
+    result (and imports matplotlib); the files are written here. See
+    :func:`gonio.report.fit_report.write_report` for the parameters.
 
-def _drawn_here(error: ReportWorkerError, result, out: Path, share: tuple[str, ...]) -> dict[str, bytes]:
-    """Warn about a failed worker and draw its share in this process."""
-    from .fit_report import write_figures
+    Returns
+    -------
+    pathlib.Path
+        The HTML file.
+    """
+    with report_pool(processes - 1, method) as pool:
+        from .fit_report import load_source
 
-    warnings.warn(f"{error}\ndrawing {', '.join(share)} in this process instead", ReportWorkerWarning, stacklevel=4)
-    return write_figures(result, out, share)
+        result, folder = load_source(source, out)
+        pngs = draw_figures_shared(result, pool, draw_here=True)
+    return write_report_files(result, folder, pngs)

@@ -80,7 +80,7 @@ def test_report_is_one_self_contained_html_file(tmp_path):
     result.save(tmp_path)
     html_path = write_report(tmp_path)
     text = html_path.read_text()
-    for filename, title, _, _ in FIGURES:
+    for filename, title, *_ in FIGURES:
         assert (tmp_path / filename).stat().st_size > 10_000  # a real picture, not an empty canvas
         assert f"<h2>{title}</h2>" in text
     sources = re.findall(r"src=['\"]([^'\"]*)['\"]", text)

@@ -1,23 +1,33 @@
 """The report drawn by worker processes (gonio.report.workers): the same files as in one
-process, failures surfaced and the report then drawn in-process, the result untouched."""
+process; an error in a figure raised as it is; a worker that dies, hangs or cannot start
+reported, ended and its figures drawn here; workers ended at once on Ctrl-C; the result
+untouched. Faults are injected through the pickled result (objects whose unpickling in
+the worker ends or stalls it), since workers forked from the fork server do not run this
+process's (monkeypatched) code."""
 from __future__ import annotations
 
+import base64
+import copy
 import hashlib
+import multiprocessing
 import os
+import pickle
 import signal
+import time
+import warnings
 
 import pytest
 
+from gonio.cli import main
 from gonio.fitting import fit
+from gonio.fitting.results import FitResult
 from gonio.report import fit_report, workers
-from gonio.report.fit_report import FIGURES, REPORT_FILES, write_report
-from gonio.report.workers import (FIGURE_COST, ReportWorkerError, ReportWorkers, ReportWorkerWarning,
-                                  finish_report, report_processes, share_figures, start_report_workers)
+from gonio.report.fit_html import FIGURE_NAMES, FIGURES, REPORT_FILES, write_html, write_report_files
+from gonio.report.fit_report import write_report
+from gonio.report.workers import (ReportWorkerWarning, draw_figures_shared, finish_report, report_pool,
+                                  report_processes, share_figures, write_report_shared)
 
 from .synthetic import synthetic_dataset
-
-#: A worker started with fork runs the test process's (monkeypatched) code.
-needs_fork = pytest.mark.skipif(workers.START_METHOD != "fork", reason="fault injection relies on fork")
 
 
 @pytest.fixture(scope="module")
@@ -45,36 +55,105 @@ def in_process(saved_fit, tmp_path_factory):
     return _contents(out)
 
 
-def test_figure_costs_name_every_figure_of_the_report():
-    assert list(FIGURE_COST) == [name for name, *_ in FIGURES]
+@pytest.fixture
+def strict():
+    """A worker failure (a ReportWorkerWarning) is an error: the workers really drew."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ReportWorkerWarning)
+        yield
+
+
+def _new_children(before) -> list:
+    return [p for p in multiprocessing.active_children() if p not in before]
+
+
+# A worker ended by the pool has a nonzero exit code: -SIGTERM, or 255 when two threads
+# read its status from the fork server at once (multiprocessing.popen_forkserver); one
+# left to finish its stalled job would exit with 0 after a minute.
+
+
+class _EndOnArrival:
+    """Unpickled in a worker, ends it (as a crash would) with exit code 3."""
+
+    def __reduce__(self):
+        return os._exit, (3,)
+
+
+class _StallOnArrival:
+    """Unpickled in a worker, stalls it for a minute (as a hang would)."""
+
+    def __reduce__(self):
+        return time.sleep, (60.0,)
+
+
+def _with(result: FitResult, poison) -> FitResult:
+    clone = copy.copy(result)
+    clone.__dict__["poison"] = poison  # harmless here; acts when a worker unpickles it
+    return clone
+
+
+# ----------------------------------------------------------------------------- plumbing
+def test_figure_costs_are_positive_and_names_unique():
+    assert all(figure.cost > 0 for figure in FIGURES)
+    assert len(set(FIGURE_NAMES)) == len(FIGURES) == 5
 
 
 def test_shares_cover_every_figure_once_balanced_lightest_first():
+    cost = {figure.file: figure.cost for figure in FIGURES}
     for count in (1, 2, 3, 7):
         shares = share_figures(count)
         assert len(shares) == count
-        assert sorted(n for share in shares for n in share) == sorted(FIGURE_COST)
-        costs = [sum(FIGURE_COST[n] for n in share) for share in shares]
+        assert sorted(n for share in shares for n in share) == sorted(FIGURE_NAMES)
+        costs = [sum(cost[n] for n in share) for share in shares]
         assert costs == sorted(costs)
-    light, heavy = (sum(FIGURE_COST[n] for n in share) for share in share_figures(2))
+    light, heavy = (sum(cost[n] for n in share) for share in share_figures(2))
     # Greedy longest-first: the two shares differ by at most the lightest figure's cost.
-    assert heavy - light <= min(FIGURE_COST.values()) + 1e-12
+    assert heavy - light <= min(cost.values()) + 1e-12
 
 
-def test_number_of_processes_from_the_environment():
+def test_number_of_processes_from_the_environment_and_the_cores(monkeypatch):
     assert report_processes({"GONIO_REPORT_PROCESSES": "3"}) == 3
-    assert report_processes({}) == min(2, os.cpu_count() or 1)
     for bad in ("0", "two", "-1", "1.5"):
         with pytest.raises(ValueError, match="GONIO_REPORT_PROCESSES.*whole number"):
             report_processes({"GONIO_REPORT_PROCESSES": bad})
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3}, raising=False)
+    # Two processes by default only where the workers start while a fit runs.
+    assert report_processes({}, while_fitting=True) == 2
+    assert report_processes({}) == 1
+    assert report_processes({"GONIO_REPORT_PROCESSES": "2"}) == 2
+    # A process allowed on one core only (taskset, a container's CPU set) draws alone.
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {5}, raising=False)
+    assert report_processes({}, while_fitting=True) == 1
 
 
-def test_two_processes_write_the_same_files_as_one(saved_fit, in_process, tmp_path):
+def test_a_pickled_result_leaves_its_cached_problem_behind():
+    data = synthetic_dataset("lambert", dict(rho=0.5), 0.005)
+    result = fit(data, "lambert", mcmc=False)
+    result.problem()
+    clone = pickle.loads(pickle.dumps(result))
+    assert "_problem" in result.__dict__ and "_problem" not in clone.__dict__
+    assert clone.problem().free == result.problem().free
+
+
+def test_the_page_embeds_exactly_the_figures_given_and_needs_all_five(saved_fit, tmp_path):
+    result = FitResult.load(saved_fit)
+    pngs = {name: f"not really {name}".encode() for name in FIGURE_NAMES}
+    (tmp_path / "fit-corner.png").write_bytes(b"an earlier fit's corner plot")
+    with pytest.raises(ValueError, match="no PNG for fit-corner.png"):
+        write_html(result, tmp_path, {k: v for k, v in pngs.items() if k != "fit-corner.png"})
+    assert not (tmp_path / "report.html").exists()
+    text = write_html(result, tmp_path, pngs).read_text()
+    embedded = [base64.b64decode(s) for s in text.split("data:image/png;base64,")[1:] for s in [s.split("'")[0]]]
+    assert embedded == [pngs[name] for name in FIGURE_NAMES]
+
+
+# ----------------------------------------------------------------------------- same files
+def test_two_processes_write_the_same_files_as_one(saved_fit, in_process, tmp_path, strict):
     write_report(saved_fit, tmp_path, processes=2)
     assert _contents(tmp_path) == in_process
 
 
-def test_a_result_in_memory_is_sent_to_the_worker(tmp_path):
+def test_a_result_in_memory_is_sent_to_the_worker(tmp_path, strict):
     # A fresh result caches its FitProblem (the model's prepared functions, which do not
     # pickle); the worker gets the result without it and rebuilds it.
     data = synthetic_dataset("lambert", dict(rho=0.5), 0.005)
@@ -86,99 +165,205 @@ def test_a_result_in_memory_is_sent_to_the_worker(tmp_path):
     assert "_problem" in result.__dict__  # the caller's result keeps its cache
 
 
-def test_command_workers_write_the_same_files_and_keep_the_result(saved_fit, in_process, tmp_path):
-    # gonio fit --report: one worker and its helper draw the report of the saved result.
-    before = _digests(saved_fit)
-    pool = start_report_workers(2)
-    assert pool is not None
-    path = finish_report(pool, saved_fit)
+def test_command_workers_write_the_same_files_keep_the_result_and_end(saved_fit, in_process, tmp_path, strict):
+    # gonio fit --report: two workers draw every figure of the saved result; this process
+    # writes the files; the workers are gone when the pool's block ends.
+    before, children = _digests(saved_fit), multiprocessing.active_children()
+    with report_pool(2) as pool:
+        path = finish_report(pool, FitResult.load(saved_fit), saved_fit)
+        started = _new_children(children)
     assert path == saved_fit / "report.html"
     assert _contents(saved_fit) == in_process
     assert _digests(saved_fit) == before
-    assert not any(process.is_alive() for process, _ in pool._workers)  # stopped after the report
+    assert started and not any(process.is_alive() for process in started)
 
 
-def test_spawned_workers_write_the_same_files(saved_fit, in_process, tmp_path):
-    # The start method of macOS and Windows: a fresh interpreter that imports numpy, gonio
-    # and matplotlib itself (2-3 s here; one worker, no helper, to keep it to one).
-    with ReportWorkers(1, "spawn") as pool:
-        path, messages = pool.write_report(saved_fit, tmp_path)
-    assert messages == []
+def test_spawned_workers_write_the_same_files(saved_fit, in_process, tmp_path, strict):
+    # The start method of Windows: a fresh interpreter that imports numpy, gonio and
+    # matplotlib itself (2-3 s here; one worker to keep it to one).
+    path = write_report_shared(saved_fit, tmp_path, processes=2, method="spawn")
     assert path == tmp_path / "report.html"
     assert _contents(tmp_path) == in_process
 
 
-def _break_outside(monkeypatch, parent: int, how: str, figure: str = "fit-corner.png") -> None:
-    """Make ``figure`` fail (raise, or end the process) in any process but ``parent``."""
-    original = {name: f for name, _, f, _ in FIGURES}[figure]
+# ----------------------------------------------------------------------------- failures
+def test_an_error_in_a_figure_is_raised_with_the_workers_traceback_not_drawn_again(saved_fit, tmp_path,
+                                                                                  monkeypatch, strict):
+    broken = copy.copy(FitResult.load(saved_fit))
+    broken.dataset = "not a dataset"  # every figure fails on it, in any process
 
-    def make(result):
-        if os.getpid() != parent:
-            if how == "exit":
-                os._exit(3)
-            raise RuntimeError(f"{figure} broke in the worker")
-        return original(result)
+    def drawn_here(*args, **kwargs):
+        raise AssertionError("the figures were drawn again in the calling process")
 
-    figures = tuple((name, title, make if name == figure else f, caption) for name, title, f, caption in FIGURES)
-    monkeypatch.setattr(fit_report, "FIGURES", figures)
-
-
-@needs_fork
-@pytest.mark.parametrize("how, message", [("raise", "RuntimeError: fit-corner.png broke in the worker"),
-                                          ("exit", r"exited \(code 3\) before it replied")])
-def test_a_failing_worker_is_reported_and_the_report_drawn_here(saved_fit, in_process, monkeypatch, capsys, how,
-                                                                message):
-    _break_outside(monkeypatch, os.getpid(), how)
-    before = _digests(saved_fit)
-    with ReportWorkers(1) as pool:
-        pool.submit(0, ("figures", saved_fit, None, ("fit-corner.png",)))
-        with pytest.raises(ReportWorkerError, match=message):
-            pool.wait(0)
-    for name in REPORT_FILES:
-        (saved_fit / name).unlink(missing_ok=True)
-    finish_report(start_report_workers(2), saved_fit)
-    err = capsys.readouterr().err
-    assert "gonio: warning:" in err and "drawing the report in this process instead" in err
-    assert _contents(saved_fit) == in_process  # complete, and as the in-process report
-    assert _digests(saved_fit) == before  # the saved result is untouched
+    monkeypatch.setattr(fit_report, "render_figures", drawn_here)  # this process only: workers keep theirs
+    with pytest.raises(AttributeError, match="'str' object has no attribute") as raised:
+        with report_pool(2) as pool:
+            finish_report(pool, broken, tmp_path)
+    assert "Traceback" in str(raised.value.__cause__)  # the worker's traceback, shown by --debug
+    assert list(tmp_path.iterdir()) == []
 
 
-@needs_fork
-def test_a_failing_helper_is_a_warning_and_its_share_drawn_here(saved_fit, in_process, monkeypatch, tmp_path):
-    helper_figure = share_figures(2)[1][0]  # the lightest share is drawn here, the other by the helper
-    _break_outside(monkeypatch, os.getpid(), "raise", helper_figure)
-    with pytest.warns(ReportWorkerWarning, match=f"{helper_figure} broke in the worker"):
-        write_report(saved_fit, tmp_path, processes=2)
+def test_a_worker_that_dies_is_reported_ended_with_the_others_and_its_figures_drawn_here(saved_fit, in_process,
+                                                                                          tmp_path, capsys):
+    before, children = _digests(saved_fit), multiprocessing.active_children()
+    dying = _with(FitResult.load(saved_fit), _EndOnArrival())
+    with report_pool(2) as pool:
+        for future in [pool.executor.submit(time.sleep, 0.2) for _ in range(2)]:  # both workers started
+            future.result()
+        started = _new_children(children)
+        path = finish_report(pool, dying, tmp_path)
+        assert len(started) == 2 and not any(process.is_alive() for process in started)  # the other one too
+    assert "gonio: warning: a report worker died" in capsys.readouterr().err
+    assert path == tmp_path / "report.html"
     assert _contents(tmp_path) == in_process
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(REPORT_FILES)  # no stray or temporary file
+    assert _digests(saved_fit) == before
 
 
-def test_workers_that_cannot_start_leave_the_report_to_this_process(saved_fit, in_process, monkeypatch, capsys,
-                                                                   tmp_path):
+def test_a_worker_that_hangs_is_ended_after_the_timeout_and_its_figures_drawn_here(saved_fit, in_process, tmp_path,
+                                                                                   monkeypatch):
+    monkeypatch.setattr(workers, "WORKER_TIMEOUT_S", 0.5)
+    children = multiprocessing.active_children()
+    stalled = _with(FitResult.load(saved_fit), _StallOnArrival())
+    with pytest.warns(ReportWorkerWarning, match=r"did not answer within 0\.5 s"):
+        with report_pool(1) as pool:
+            pool.executor.submit(os.getpid).result()  # the worker started
+            started = _new_children(children)
+            write_report_files(stalled, tmp_path, draw_figures_shared(stalled, pool, draw_here=False))
+    assert _contents(tmp_path) == in_process
+    assert started and all(process.exitcode not in (None, 0) for process in started)  # ended, not finished
+
+
+def test_workers_that_cannot_start_leave_the_figures_to_this_process(saved_fit, in_process, monkeypatch, capsys,
+                                                                    tmp_path):
     def refuse(*args, **kwargs):
         raise OSError("no processes left")
 
-    monkeypatch.setattr(workers.ReportWorkers, "__init__", refuse)
-    assert start_report_workers(2) is None
-    assert "report workers could not start (OSError: no processes left)" in capsys.readouterr().err
-    with pytest.warns(ReportWorkerWarning, match="could not start"):
+    monkeypatch.setattr(workers.ReportPool, "start", refuse)
+    with pytest.warns(ReportWorkerWarning, match=r"could not start \(OSError: no processes left\)"):
         write_report(saved_fit, tmp_path, processes=2)
     assert _contents(tmp_path) == in_process
 
 
+def test_ctrl_c_ends_the_workers_at_once(saved_fit, tmp_path):
+    # Ctrl-C while the command waits for a stalled worker: the workers are ended (SIGTERM)
+    # when the exception leaves the pool's block, not waited for.
+    stalled = _with(FitResult.load(saved_fit), _StallOnArrival())
+    children, started = multiprocessing.active_children(), []
+
+    def interrupt(signum, frame):
+        started.extend(_new_children(children))
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with report_pool(1) as pool:
+                pool.executor.submit(os.getpid).result()  # the worker started
+                signal.setitimer(signal.ITIMER_REAL, 0.5)
+                finish_report(pool, stalled, tmp_path)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert started and all(process.exitcode not in (None, 0) for process in started)  # ended, not finished
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_sigterm_ends_the_workers_and_the_process_by_exit_status_143(saved_fit, tmp_path):
+    # SIGTERM to the command while its pool is open: SystemExit(143) on the way out of
+    # the block, the workers ended; the default action is back afterwards.
+    stalled = _with(FitResult.load(saved_fit), _StallOnArrival())
+    children = multiprocessing.active_children()
+    with pytest.raises(SystemExit) as raised:
+        with report_pool(1) as pool:
+            pool.executor.submit(os.getpid).result()
+            started = _new_children(children)
+            future = pool.executor.submit(workers._render, stalled, ("fit-geometry.png",))
+            os.kill(os.getpid(), signal.SIGTERM)
+            future.result()
+    assert raised.value.code == 143
+    assert started and all(process.exitcode not in (None, 0) for process in started)
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+
+
+def test_a_worker_ignores_ctrl_c_and_goes_on(saved_fit, in_process, strict):
+    # Ctrl-C reaches every process of the terminal's group: a worker leaves it to the
+    # command (no traceback of its own) and goes on answering.
+    with report_pool(1) as pool:
+        pid = pool.executor.submit(os.getpid).result()
+        os.kill(pid, signal.SIGINT)
+        pngs = draw_figures_shared(FitResult.load(saved_fit), pool, draw_here=False)
+        assert pool.executor.submit(os.getpid).result() == pid
+    assert pngs["fit-geometry.png"] == in_process["fit-geometry.png"]
+
+
+def test_a_reused_pool_never_returns_an_earlier_reports_figures(saved_fit, in_process, monkeypatch):
+    # The first report fails in this process while the worker draws its share of another
+    # fit; the next report on the same pool gets its own figures.
+    other = fit(synthetic_dataset("lambert", dict(rho=0.5), 0.005), "lambert", n_walkers=8, tau_multiple=10.0,
+                rhat_limit=1.05, seed=0)
+    original = fit_report.render_figures
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("this process's share failed")
+
+    with report_pool(1) as pool:
+        monkeypatch.setattr(fit_report, "render_figures", fail)
+        with pytest.raises(RuntimeError, match="share failed"):
+            draw_figures_shared(other, pool, draw_here=True)
+        monkeypatch.setattr(fit_report, "render_figures", original)
+        pngs = draw_figures_shared(FitResult.load(saved_fit), pool, draw_here=True)
+    assert pngs == {name: in_process[name] for name in FIGURE_NAMES}
+
+
 def test_one_process_starts_no_worker():
-    assert start_report_workers(1) is None
+    with report_pool(0) as pool:
+        assert pool is None
     with pytest.raises(ValueError, match="processes = 0"):
         write_report("unused", processes=0)
 
 
-def test_ctrl_c_is_left_to_the_command(saved_fit, in_process, tmp_path):
-    # Ctrl-C reaches every process of the terminal's group: the command stops its workers;
-    # a worker itself ignores it (no traceback of its own) and goes on answering.
-    with ReportWorkers(1) as pool:
-        process, _ = pool._workers[0]
-        pool.submit(0, ("figures", saved_fit, tmp_path, ("fit-residuals.png",)))
-        pool.wait(0)  # the worker is in its loop
-        os.kill(process.pid, signal.SIGINT)
-        pool.submit(0, ("figures", saved_fit, tmp_path, ("fit-geometry.png",)))
-        assert pool.wait(0) == ("fit-geometry.png",)
-    assert (tmp_path / "fit-geometry.png").read_bytes() == in_process["fit-geometry.png"]
+# ----------------------------------------------------------------------------- the command
+@pytest.fixture
+def small_csv(tmp_path):
+    data = synthetic_dataset("lambert", dict(rho=0.5), 0.005)
+    return data.to_csv(tmp_path / "d.csv")
+
+
+FIT = ["--model", "lambert", "--walkers", "8", "--max-steps", "300", "--rhat-limit", "1.2", "--quiet", "--report"]
+
+
+def test_fit_starts_no_worker_before_its_input_is_checked(small_csv, tmp_path, monkeypatch):
+    started = []
+    monkeypatch.setattr(workers, "report_pool", lambda *a, **k: started.append(a))
+    taken = tmp_path / "taken"
+    taken.mkdir()
+    (taken / "notes.txt").write_text("mine")
+    assert main(["fit", str(small_csv), *FIT, "--out", str(taken)]) == 2  # folder in use, no --overwrite
+    assert main(["fit", str(tmp_path / "missing.csv"), *FIT]) == 2  # unreadable data
+    assert main(["fit", str(small_csv), *FIT, "--out", " "]) == 2  # no folder name
+    assert started == []
+
+
+def test_overwrite_removes_the_earlier_report_before_drawing(small_csv, tmp_path, monkeypatch, capsys):
+    out = tmp_path / "fit"
+    monkeypatch.setenv("GONIO_REPORT_PROCESSES", "1")
+    main(["fit", str(small_csv), *FIT, "--out", str(out)])
+    assert (out / "report.html").exists()
+    earlier = (out / "result.json").read_bytes()
+
+    def disk_full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(workers, "finish_report", disk_full)
+    assert main(["fit", str(small_csv), *FIT, "--out", str(out), "--overwrite", "--seed", "1"]) == 2
+    assert "No space left on device" in capsys.readouterr().err
+    assert (out / "result.json").read_bytes() != earlier  # the new result
+    assert not any((out / name).exists() for name in REPORT_FILES)  # and no report of the earlier fit
+
+
+def test_fit_report_by_workers_equals_the_report_command(small_csv, tmp_path, monkeypatch, strict):
+    monkeypatch.setenv("GONIO_REPORT_PROCESSES", "2")
+    main(["fit", str(small_csv), *FIT, "--out", str(tmp_path / "fit")])
+    assert main(["report", str(tmp_path / "fit"), "--out", str(tmp_path / "again")]) == 0
+    assert _contents(tmp_path / "fit") == _contents(tmp_path / "again")
