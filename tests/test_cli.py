@@ -97,6 +97,18 @@ def test_fit_refuses_a_used_folder_and_overwrite_replaces_only_its_own_files(tmp
     assert (out / "result.json").stat().st_mtime_ns >= before
 
 
+def test_overwrite_without_mcmc_removes_the_earlier_chain_and_posterior(tmp_path, capsys):
+    """A least-squares result must not sit beside the chain and posterior.nc of an earlier
+    MCMC fit, which a reader would take for its own."""
+    data = tmp_path / "data.csv"
+    data.write_text(CSV)
+    out = tmp_path / "result"
+    assert main(["fit", str(data), "--model", "lambert", "--quiet", "--out", str(out)]) == 0  # with MCMC
+    assert {"chain.npz", "posterior.nc"} <= {p.name for p in out.iterdir()}
+    assert _fit(data, out, "--overwrite") == 0
+    assert {p.name for p in out.iterdir()} == {"result.json", "summary.txt"}
+
+
 def test_fit_result_files_are_written_atomically_with_normal_permissions(tmp_path, monkeypatch):
     from gonio import files
     from gonio.fitting import Dataset, fit
