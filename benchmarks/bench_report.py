@@ -37,12 +37,21 @@
    ``import numpy`` are timed the same way as the
    references. Target: at most 2.5 s wall.
 
+   gonio's bytecode is compiled before the timings (``compileall``), as it is after a
+   first run of any program that may write it, after a non-editable ``pip install`` and
+   by the Makefile's install; what compiling the modules the command loads from source
+   would add at every start (an editable install where ``PYTHONDONTWRITEBYTECODE`` is
+   set) is measured on its own (``source_compile_s``). So is the interpreter's exit
+   after the work, with the final garbage collection and after ``gc.freeze()`` (what
+   ``gonio.cli.run`` does), in a process that has loaded what the command loads.
+
 Medians of ``--repeats`` runs. Writes docs/benchmarks/report.json and report.png.
 Run: ``python benchmarks/bench_report.py [--repeats N] [--previous-max N]``.
 """
 from __future__ import annotations
 
 import argparse
+import compileall
 import io
 import json
 import os
@@ -296,7 +305,45 @@ def run_phases(recording: str, out: str) -> dict:
     result = _timed(phases, "result and summary", lambda: _summarised(FitResult.build(problem, least, chain, used)))
     _timed(phases, "save (result.json, chain.npz, posterior.nc)", lambda: result.save(out))
     _timed(phases, "report", lambda: write_report(out))
-    return {"phases": phases, "points": dataset.n}
+    compile_seconds, modules = source_compile_seconds()
+    return {"phases": phases, "points": dataset.n, "source_compile_s": compile_seconds, "source_modules": modules}
+
+
+def source_compile_seconds() -> tuple[float, int]:
+    """CPU time [s] to compile from source the modules of gonio (and its drivers) loaded in
+    this process, and how many: what every start of the command costs when their bytecode
+    is not cached (an editable install run where PYTHONDONTWRITEBYTECODE is set and
+    ``make`` did not compile it)."""
+    files = sorted({Path(module.__file__) for name, module in list(sys.modules.items())
+                    if name.split(".")[0] in ("gonio", "drivers") and getattr(module, "__file__", None)})
+    start = time.process_time()
+    for path in files:
+        compile(path.read_bytes(), str(path), "exec")
+    return time.process_time() - start, len(files)
+
+
+#: What the command has loaded when it exits (with report workers: no matplotlib).
+_EXIT_PROBE = """
+import gc, sys, time
+import emcee, h5netcdf, scipy.optimize
+import gonio.cli, gonio.cli.fit, gonio.fitting, gonio.report.workers
+from gonio.fitting.diagnostics import array_stats
+gonio.cli.build_parser()
+array_stats()
+if sys.argv[1] == "freeze":
+    gc.freeze()
+print(time.time(), flush=True)
+"""
+
+
+def exit_seconds(freeze: bool) -> float:
+    """Wall time [s] from the last statement to the end of a process that has loaded what
+    ``gonio fit`` loads, with or without :func:`gc.freeze` first (``gonio.cli.run``)."""
+    probe = subprocess.Popen([sys.executable, "-c", _EXIT_PROBE, "freeze" if freeze else "collect"],
+                             stdout=subprocess.PIPE, text=True)
+    last = float(probe.stdout.readline())
+    probe.wait()
+    return time.time() - last
 
 
 def _parse(arguments: list[str]) -> argparse.Namespace:
@@ -325,10 +372,13 @@ def _summarised(result):
 
 def fit_command(repeats: int) -> dict:
     """Wall time of the command, its phases and the interpreter references (medians) [s]."""
+    compileall.compile_dir(ROOT / "gonio", quiet=1)  # as after any first run, or a pip install
+    compileall.compile_dir(ROOT / "drivers", quiet=1)
     with tempfile.TemporaryDirectory(prefix="gonio-fig16-") as scratch:
         folder = Path(scratch)
         recording = make_recording(folder)
         totals, cpus, loads, phase_runs, start_up, numpy = [], [], [], [], [], []
+        exits_frozen, exits_collected = [], []
         single, single_cpus = [], []
         for k in range(repeats):
             out = folder / f"fit-{k}"
@@ -348,6 +398,8 @@ def fit_command(repeats: int) -> dict:
             shutil.rmtree(out)
             start_up.append(command_seconds([sys.executable, "-c", "pass"]))
             numpy.append(command_seconds([sys.executable, "-c", "import numpy"]))
+            exits_frozen.append(exit_seconds(freeze=True))
+            exits_collected.append(exit_seconds(freeze=False))
     every = {name: statistics.median(run["phases"][name] for run in phase_runs) for name in phase_runs[0]["phases"]}
     phases = {name: value for name, value in every.items() if not name.endswith(CPU)}
     phases_cpu = {name[: -len(CPU)]: value for name, value in every.items() if name.endswith(CPU)}
@@ -372,6 +424,11 @@ def fit_command(repeats: int) -> dict:
         "speed_up_of_report_workers": statistics.median(single) / total,
         "load_average_runs": loads,
         "imports_s": imports,
+        "bytecode": "gonio's compiled before timing (compileall), as after a first run or by make",
+        "source_compile_s": statistics.median(run["source_compile_s"] for run in phase_runs),
+        "source_modules": phase_runs[0]["source_modules"],
+        "exit_with_gc_freeze_s": statistics.median(exits_frozen),
+        "exit_with_final_collection_s": statistics.median(exits_collected),
         "interpreter_start_s": statistics.median(start_up),
         "interpreter_with_numpy_s": statistics.median(numpy),
         "ratio_to_interpreter_with_numpy": total / statistics.median(numpy),
@@ -470,6 +527,9 @@ def main() -> int:
     print(f"  {'the command, report by 2 workers':58s} {command['wall_s']:6.2f} s  (CPU {command['command_cpu_s']:.2f} s; "
           f"python -c pass {command['interpreter_start_s']:.2f} s; load {min(command['load_average_runs']):.1f}-"
           f"{max(command['load_average_runs']):.1f})")
+    print(f"  gonio's bytecode compiled first; compiling its {command['source_modules']} modules from source would "
+          f"add {command['source_compile_s']:.2f} s of CPU; exit {command['exit_with_gc_freeze_s']:.2f} s after "
+          f"gc.freeze, {command['exit_with_final_collection_s']:.2f} s with the final collection")
     print(f"wrote {path}")
     return 0
 

@@ -1,6 +1,4 @@
 """``python -m gonio`` runs the command line."""
-import sys
+from gonio.cli import run
 
-from gonio.cli import main
-
-sys.exit(main())
+run()

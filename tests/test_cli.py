@@ -28,6 +28,20 @@ def test_console_script_runs_as_a_module():
     assert done.returncode == 0 and done.stdout.startswith("gonio ")
 
 
+def test_the_program_exits_with_the_commands_status_and_its_whole_output(tmp_path):
+    # gonio.cli.run (the console script, python -m gonio) freezes the objects left before
+    # exiting: the exit status and every line of output are still the command's.
+    listed = subprocess.run([sys.executable, "-m", "gonio", "models"], capture_output=True, text=True, timeout=120)
+    assert listed.returncode == 0
+    assert all(f"{name}  -  " in listed.stdout for name in gonio.models.available())
+    missing = subprocess.run([sys.executable, "-m", "gonio", "fit", str(tmp_path / "none.csv"), "--model", "lambert"],
+                             capture_output=True, text=True, timeout=120)
+    assert missing.returncode == 2 and missing.stderr.startswith("gonio: error:")
+    from importlib.metadata import entry_points
+
+    assert [script.value for script in entry_points(group="console_scripts", name="gonio")] == ["gonio.cli:run"]
+
+
 def test_models_lists_every_model_with_units_and_bounds(capsys):
     assert main(["models"]) == 0
     out = capsys.readouterr().out

@@ -287,6 +287,7 @@ def _run(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(f"fitting {name} to {dataset.n} {dataset.quantity} values from {data_path}", file=sys.stderr)
     with _report_workers(args.report) as pool:  # they import matplotlib while this process fits
+        drawing = _report_drawing(pool, dataset) if args.report else None
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
             result = fit(
@@ -294,14 +295,16 @@ def _run(args: argparse.Namespace) -> int:
                 options=options, n_walkers=args.walkers, max_steps=args.max_steps, rhat_limit=args.rhat_limit,
                 seed=args.seed, progress=_Progress(args.quiet), alignment=alignment, stray_light=args.stray_light,
             )
+        if drawing is not None:
+            drawing.draw_fit(result)  # the workers draw while this process saves
         path = result.save(out)
         if replacing:
-            remove_stale_results(out, result.saved_files())  # the earlier fit's report too, before drawing
+            remove_stale_results(out, result.saved_files())  # the earlier fit's report too, before writing it
         print(result.summary())
-        if args.report:
+        if drawing is not None:
             from gonio.report.workers import finish_report
 
-            print(f"report: {finish_report(pool, result, out)}")
+            print(f"report: {finish_report(pool, result, out, drawing)}")
     print(f"result: {path}")
     if result.converged is False:
         print("gonio: WARNING: the MCMC chain did NOT converge (step limit reached); "
@@ -312,6 +315,16 @@ def _run(args: argparse.Namespace) -> int:
     if result.adequate is False:
         print(f"gonio: {result.adequacy.headline()}", file=sys.stderr)
     return result.exit_code()
+
+
+def _report_drawing(pool, dataset: Dataset):
+    """The report's figures (gonio.report.workers.ReportDrawing), those of the measurements
+    alone given to the workers now."""
+    from gonio.report.workers import ReportDrawing, print_warning
+
+    drawing = ReportDrawing(pool, print_warning)
+    drawing.draw_measurements(dataset)
+    return drawing
 
 
 def _report_workers(report: bool):

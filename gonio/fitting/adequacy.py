@@ -60,14 +60,6 @@ def chi2_pvalue(chi2: float, dof: int) -> float:
     return float(chdtrc(dof, chi2))
 
 
-def _discrepancy(problem, vector: np.ndarray) -> float:
-    """Chi-square of the data under the fit's likelihood at ``vector`` (extra noise included)."""
-    values, predicted = problem._predict_vector(vector)
-    extra = problem.extra_variance(values, predicted) if problem.jitter else 0.0
-    z = problem.whiten(predicted - problem.dataset.value, extra)[0]
-    return float(np.dot(z, z))
-
-
 def posterior_predictive_pvalue(problem, samples: np.ndarray, max_draws: int = 1000) -> float:
     """Posterior predictive p-value of the chi-square discrepancy (module docstring).
 
@@ -83,7 +75,7 @@ def posterior_predictive_pvalue(problem, samples: np.ndarray, max_draws: int = 1
         return math.nan
     pick = np.linspace(0, len(samples) - 1, min(max_draws, len(samples))).astype(int)
     n = problem.n_informative
-    discrepancies = np.array([_discrepancy(problem, samples[k]) for k in pick])
+    discrepancies = problem.chi_square_batch(samples[pick])
     return float(np.mean(chdtrc(n, discrepancies)))
 
 
@@ -142,7 +134,7 @@ def _p(value: float) -> str:
 def assess(problem, least_squares, samples: np.ndarray | None = None, alpha: float = ALPHA) -> Adequacy:
     """The verdict of a fit: both p-values and the extra-noise ratio against their limits."""
     vector = np.array([least_squares.values[n] for n in problem.free])
-    chi2_p = chi2_pvalue(_discrepancy(problem, vector), least_squares.dof)
+    chi2_p = chi2_pvalue(float(problem.chi_square_batch(vector)[0]), least_squares.dof)
     ppc_p = posterior_predictive_pvalue(problem, samples) if samples is not None else math.nan
     values = samples_median(problem, samples) if samples is not None else least_squares.values
     ratio = extra_noise_ratio(problem, values)

@@ -4,7 +4,8 @@ Each function takes a :class:`gonio.fitting.FitResult` and returns a
 :class:`matplotlib.figure.Figure`:
 
 * :func:`geometry_figure` - what was measured: source and viewing directions on the
-  hemisphere (polar plot: radius theta [deg], angle phi [deg]);
+  hemisphere (polar plot: radius theta [deg], angle phi [deg]); drawn from the dataset
+  alone by :func:`measurement_geometry_figure`;
 * :func:`data_figure` - data with error bars and the posterior predictive band (median,
   68 % and 95 %), one panel per incidence in the plane it was measured in: in-plane data
   against the signed viewing angle (positive on the source side, DESIGN.md), off-plane
@@ -42,7 +43,8 @@ from gonio.fitting.results import FitResult
 from gonio.geometry import azimuth_difference, in_plane_angles
 
 __all__ = [
-    "geometry_figure", "data_figure", "residual_figure", "corner_figure", "trace_figure",
+    "geometry_figure", "measurement_geometry_figure", "data_figure", "residual_figure", "corner_figure",
+    "trace_figure",
     "MAX_INCIDENCE_PANELS", "MAX_AZIMUTH_SERIES", "MAX_LEGEND_INCIDENCES", "DENSE_POINTS",
     "MAX_TRACE_POINTS", "MAX_TRACE_WALKERS",
 ]
@@ -180,13 +182,19 @@ def _view_sizes(data: Dataset, index: np.ndarray, n_sources: int) -> np.ndarray:
 
 
 def geometry_figure(result: FitResult) -> Figure:
+    """Polar plot of the measured viewing directions, coloured by incidence, with the
+    sources: :func:`measurement_geometry_figure` of the fit's dataset."""
+    return measurement_geometry_figure(result.dataset)
+
+
+def measurement_geometry_figure(data: Dataset) -> Figure:
     """Polar plot of the measured viewing directions, coloured by incidence, with the sources.
 
     Two scatter collections (views, sources), whatever the number of incidences: with at
     most MAX_LEGEND_INCIDENCES each incidence has its colour and legend entry, beyond that
-    views and sources are coloured by the source's polar angle (colour bar).
+    views and sources are coloured by the source's polar angle (colour bar). It needs the
+    measurements alone, so ``gonio fit --report`` draws it while the fit runs.
     """
-    data = result.dataset
     sources, index = data.incidences()
     fig, grid = _fixed_grid(6.0, 6.6, 1, 1, _GEOMETRY_MARGINS)
     ax = fig.add_subplot(grid[0, 0], projection="polar")

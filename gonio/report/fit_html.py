@@ -28,8 +28,8 @@ from gonio.models import get as get_model
 if TYPE_CHECKING:
     from gonio.fitting.results import FitResult
 
-__all__ = ["ReportFigure", "FIGURES", "FIGURE_NAMES", "REPORT_FILE", "REPORT_FILES", "write_html",
-           "write_report_files"]
+__all__ = ["ReportFigure", "FIGURES", "FIGURE_NAMES", "DATASET_FIGURES", "REPORT_FILE", "REPORT_FILES",
+           "write_html", "write_report_files"]
 
 
 class ReportFigure(NamedTuple):
@@ -70,6 +70,12 @@ FIGURES: tuple[ReportFigure, ...] = (
 
 #: The figures' file names in report order.
 FIGURE_NAMES: tuple[str, ...] = tuple(figure.file for figure in FIGURES)
+
+#: Figures drawn from the measurements alone, by file name: the function of
+#: :mod:`gonio.report.fit_figures` that draws each from a :class:`gonio.fitting.Dataset`
+#: (the same figure its :data:`FIGURES` function draws from a fit of that dataset).
+#: ``gonio fit --report`` has them drawn while the fit runs.
+DATASET_FIGURES: dict[str, str] = {"fit-geometry.png": "measurement_geometry_figure"}
 
 #: Every file a report writes into its output folder.
 REPORT_FILES: tuple[str, ...] = (REPORT_FILE,) + FIGURE_NAMES

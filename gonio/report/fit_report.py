@@ -14,13 +14,14 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
+from gonio.fitting.dataset import Dataset
 from gonio.fitting.results import FitResult
 
 from . import fit_figures
-from .fit_html import FIGURE_NAMES, FIGURES, REPORT_FILE, REPORT_FILES, write_html, write_report_files
+from .fit_html import DATASET_FIGURES, FIGURE_NAMES, FIGURES, REPORT_FILE, REPORT_FILES, write_html, write_report_files
 
-__all__ = ["write_report", "render_figures", "write_html", "write_report_files", "load_source", "FIGURES",
-           "FIGURE_NAMES", "REPORT_FILE", "REPORT_FILES"]
+__all__ = ["write_report", "render_figures", "render_dataset_figures", "write_html", "write_report_files",
+           "load_source", "FIGURES", "FIGURE_NAMES", "DATASET_FIGURES", "REPORT_FILE", "REPORT_FILES"]
 
 #: zlib level of the PNG files: 1 makes files 2 to 5 % larger than 3 or the default 6 in
 #: 70 % (trace figure) to 90 % of the time of 3 and half that of 6 (measured on the
@@ -92,11 +93,28 @@ def render_figures(result: FitResult, filenames: tuple[str, ...] = FIGURE_NAMES)
     ValueError
         A name is not one of the report's figures.
     """
-    makers = {figure.file: getattr(fit_figures, figure.function) for figure in FIGURES}
-    unknown = sorted(set(filenames) - set(makers))
+    functions = {figure.file: figure.function for figure in FIGURES}
+    return _render(result, filenames, functions, "render_figures: unknown figure file(s)")
+
+
+def render_dataset_figures(dataset: Dataset, filenames: tuple[str, ...] = tuple(DATASET_FIGURES)) -> dict[str, bytes]:
+    """Draw figures of :data:`DATASET_FIGURES` from the measurements alone and encode them
+    as PNG: the same bytes :func:`render_figures` gives for a fit of ``dataset``
+    (parameters, return value and errors as there; default: every such figure).
+    """
+    return _render(dataset, filenames, DATASET_FIGURES,
+                   "render_dataset_figures: figure file(s) that cannot be drawn from the measurements alone:")
+
+
+def _render(source: FitResult | Dataset, filenames: tuple[str, ...], functions: dict[str, str],
+            refusal: str) -> dict[str, bytes]:
+    """PNG bytes of ``filenames``, each drawn from ``source`` by its function of
+    :mod:`gonio.report.fit_figures` (``functions``); ``refusal`` begins the error for names
+    not among them."""
+    unknown = sorted(set(filenames) - set(functions))
     if unknown:
-        raise ValueError(f"render_figures: unknown figure file(s) {unknown}; expected names of {list(makers)}")
-    return {filename: _png(makers[filename](result)) for filename in filenames}
+        raise ValueError(f"{refusal} {unknown}; expected names of {list(functions)}")
+    return {filename: _png(getattr(fit_figures, functions[filename])(source)) for filename in filenames}
 
 
 def write_report(source: str | Path | FitResult, out: str | Path | None = None, *, processes: int = 1) -> Path:

@@ -14,9 +14,13 @@ Two uses:
   and before it fits. With the ``forkserver`` start method the fork server is started at
   once with :data:`PRELOAD` (matplotlib, :mod:`gonio.report.fit_report`, the scipy parts
   the figures use): it imports them on another core while the command reads, fits and
-  samples, and workers forked from it after the fit start in milliseconds. The command
-  then sends the saved result to the workers, which draw every figure
-  (:func:`finish_report`); its own process never imports matplotlib.
+  samples. Each figure is given to the workers as soon as what it shows is known
+  (:class:`ReportDrawing`): the measurement geometry, which needs the measurements alone,
+  before the fit starts (the submission waits for the server in a background thread,
+  :meth:`ReportPool.submit_soon`, so the worker draws it during the MCMC); the others,
+  shared between the workers, as soon as the fit is done, while the command saves the
+  result and prints its summary. The command then receives the PNG bytes and writes the
+  files (:func:`finish_report`); its own process never imports matplotlib.
 * ``write_report(..., processes=2)`` (and ``gonio report`` with
   ``$GONIO_REPORT_PROCESSES`` of 2 or more; :func:`write_report_shared`): the pool is
   opened first, so that the server imports while this process reads the result and
@@ -59,21 +63,24 @@ import multiprocessing.forkserver
 import os
 import signal
 import sys
+import threading
 import time
 import warnings
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterator, Sequence
 
-from .fit_html import FIGURE_NAMES, FIGURES, write_report_files
+from .fit_html import DATASET_FIGURES, FIGURE_NAMES, FIGURES, write_report_files
 
 if TYPE_CHECKING:
+    from gonio.fitting.dataset import Dataset
     from gonio.fitting.results import FitResult
 
-__all__ = ["ReportPool", "ReportWorkerWarning", "report_pool", "draw_figures_shared", "finish_report",
-           "print_warning", "write_report_shared", "report_processes", "available_cores", "share_figures",
+__all__ = ["ReportPool", "ReportWorkerWarning", "ReportDrawing", "report_pool", "draw_figures_shared",
+           "finish_report", "print_warning", "write_report_shared", "report_processes", "available_cores",
+           "share_figures",
            "START_METHOD", "ENVIRONMENT_VARIABLE", "PRELOAD", "WORKER_TIMEOUT_S"]
 
 #: Environment variable setting the number of report processes.
@@ -204,6 +211,13 @@ def _render(result: FitResult, filenames: tuple[str, ...]) -> dict[str, bytes]:
     return render_figures(result, filenames)
 
 
+def _render_measurements(dataset: Dataset, filenames: tuple[str, ...]) -> dict[str, bytes]:
+    """The job for figures of the measurements alone (gonio.report.fit_report.render_dataset_figures)."""
+    from .fit_report import render_dataset_figures
+
+    return render_dataset_figures(dataset, filenames)
+
+
 # ------------------------------------------------------------------------- the pool
 @dataclass
 class ReportPool:
@@ -211,6 +225,8 @@ class ReportPool:
 
     executor: ProcessPoolExecutor
     workers: int
+    #: Threads of :meth:`submit_soon` (joined briefly by :meth:`terminate`).
+    _submitting: list[threading.Thread] = field(default_factory=list, repr=False)
 
     @classmethod
     def start(cls, workers: int, method: str = START_METHOD) -> ReportPool:
@@ -228,16 +244,44 @@ class ReportPool:
             context.set_forkserver_preload(list(PRELOAD))
             multiprocessing.forkserver.ensure_running()  # starts importing; returns at once
         pool = cls(ProcessPoolExecutor(workers, mp_context=context, initializer=_prepare_worker), workers)
-        if method == "spawn":
-            for _ in range(workers):  # a spawned worker starts on its first job
-                pool.executor.submit(_ready)
+        for _ in range(workers):  # a worker starts on its first job: have them start as soon as they can
+            pool.submit_soon(_ready)
         return pool
+
+    def submit_soon(self, function: Callable, *args) -> Future:
+        """Submit a job without waiting for the workers to start; returns its future at once.
+
+        A job submitted to a pool whose workers do not exist yet makes the submitting
+        thread start one, and a worker forked from the fork server starts only once the
+        server has imported :data:`PRELOAD` (about a second). The submission is therefore
+        made by a background thread, and the returned future takes the job's result or
+        error. A job that cannot be submitted (the pool shut down or broken meanwhile)
+        ends its future with :class:`BrokenProcessPool`, as a worker's death would.
+        """
+        outer: Future = Future()
+
+        def submit() -> None:
+            try:
+                inner = self.executor.submit(function, *args)
+            except Exception as error:  # the pool was shut down or broke meanwhile
+                outer.set_exception(BrokenProcessPool(f"a job could not be given to the workers "
+                                                      f"({type(error).__name__}: {error})"))
+                return
+            inner.add_done_callback(lambda done: _pass_on(done, outer))
+
+        thread = threading.Thread(target=submit, name="gonio-report-submit", daemon=True)
+        self._submitting.append(thread)
+        thread.start()
+        return outer
 
     def terminate(self) -> None:
         """End the workers now: pending jobs are cancelled and running ones abandoned
         (workers write no file, so nothing is left half written)."""
         # ProcessPoolExecutor ends its workers only after their running jobs; its
-        # processes are read from the executor (Python 3.14 adds terminate_workers()).
+        # processes are read from the executor (Python 3.14 adds terminate_workers()),
+        # once the workers being started by submit_soon exist.
+        for thread in self._submitting:
+            thread.join(_END_SECONDS)
         processes = list((getattr(self.executor, "_processes", None) or {}).values())
         self.executor.shutdown(wait=False, cancel_futures=True)
         for process in processes:
@@ -288,6 +332,17 @@ def report_pool(workers: int, method: str = START_METHOD,
             pool.executor.shutdown(wait=True, cancel_futures=True)
 
 
+def _pass_on(done: Future, outer: Future) -> None:
+    """Give ``outer`` the result or error of the finished job ``done`` (a cancelled job:
+    :class:`BrokenProcessPool`, since only an ended pool cancels them)."""
+    if done.cancelled():
+        outer.set_exception(BrokenProcessPool("the job was cancelled: the report workers were ended"))
+    elif done.exception() is not None:
+        outer.set_exception(done.exception())
+    else:
+        outer.set_result(done.result())
+
+
 def _exit_on_sigterm(signum: int, frame) -> None:
     raise SystemExit(128 + signum)
 
@@ -299,7 +354,6 @@ def _sigterm_as_exit(active: bool) -> Iterator[None]:
     action would end this process alone, leaving them to finish and multiprocessing's
     resource tracker to warn of leaked semaphores). Only where this process still has
     the default action and only in the main thread (where Python runs signal handlers)."""
-    import threading
 
     install = (active and threading.current_thread() is threading.main_thread()
                and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)
@@ -312,14 +366,15 @@ def _sigterm_as_exit(active: bool) -> Iterator[None]:
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def _submit(pool: ReportPool, result: FitResult, shares: list[tuple[str, ...]],
+def _submit(pool: ReportPool, function: Callable, first, shares: list[tuple[str, ...]],
             warn: Callable[[str], None]) -> list[Future]:
-    """One job per non-empty share; none (after ``warn``) when the workers cannot take them."""
+    """One job ``function(first, share)`` per non-empty share; none (after ``warn``) when the
+    workers cannot take them."""
     futures = []
     try:
         for share in shares:
             if share:
-                futures.append(pool.executor.submit(_render, result, share))
+                futures.append(pool.executor.submit(function, first, share))
     except Exception as error:  # a worker that cannot start, or a pool already broken
         warn(f"report workers cannot take the figures ({type(error).__name__}: {error}); drawing them in this "
              "process")
@@ -347,6 +402,70 @@ def _collect(pool: ReportPool, futures: list[Future], warn: Callable[[str], None
              "figures in this process")
         pool.terminate()
     return pngs
+
+
+class ReportDrawing:
+    """The figures of one report, given to the workers as soon as what they show is known.
+
+    :meth:`draw_measurements` has the figures of the measurements alone
+    (:data:`gonio.report.fit_html.DATASET_FIGURES`) drawn while the fit runs;
+    :meth:`draw_fit` shares the others among the workers once the fit is done;
+    :meth:`receive` waits for them and draws here whatever the workers did not return
+    (every figure, without a pool).
+
+    Parameters
+    ----------
+    pool : ReportPool or None
+        Running workers, or None (every figure is then drawn by :meth:`receive`).
+    warn : callable
+        Called with a one-line message when workers fail (default: a
+        :class:`ReportWorkerWarning`).
+    """
+
+    def __init__(self, pool: ReportPool | None, warn: Callable[[str], None] = _warn):
+        self.pool = pool
+        self.warn = warn
+        self._futures: list[Future] = []
+        self._given: set[str] = set()
+
+    def draw_measurements(self, dataset: Dataset) -> None:
+        """Have the workers draw the figures of ``dataset`` alone; returns at once (the
+        job is submitted by :meth:`ReportPool.submit_soon`). Nothing without a pool."""
+        if self.pool is None:
+            return
+        names = tuple(DATASET_FIGURES)
+        self._futures.append(self.pool.submit_soon(_render_measurements, dataset, names))
+        self._given.update(names)
+
+    def draw_fit(self, result: FitResult, draw_here: bool = False) -> dict[str, bytes]:
+        """Share the figures not yet given among the workers (and this process, when
+        ``draw_here``: it draws the lightest share now and returns its PNG bytes)."""
+        remaining = tuple(name for name in FIGURE_NAMES if name not in self._given)
+        if self.pool is None or not remaining:
+            return {}
+        shares = share_figures(self.pool.workers + int(draw_here), remaining)
+        from_here, for_workers = (shares[0], shares[1:]) if draw_here else ((), shares)
+        self._futures += _submit(self.pool, _render, result, for_workers, self.warn)
+        self._given.update(remaining)
+        return _render_here(result, from_here)
+
+    def receive(self, result: FitResult, drawn_here: dict[str, bytes] | None = None) -> dict[str, bytes]:
+        """The PNG bytes of every figure: the workers' (waited for, within
+        :data:`WORKER_TIMEOUT_S`), ``drawn_here``, and the figures missing from both drawn
+        here now.
+
+        Raises
+        ------
+        Exception
+            What drawing a figure raised, here or in a worker (the worker's traceback is
+            the exception's ``__cause__``).
+        """
+        pngs = dict(drawn_here or {})
+        if self.pool is not None:
+            pngs.update(_collect(self.pool, self._futures, self.warn))
+        missing = tuple(name for name in FIGURE_NAMES if name not in pngs)
+        pngs.update(_render_here(result, missing))
+        return pngs
 
 
 def draw_figures_shared(result: FitResult, pool: ReportPool | None, *, draw_here: bool,
@@ -380,17 +499,8 @@ def draw_figures_shared(result: FitResult, pool: ReportPool | None, *, draw_here
         What drawing a figure raised, here or in a worker (the worker's traceback is the
         exception's ``__cause__``).
     """
-    from_here: tuple[str, ...] = ()
-    pngs: dict[str, bytes] = {}
-    if pool is not None:
-        shares = share_figures(pool.workers + int(draw_here))
-        from_here, for_workers = (shares[0], shares[1:]) if draw_here else ((), shares)
-        futures = _submit(pool, result, for_workers, warn)
-        pngs.update(_render_here(result, from_here))
-        pngs.update(_collect(pool, futures, warn))
-    missing = tuple(name for name in FIGURE_NAMES if name not in pngs)
-    pngs.update(_render_here(result, missing))
-    return pngs
+    drawing = ReportDrawing(pool, warn)
+    return drawing.receive(result, drawing.draw_fit(result, draw_here))
 
 
 def _render_here(result: FitResult, filenames: tuple[str, ...]) -> dict[str, bytes]:
@@ -407,7 +517,8 @@ def print_warning(message: str) -> None:
     print(f"gonio: warning: {message}", file=sys.stderr)
 
 
-def finish_report(pool: ReportPool | None, result: FitResult, out: str | Path) -> Path:
+def finish_report(pool: ReportPool | None, result: FitResult, out: str | Path,
+                  drawing: ReportDrawing | None = None) -> Path:
     """Write the report of ``result`` (saved in ``out``) into ``out``, for ``gonio fit``:
     the workers draw every figure; without them (or when they fail, with ``gonio:
     warning:`` lines on stderr) this process draws them.
@@ -420,14 +531,20 @@ def finish_report(pool: ReportPool | None, result: FitResult, out: str | Path) -
         The fit, as saved.
     out : path
         The result folder; the report goes into it.
+    drawing : ReportDrawing, optional
+        The figures already given to ``pool``'s workers (``gonio fit`` gives the
+        measurements' figures before the fit and the rest before it saves the result);
+        the figures not given yet are given now.
 
     Returns
     -------
     pathlib.Path
         The HTML file.
     """
-    pngs = draw_figures_shared(result, pool, draw_here=False, warn=print_warning)
-    return write_report_files(result, Path(out), pngs)
+    if drawing is None:
+        drawing = ReportDrawing(pool, print_warning)
+    drawing.draw_fit(result)
+    return write_report_files(result, Path(out), drawing.receive(result))
 
 
 def write_report_shared(source: str | Path | FitResult, out: str | Path | None = None, processes: int = 2,

@@ -149,6 +149,28 @@ def test_batch_likelihood_equals_one_walker_at_a_time(case):
     np.testing.assert_allclose(problem.log_likelihood_batch(vectors), one_by_one, rtol=1e-11, atol=1e-9)
 
 
+@pytest.mark.parametrize("case", range(8))
+def test_batch_chi_square_equals_the_whitened_residuals_one_vector_at_a_time(case):
+    """The posterior predictive check's discrepancy of many posterior draws in one model
+    evaluation equals the squared whitened residuals (the extra noise included) of each:
+    every quantity, extra-noise form, covariance (with a free extra noise, one factor per
+    row) and the aperture average."""
+    model, data, fixed, jitter = _batch_cases()[case]
+    problem = FitProblem(model, data, fixed, jitter=jitter)
+    rng = np.random.default_rng(100 + case)
+    starts = {"rho": (0.5, 0.95), "sigma": (5.0, 45.0), "ir_weight": (0.2, 1.0), "scale": (1.5, 2.5),
+              "jitter": (0.0, 0.02), "rel_jitter": (0.0, 0.05)}
+    vectors = np.column_stack([rng.uniform(*starts[name], 7) for name in problem.free])
+    one_by_one = []
+    for vector in vectors:
+        values, predicted = problem._predict_vector(vector)
+        extra = problem.extra_variance(values, predicted) if problem.jitter else 0.0
+        z = problem.whiten(predicted - data.value, extra)[0]
+        one_by_one.append(float(z @ z))
+    np.testing.assert_allclose(problem.chi_square_batch(vectors), one_by_one, rtol=1e-10)
+    assert problem.chi_square_batch(vectors[0]).shape == (1,)
+
+
 def test_batch_posterior_rejects_walkers_outside_the_support_without_evaluating_them():
     from gonio.fitting.mcmc import LogPosterior, resolve_priors
 

@@ -15,6 +15,7 @@ import pickle
 import signal
 import time
 import warnings
+from concurrent.futures.process import BrokenProcessPool
 
 import pytest
 
@@ -22,10 +23,10 @@ from gonio.cli import main
 from gonio.fitting import fit
 from gonio.fitting.results import FitResult
 from gonio.report import fit_report, workers
-from gonio.report.fit_html import FIGURE_NAMES, FIGURES, REPORT_FILES, write_html, write_report_files
+from gonio.report.fit_html import DATASET_FIGURES, FIGURE_NAMES, FIGURES, REPORT_FILES, write_html, write_report_files
 from gonio.report.fit_report import write_report
-from gonio.report.workers import (ReportWorkerWarning, draw_figures_shared, finish_report, report_pool,
-                                  report_processes, share_figures, write_report_shared)
+from gonio.report.workers import (ReportDrawing, ReportPool, ReportWorkerWarning, draw_figures_shared,
+                                  finish_report, report_pool, report_processes, share_figures, write_report_shared)
 
 from .synthetic import synthetic_dataset
 
@@ -176,6 +177,54 @@ def test_command_workers_write_the_same_files_keep_the_result_and_end(saved_fit,
     assert _contents(saved_fit) == in_process
     assert _digests(saved_fit) == before
     assert started and not any(process.is_alive() for process in started)
+
+
+def test_the_measurements_figure_drawn_from_the_dataset_is_the_fits(saved_fit, in_process):
+    result = FitResult.load(saved_fit)
+    pngs = fit_report.render_dataset_figures(result.dataset)
+    assert list(pngs) == list(DATASET_FIGURES) == ["fit-geometry.png"]
+    assert pngs["fit-geometry.png"] == in_process["fit-geometry.png"]
+    with pytest.raises(ValueError, match=r"cannot be drawn from the measurements alone: \['fit-corner\.png'\]"):
+        fit_report.render_dataset_figures(result.dataset, ("fit-corner.png",))
+
+
+def test_figures_given_while_fitting_and_after_make_the_same_report(saved_fit, in_process, tmp_path, strict):
+    # gonio fit --report: the geometry is given to the workers before the fit (its job
+    # waits for the fork server in a background thread), the rest once the fit is done.
+    result = FitResult.load(saved_fit)
+    with report_pool(2) as pool:
+        drawing = ReportDrawing(pool)
+        drawing.draw_measurements(result.dataset)
+        drawing.draw_fit(result)
+        path = finish_report(pool, result, tmp_path, drawing)
+    assert path == tmp_path / "report.html"
+    assert _contents(tmp_path) == in_process
+
+
+def test_a_job_given_before_the_workers_exist_returns_its_result_there():
+    with report_pool(1) as pool:
+        future = pool.submit_soon(os.getpid)  # returns at once; the worker may still be starting
+        assert future.result(timeout=60) != os.getpid()
+
+
+def test_a_job_the_workers_cannot_take_ends_as_a_broken_pool():
+    pool = ReportPool.start(1)
+    pool.executor.shutdown(wait=True)
+    with pytest.raises(BrokenProcessPool, match="could not be given to the workers.*RuntimeError"):
+        pool.submit_soon(os.getpid).result(timeout=60)
+
+
+def test_a_worker_that_dies_on_the_measurements_figure_leaves_every_figure_to_this_process(saved_fit, in_process,
+                                                                                           tmp_path):
+    result = FitResult.load(saved_fit)
+    dying = copy.copy(result.dataset)
+    object.__setattr__(dying, "poison", _EndOnArrival())  # a frozen dataclass; acts when a worker unpickles it
+    with pytest.warns(ReportWorkerWarning, match="report worker"):
+        with report_pool(2) as pool:
+            drawing = ReportDrawing(pool)
+            drawing.draw_measurements(dying)
+            finish_report(pool, result, tmp_path, drawing)
+    assert _contents(tmp_path) == in_process
 
 
 def test_spawned_workers_write_the_same_files(saved_fit, in_process, tmp_path, strict):
