@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Iterator
 
 if TYPE_CHECKING:  # loaded on use: the command line starts without the fitting stack
     from gonio.fitting import Dataset, Prior
@@ -327,14 +328,25 @@ def _report_drawing(pool, dataset: Dataset):
     return drawing
 
 
-def _report_workers(report: bool):
-    """The report's worker pool (gonio.report.workers.report_pool) for ``gonio fit``, or an
-    empty context: none without ``--report`` or with one report process."""
-    import contextlib
+@contextlib.contextmanager
+def _report_workers(report: bool) -> Iterator[Any]:
+    """The report's worker pool (gonio.report.workers.report_pool) for ``gonio fit``, or
+    None: none without ``--report`` or with one report process.
 
+    While the workers run, this process keeps its BLAS to one thread
+    (:func:`threadpoolctl.threadpool_limits`): a fit's matrix products (a few hundred
+    values) gain nothing from threads, and OpenBLAS's threads, which spin between calls,
+    took 0.4 s of CPU from the cores the fork server and the workers draw on
+    (docs/fitting.md "Performance").
+    """
     if not report:
-        return contextlib.nullcontext(None)
+        yield None
+        return
+    from threadpoolctl import threadpool_limits
+
     from gonio.report.workers import print_warning, report_pool, report_processes
 
     processes = report_processes(while_fitting=True)
-    return report_pool(processes if processes > 1 else 0, warn=print_warning)
+    with report_pool(processes if processes > 1 else 0, warn=print_warning) as pool:
+        with threadpool_limits(limits=1, user_api="blas") if pool is not None else contextlib.nullcontext():
+            yield pool

@@ -329,6 +329,13 @@ class FitProblem:
         self._precision: np.ndarray | None = None  # C^-1, computed on first use
         self._whitener: np.ndarray | None = None  # L^-1, computed on first use
         self._log_sigma_sum = float(np.sum(np.log(dataset.sigma)))
+        #: Every parameter's fixed or default value (the free ones are overwritten per call).
+        self._set_values = {p.name: self.fixed.get(p.name, p.default) for p in self.specs}
+        #: log of the Gaussian likelihood's normalisation without extra noise: -(log det L
+        #: + N/2 log 2 pi), L = diag(sigma) or the covariance's Cholesky factor.
+        self._log_normalisation = -(self._log_sigma_sum if self._cholesky is None
+                                    else float(np.sum(np.log(np.diag(self._cholesky))))
+                                    ) - 0.5 * dataset.n * math.log(2.0 * math.pi)
         self._linear = self._quadratic_chi_square()
         self._model_names = set(self.model.param_names)
         # Free model parameters, checked on each evaluation from a vector; fixed values were
@@ -513,8 +520,8 @@ class FitProblem:
         default values stay floats.
         """
         vectors = np.asarray(vectors, float).reshape(-1, self.ndim)
-        out: dict[str, Any] = {p.name: self.fixed.get(p.name, p.default) for p in self.specs}
-        out.update({name: vectors[:, [k]] for k, name in enumerate(self.free)})
+        out: dict[str, Any] = dict(self._set_values)
+        out.update({name: vectors[:, [k]] for k, name in enumerate(self.free)})  # copies: models may work in place
         return out
 
     def log_likelihood_batch(self, vectors: Any) -> np.ndarray:
@@ -617,14 +624,13 @@ class FitProblem:
         """:meth:`log_likelihood_batch` through the sufficient statistics of a linear model."""
         form, chi_square = self._linear
         walkers = next((np.shape(v)[0] for v in values.values() if np.ndim(v)), 1)
-        columns = [np.broadcast_to(np.reshape(np.asarray(c, float), -1), (walkers,))
-                   for c in form.coefficients(**params)]
-        coefficients = np.stack(columns, axis=1)
+        coefficients = np.empty((walkers, chi_square.terms.shape[0]))
+        for k, c in enumerate(form.coefficients(**params)):  # (W, 1) columns or floats
+            coefficients[:, k] = np.reshape(c, -1) if np.ndim(c) else c
         if self.dataset.quantity == "radiance":
-            coefficients = coefficients * np.reshape(values.get("scale", 1.0), (-1, 1))
+            coefficients *= np.reshape(values.get("scale", 1.0), (-1, 1))
         self.evaluations += walkers
-        log_det = self._log_sigma_sum if self._cholesky is None else float(np.sum(np.log(np.diag(self._cholesky))))
-        out = -0.5 * chi_square(coefficients) - log_det - 0.5 * self.dataset.n * math.log(2.0 * math.pi)
+        out = -0.5 * chi_square(coefficients) + self._log_normalisation
         out[~np.isfinite(out)] = -math.inf
         return out
 

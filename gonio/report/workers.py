@@ -2,8 +2,9 @@
 
 A report is five matplotlib figures (:data:`gonio.report.fit_html.FIGURES`), each drawn
 and PNG-encoded on its own: they can be drawn side by side. The workers are a
-:class:`concurrent.futures.ProcessPoolExecutor` (:class:`ReportPool`); each job draws a
-share of the figures (:func:`share_figures`) and returns their PNG bytes. Workers write
+:class:`concurrent.futures.ProcessPoolExecutor` (:class:`ReportPool`); each job draws
+one figure (the dearest first, so that a free worker takes the next) and returns its PNG
+bytes. Workers write
 no file: the calling process writes the PNG files and ``report.html`` from the bytes it
 received (:func:`gonio.report.fit_html.write_report_files`), so a worker that is stopped
 or dies leaves nothing behind, and the page embeds exactly the figures of this report.
@@ -193,11 +194,15 @@ def share_figures(count: int, filenames: Sequence[str] = FIGURE_NAMES) -> list[t
 
 # ------------------------------------------------------------------------- in the worker
 def _prepare_worker() -> None:
-    """A worker's start: leave Ctrl-C to the command (it reaches the whole process group)
-    and import what drawing needs (nothing left to do when forked from the fork server)."""
+    """A worker's start: leave Ctrl-C to the command (it reaches the whole process group),
+    import what drawing needs (nothing left to do when forked from the fork server) and
+    keep BLAS to one thread (each worker has a core; OpenBLAS's idle threads spin)."""
+    from threadpoolctl import threadpool_limits
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for module in PRELOAD:
         __import__(module)
+    threadpool_limits(limits=1, user_api="blas")
 
 
 def _ready() -> None:
@@ -438,14 +443,18 @@ class ReportDrawing:
         self._given.update(names)
 
     def draw_fit(self, result: FitResult, draw_here: bool = False) -> dict[str, bytes]:
-        """Share the figures not yet given among the workers (and this process, when
-        ``draw_here``: it draws the lightest share now and returns its PNG bytes)."""
+        """Give the workers the figures not yet given, one job per figure, dearest first
+        (:attr:`ReportFigure.cost`): whichever worker is free takes the next, so the
+        shares balance themselves, also while a worker still draws the measurements'
+        figures. With ``draw_here`` this process draws the lightest share of
+        :func:`share_figures` meanwhile and returns its PNG bytes."""
         remaining = tuple(name for name in FIGURE_NAMES if name not in self._given)
         if self.pool is None or not remaining:
             return {}
-        shares = share_figures(self.pool.workers + int(draw_here), remaining)
-        from_here, for_workers = (shares[0], shares[1:]) if draw_here else ((), shares)
-        self._futures += _submit(self.pool, _render, result, for_workers, self.warn)
+        from_here = share_figures(self.pool.workers + 1, remaining)[0] if draw_here else ()
+        cost = {figure.file: figure.cost for figure in FIGURES}
+        for_workers = sorted((name for name in remaining if name not in from_here), key=cost.__getitem__, reverse=True)
+        self._futures += _submit(self.pool, _render, result, [(name,) for name in for_workers], self.warn)
         self._given.update(remaining)
         return _render_here(result, from_here)
 
