@@ -4,10 +4,10 @@ A report is five matplotlib figures (:data:`gonio.report.fit_html.FIGURES`), eac
 and PNG-encoded on its own: they can be drawn side by side. The workers are a
 :class:`concurrent.futures.ProcessPoolExecutor` (:class:`ReportPool`); each job draws
 one figure (the dearest first, so that a free worker takes the next) and returns its PNG
-bytes. Workers write
-no file: the calling process writes the PNG files and ``report.html`` from the bytes it
-received (:func:`gonio.report.fit_html.write_report_files`), so a worker that is stopped
-or dies leaves nothing behind, and the page embeds exactly the figures of this report.
+bytes. Workers write no file: the calling process writes the PNG files and
+``report.html`` from the bytes it received
+(:func:`gonio.report.fit_html.write_report_files`), so a worker that is stopped or dies
+leaves nothing behind, and the page embeds exactly the figures of this report.
 
 Two uses:
 
@@ -19,8 +19,8 @@ Two uses:
   (:class:`ReportDrawing`): the measurement geometry, which needs the measurements alone,
   before the fit starts (the submission waits for the server in a background thread,
   :meth:`ReportPool.submit_soon`, so the worker draws it during the MCMC); the others,
-  shared between the workers, as soon as the fit is done, while the command saves the
-  result and prints its summary. The command then receives the PNG bytes and writes the
+  one job each, as soon as the fit is done, while the command saves the result and prints
+  its summary. The command then receives the PNG bytes and writes the
   files (:func:`finish_report`); its own process never imports matplotlib.
 * ``write_report(..., processes=2)`` (and ``gonio report`` with
   ``$GONIO_REPORT_PROCESSES`` of 2 or more; :func:`write_report_shared`): the pool is
@@ -414,7 +414,7 @@ class ReportDrawing:
 
     :meth:`draw_measurements` has the figures of the measurements alone
     (:data:`gonio.report.fit_html.DATASET_FIGURES`) drawn while the fit runs;
-    :meth:`draw_fit` shares the others among the workers once the fit is done;
+    :meth:`draw_fit` gives them the others once the fit is done;
     :meth:`receive` waits for them and draws here whatever the workers did not return
     (every figure, without a pool).
 
