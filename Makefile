@@ -18,8 +18,8 @@ help:
 
 # gonio is installed editable; its bytecode is compiled here, since an editable install
 # leaves that to the first run, which cannot write it where PYTHONDONTWRITEBYTECODE is
-# set, and every start would compile gonio's modules again (0.17 s of `gonio fit`,
-# docs/fitting.md "Performance").
+# set, and every start would compile gonio's modules again (0.15-0.20 s of CPU in
+# `gonio fit`, docs/fitting.md "Performance").
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip

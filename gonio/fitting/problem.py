@@ -553,7 +553,7 @@ class FitProblem:
         extra = self.extra_variance(values, predicted) if self.jitter else 0.0
         if self._cholesky is None and not self.jitter:
             z = difference / self.dataset.sigma
-            out[finite] = (-0.5 * np.einsum("wn,wn->w", z, z) - self._log_sigma_sum - normaliser)[finite]
+            out[finite] = (-0.5 * np.einsum("wn,wn->w", z, z) + self._log_normalisation)[finite]
         elif self._cholesky is None:
             variance = self.dataset.sigma**2 + np.asarray(extra)
             chi2 = np.sum(difference**2 / variance, axis=-1)
@@ -561,8 +561,7 @@ class FitProblem:
             out[finite] = (-0.5 * chi2 - log_det - normaliser)[finite]
         elif not self.jitter:
             z = self._whitening_matrix() @ difference[finite].T
-            log_det = float(np.sum(np.log(np.diag(self._cholesky))))
-            out[finite] = -0.5 * np.sum(z * z, axis=0) - log_det - normaliser
+            out[finite] = -0.5 * np.sum(z * z, axis=0) + self._log_normalisation
         else:  # a covariance with a free extra noise: one Cholesky factor per walker
             rows = np.asarray(vectors, float).reshape(walkers, self.ndim)
             out[finite] = [self.log_likelihood(row) for row in rows[finite]]
