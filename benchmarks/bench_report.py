@@ -35,7 +35,9 @@
    chain.npz, posterior.nc) and the report, each with its wall and CPU time (the CPU
    time is what other jobs on a shared machine inflate least). ``python -c pass`` and
    ``import numpy`` are timed the same way as the
-   references. Target: at most 2.5 s wall.
+   references, and so is a fixed pure-Python workload (:data:`PACE_REFERENCE`), whose
+   time tells the machine's pace in the run (``ratio_to_pace_reference``). Target: at
+   most 2.5 s wall.
 
    gonio's bytecode is compiled before the timings (``compileall``), as it is after a
    first run of any program that may write it, after a non-editable ``pip install`` and
@@ -82,6 +84,11 @@ FIT_TARGET_S = 2.5
 #: The recording's protocol and the command timed.
 PROTOCOL = ROOT / "protocols" / "oren-nayar-fig16-plaster.toml"
 FIT_ARGUMENTS = ("--model", "oren-nayar", "--fix", "ir_weight=1", "--report", "--quiet")
+#: The machine's pace, timed between the commands in a fresh interpreter: pure Python
+#: work of the kind the command's imports and sampling loop are made of (bytecode,
+#: small objects), fixed from run to run. The command's wall time over this one's
+#: compares runs made while the shared machine went at different speeds.
+PACE_REFERENCE = "d = {}\nfor i in range(1_500_000):\n    d[i % 1000] = (i, str(i & 255))"
 #: The PNG resolution of gonio.report.fit_report [dpi].
 DPI = 110
 GONIO = Path(sys.executable).with_name("gonio")
@@ -377,7 +384,7 @@ def fit_command(repeats: int) -> dict:
     with tempfile.TemporaryDirectory(prefix="gonio-fig16-") as scratch:
         folder = Path(scratch)
         recording = make_recording(folder)
-        totals, cpus, loads, phase_runs, start_up, numpy = [], [], [], [], [], []
+        totals, cpus, loads, phase_runs, start_up, numpy, pace = [], [], [], [], [], [], []
         exits_frozen, exits_collected = [], []
         single, single_cpus = [], []
         for k in range(repeats):
@@ -398,6 +405,7 @@ def fit_command(repeats: int) -> dict:
             shutil.rmtree(out)
             start_up.append(command_seconds([sys.executable, "-c", "pass"]))
             numpy.append(command_seconds([sys.executable, "-c", "import numpy"]))
+            pace.append(command_seconds([sys.executable, "-c", PACE_REFERENCE]))
             exits_frozen.append(exit_seconds(freeze=True))
             exits_collected.append(exit_seconds(freeze=False))
     every = {name: statistics.median(run["phases"][name] for run in phase_runs) for name in phase_runs[0]["phases"]}
@@ -432,6 +440,10 @@ def fit_command(repeats: int) -> dict:
         "interpreter_start_s": statistics.median(start_up),
         "interpreter_with_numpy_s": statistics.median(numpy),
         "ratio_to_interpreter_with_numpy": total / statistics.median(numpy),
+        "pace_reference_s": statistics.median(pace),
+        "pace_reference_runs_s": pace,
+        "ratio_to_pace_reference": total / statistics.median(pace),
+        "report_in_process_ratio_to_pace_reference": statistics.median(single) / statistics.median(pace),
     }
 
 
@@ -526,7 +538,8 @@ def main() -> int:
           f"(CPU {command['report_in_process_cpu_s']:.2f} s)")
     print(f"  {'the command, report by 2 workers':58s} {command['wall_s']:6.2f} s  (CPU {command['command_cpu_s']:.2f} s; "
           f"python -c pass {command['interpreter_start_s']:.2f} s; load {min(command['load_average_runs']):.1f}-"
-          f"{max(command['load_average_runs']):.1f})")
+          f"{max(command['load_average_runs']):.1f}); {command['ratio_to_pace_reference']:.2f} times the pace "
+          f"reference ({command['pace_reference_s']:.2f} s)")
     print(f"  gonio's bytecode compiled first; compiling its {command['source_modules']} modules from source would "
           f"add {command['source_compile_s']:.2f} s of CPU; exit {command['exit_with_gc_freeze_s']:.2f} s after "
           f"gc.freeze, {command['exit_with_final_collection_s']:.2f} s with the final collection")
