@@ -538,11 +538,10 @@ class FitProblem:
             Shape (W,); ``-inf`` where a prediction is undefined.
         """
         values = self.batch_values(vectors)
-        params = {name: values[name] for name in self.model.param_names}
         if self._linear is not None:
-            return self._linear_log_likelihood(values, params)
-        predicted = self._predict_checked(values, params)
-        difference = np.asarray(predicted - self.dataset.value, float).reshape(-1, self.dataset.n)
+            return self._linear_log_likelihood(values, {name: values[name] for name in self.model.param_names})
+        predicted = self._batch_prediction(values)
+        difference = predicted - self.dataset.value
         walkers = difference.shape[0]
         self.evaluations += walkers - 1
         finite = np.all(np.isfinite(difference), axis=1)
@@ -567,6 +566,11 @@ class FitProblem:
             out[finite] = [self.log_likelihood(row) for row in rows[finite]]
         out[~np.isfinite(out)] = -math.inf
         return out
+
+    def _batch_prediction(self, values: Mapping[str, Any]) -> np.ndarray:
+        """The prediction at every row of :meth:`batch_values` ``values``, shape (W, N)."""
+        params = {name: values[name] for name in self.model.param_names}
+        return np.asarray(self._predict_checked(values, params), float).reshape(-1, self.dataset.n)
 
     def _whitening_matrix(self) -> np.ndarray:
         """``L^-1`` for the data's covariance ``L L^T`` (computed once).
@@ -603,9 +607,8 @@ class FitProblem:
         if self._cholesky is not None and self.jitter:
             return np.array([self._chi_square_of(vector) for vector in vectors])
         values = self.batch_values(vectors)
-        params = {name: values[name] for name in self.model.param_names}
-        predicted = self._predict_checked(values, params)
-        difference = np.asarray(predicted - self.dataset.value, float).reshape(-1, self.dataset.n)
+        predicted = self._batch_prediction(values)
+        difference = predicted - self.dataset.value
         if self._cholesky is not None:
             z = self._whitening_matrix() @ difference.T
             return np.sum(z * z, axis=0)
@@ -670,8 +673,7 @@ class FitProblem:
         if self._cholesky is not None and self.jitter:
             return np.array([self.pointwise_log_likelihood(v) for v in vectors]).reshape(-1, self.dataset.n)
         values = self.batch_values(vectors)
-        params = {name: values[name] for name in self.model.param_names}
-        predicted = np.asarray(self._predict_checked(values, params), float).reshape(-1, self.dataset.n)
+        predicted = self._batch_prediction(values)
         if self._cholesky is not None:  # the leave-one-out conditionals of pointwise_log_likelihood
             precision = self._data_precision()
             g = (predicted - self.dataset.value) @ precision  # precision is symmetric
