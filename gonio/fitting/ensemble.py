@@ -52,6 +52,10 @@ class EnsembleChain:
         self.moves = [move for move, _ in moves]
         weights = np.array([weight for _, weight in moves], float)
         self.weights = weights / weights.sum()
+        # the move of a step is drawn as RandomState.choice(moves, p=weights) draws it
+        # (emcee.EnsembleSampler): one uniform number against the cumulative weights
+        self._cumulative = self.weights.cumsum()
+        self._cumulative /= self._cumulative[-1]
         self.random = random
         self._model = emcee.model.Model(log_prob_fn=log_prob_batch, compute_log_prob_fn=self._log_prob,
                                         map_fn=map, random=random)
@@ -79,7 +83,7 @@ class EnsembleChain:
             self._chain = _grown(self._chain, capacity)
             self._log_probs = _grown(self._log_probs, capacity)
         for _ in range(steps):
-            move = self.random.choice(self.moves, p=self.weights)
+            move = self.moves[int(self._cumulative.searchsorted(self.random.random_sample(), side="right"))]
             self.state, accepted = move.propose(self._model, self.state)
             self._chain[self.steps] = self.state.coords
             self._log_probs[self.steps] = self.state.log_prob

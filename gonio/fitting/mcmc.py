@@ -152,16 +152,22 @@ class LogPosterior:
         evaluation; equal to calling the posterior row by row (to rounding). Rows outside
         a physical range or the prior's support get ``-inf`` and are not evaluated."""
         vectors = np.asarray(vectors, float).reshape(-1, self._lower.size)
-        inside = np.all((vectors >= self._lower) & (vectors <= self._upper), axis=1)
-        out = np.full(vectors.shape[0], -math.inf)
-        if not inside.any():
-            return out
-        rows = vectors if inside.all() else vectors[inside]
-        prior = self._uniform_log_density + sum(p.logpdf_array(rows[:, k]) for k, p in self._shaped)
+        inside = ((vectors >= self._lower) & (vectors <= self._upper)).all(axis=1)
+        every = bool(inside.all())
+        if not every and not inside.any():
+            return np.full(vectors.shape[0], -math.inf)
+        rows = vectors if every else vectors[inside]
         start = time.perf_counter()
-        out[inside] = prior + self.problem.log_likelihood_batch(rows)
+        posterior = self.problem.log_likelihood_batch(rows)
         self.model_seconds += time.perf_counter() - start
         self.calls += rows.shape[0]
+        posterior += self._uniform_log_density
+        for k, prior in self._shaped:
+            posterior += prior.logpdf_array(rows[:, k])
+        if every:
+            return posterior
+        out = np.full(vectors.shape[0], -math.inf)
+        out[inside] = posterior
         return out
 
 

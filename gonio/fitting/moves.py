@@ -59,8 +59,12 @@ class VectorisedRedBlue:
             else:
                 log_prob = np.asarray(model.compute_log_prob_fn(proposal)[0], float)
             gain = factors + log_prob - state.log_prob[moving]
-            accepted[moving] = gain > np.log(model.random.rand(int(moving.sum())))
-            state = self.update(state, emcee.State(proposal, log_prob=log_prob), accepted, moving)
+            taken = gain > np.log(model.random.rand(proposal.shape[0]))
+            accepted[moving] = taken
+            # emcee's Move.update without blobs: the accepted proposals replace their walkers
+            rows = np.flatnonzero(moving)[taken]
+            state.coords[rows] = proposal[taken]
+            state.log_prob[rows] = log_prob[taken]
         return state, accepted
 
 

@@ -211,15 +211,18 @@ class QuadraticChiSquare:
     def centre(self, c0: np.ndarray) -> None:
         """Expand about ``c0`` (shape (K,))."""
         residual = self.terms.T @ c0 - self.value
-        self._centre = (np.asarray(c0, float), float(residual @ residual), self.terms @ residual)
+        self._centre = (np.asarray(c0, float), float(residual @ residual), 2.0 * (self.terms @ residual))
 
     def __call__(self, coefficients: np.ndarray) -> np.ndarray:
         """chi^2 of every row of ``coefficients`` (shape (W, K)); shape (W,)."""
         if self._centre is None:
             self.centre(coefficients.mean(axis=0))
-        c0, chi0, gradient = self._centre
+        c0, chi0, twice_gradient = self._centre
         d = coefficients - c0
-        return chi0 + 2.0 * (d @ gradient) + np.einsum("wk,kl,wl->w", d, self.gram, d)
+        # d^T (W W^T) d + 2 d^T W r0 = d . (gram d + 2 W r0), row by row
+        out = np.sum((d @ self.gram + twice_gradient) * d, axis=1)
+        out += chi0
+        return out
 
 
 class FitProblem:
@@ -338,6 +341,11 @@ class FitProblem:
                                     ) - 0.5 * dataset.n * math.log(2.0 * math.pi)
         self._linear = self._quadratic_chi_square()
         self._model_names = set(self.model.param_names)
+        # The linear path's model parameters: free ones by column of a vector, the others fixed.
+        self._linear_free = tuple((name, self.free.index(name)) for name in self.model.param_names if name in self.free)
+        self._linear_fixed = {name: self._set_values[name] for name in self.model.param_names if name not in self.free}
+        self._scale_column = (self.free.index("scale") if self.dataset.quantity == "radiance" and "scale" in self.free
+                              else None)
         # Free model parameters, checked on each evaluation from a vector; fixed values were
         # checked above and defaults lie inside their bounds.
         self._free_model_specs = tuple(self._spec[n] for n in self.free if n in self._model_names)
@@ -537,9 +545,9 @@ class FitProblem:
         numpy.ndarray
             Shape (W,); ``-inf`` where a prediction is undefined.
         """
-        values = self.batch_values(vectors)
         if self._linear is not None:
-            return self._linear_log_likelihood(values, {name: values[name] for name in self.model.param_names})
+            return self._linear_log_likelihood(np.array(vectors, float).reshape(-1, self.ndim))
+        values = self.batch_values(vectors)
         predicted = self._batch_prediction(values)
         difference = predicted - self.dataset.value
         walkers = difference.shape[0]
@@ -622,18 +630,30 @@ class FitProblem:
         z = self.whiten(predicted - self.dataset.value, extra)[0]
         return float(np.dot(z, z))
 
-    def _linear_log_likelihood(self, values: Mapping[str, Any], params: Mapping[str, Any]) -> np.ndarray:
-        """:meth:`log_likelihood_batch` through the sufficient statistics of a linear model."""
+    def _linear_log_likelihood(self, vectors: np.ndarray) -> np.ndarray:
+        """:meth:`log_likelihood_batch` through the sufficient statistics of a linear model.
+
+        ``vectors`` (shape (W, n_free), a copy the model's coefficients may work on in
+        place) gives each free model parameter as a (W, 1) column, the fixed ones stay
+        floats; for radiance the coefficients are multiplied by the scale.
+        """
         form, chi_square = self._linear
-        walkers = next((np.shape(v)[0] for v in values.values() if np.ndim(v)), 1)
-        coefficients = np.empty((walkers, chi_square.terms.shape[0]))
+        params = dict(self._linear_fixed)
+        for name, k in self._linear_free:
+            params[name] = vectors[:, k:k + 1]
+        coefficients = np.empty((vectors.shape[0], chi_square.terms.shape[0]))
         for k, c in enumerate(form.coefficients(**params)):  # (W, 1) columns or floats
-            coefficients[:, k] = np.reshape(c, -1) if np.ndim(c) else c
-        if self.dataset.quantity == "radiance":
-            coefficients *= np.reshape(values.get("scale", 1.0), (-1, 1))
-        self.evaluations += walkers
-        out = -0.5 * chi_square(coefficients) + self._log_normalisation
-        out[~np.isfinite(out)] = -math.inf
+            coefficients[:, k:k + 1] = c
+        if self._scale_column is not None:
+            coefficients *= vectors[:, self._scale_column:self._scale_column + 1]
+        elif self.dataset.quantity == "radiance":
+            coefficients *= self._set_values.get("scale", 1.0)
+        self.evaluations += vectors.shape[0]
+        out = chi_square(coefficients)
+        out *= -0.5
+        out += self._log_normalisation
+        if not np.isfinite(out).all():
+            out[~np.isfinite(out)] = -math.inf
         return out
 
     def pointwise_log_likelihood(self, vector: Any) -> np.ndarray:
