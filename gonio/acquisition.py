@@ -38,7 +38,6 @@ import numpy as np
 
 from drivers.errors import DriverError
 
-from . import __version__
 from .data import RecordingError, RecordingWriter, point_key
 from .protocols import PlannedPoint, Protocol, load, plan
 from .reduction import (
@@ -132,8 +131,10 @@ def _software_versions() -> dict[str, str]:
     import scipy
     import serial
 
+    import gonio  # its version is read from the package metadata when first asked for
+
     return {
-        "gonio": __version__,
+        "gonio": gonio.__version__,
         "python": platform.python_version(),
         "numpy": np.__version__,
         "scipy": scipy.__version__,

@@ -37,13 +37,27 @@ class CLIError(ValueError):
     """An error the user can fix; printed as ``gonio: error: ...`` with exit code 2."""
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: print ``gonio VERSION`` and exit, as argparse's ``version`` action does,
+    reading the installed version only when asked (:mod:`importlib.metadata` costs about
+    0.02 s, which every other command would pay at start-up)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                 help="show program's version number and exit"):
+        super().__init__(option_strings=option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> NoReturn:
+        print(f"gonio {gonio.__version__}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The top-level argument parser with every sub-command registered."""
     parser = argparse.ArgumentParser(
         prog="gonio",
         description="gonio: a virtual gonioreflectometer and measurement-analysis suite.",
     )
-    parser.add_argument("--version", action="version", version=f"gonio {gonio.__version__}")
+    parser.add_argument("--version", action=_VersionAction)
     parser.add_argument("--debug", action="store_true",
                         help="show the full traceback of an error instead of a one-line message")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")

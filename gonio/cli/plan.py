@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import argparse
 
-from gonio import protocols
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``gonio plan``."""
@@ -23,6 +21,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from gonio import protocols  # loaded by the command itself: every gonio command builds this parser
+
     result = protocols.plan(protocols.load(args.protocol))
     print(result.summary())
     if args.points:

@@ -5,16 +5,18 @@ import argparse
 import functools
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
 import gonio
-from gonio import acquisition, protocols
 
 from . import CLIError
 from .realism import REALISM_HELP, REALISM_SYNTAX, parse_realism, realism_metadata
 from .samples import parse_sample_spec
 from .paths import check_output_folder
 from .progress import ProgressLine
+
+if TYPE_CHECKING:  # loaded by the command itself: every gonio command builds this parser
+    from gonio import acquisition, protocols
 
 #: The paper's wall plaster (Oren & Nayar 1995, Fig 16): the default emulated sample.
 DEFAULT_SAMPLE = "oren-nayar:sigma=30,rho=0.9"
@@ -143,6 +145,8 @@ def emulated_sample(cli_sample: str | None, protocol: protocols.Protocol) -> str
 
 
 def _run(args: argparse.Namespace) -> int:
+    from gonio import acquisition, protocols
+
     check_output_folder(args.out, "recording")
     check_ports({"--stage": args.stage, "--camera": args.camera, "--lamp": args.lamp})
     protocol = protocols.load(args.protocol)
