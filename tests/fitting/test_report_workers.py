@@ -13,6 +13,8 @@ import multiprocessing
 import os
 import pickle
 import signal
+import subprocess
+import sys
 import time
 import warnings
 from concurrent.futures.process import BrokenProcessPool
@@ -205,6 +207,33 @@ def test_a_job_given_before_the_workers_exist_returns_its_result_there():
     with report_pool(1) as pool:
         future = pool.submit_soon(os.getpid)  # returns at once; the worker may still be starting
         assert future.result(timeout=60) != os.getpid()
+
+
+def test_the_single_thread_blas_environment_is_restored(monkeypatch):
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")
+    monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
+    with workers._single_thread_blas_environment():
+        assert all(os.environ[name] == "1" for name in workers.BLAS_THREAD_VARIABLES)
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "3" and "MKL_NUM_THREADS" not in os.environ
+
+
+@pytest.mark.skipif(workers.START_METHOD != "forkserver", reason="the fork server's environment")
+def test_the_fork_server_has_one_blas_thread_and_this_process_keeps_its_setting():
+    # a fresh interpreter: this process's fork server may already run, started by another test
+    code = (
+        "import os\n"
+        "os.environ['OPENBLAS_NUM_THREADS'] = '3'\n"
+        "from gonio.report.workers import ReportPool\n"
+        "pool = ReportPool.start(1)\n"
+        "seen = pool.submit_soon(os.getenv, 'OPENBLAS_NUM_THREADS').result(timeout=120)\n"
+        "from threadpoolctl import threadpool_info\n"
+        "blas = pool.executor.submit(threadpool_info).result(timeout=120)\n"
+        "pool.executor.shutdown()\n"
+        "print(seen, os.environ['OPENBLAS_NUM_THREADS'], sorted({p['num_threads'] for p in blas if p['user_api'] == 'blas'}))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["1", "3", "[1]"]
 
 
 def test_a_job_the_workers_cannot_take_ends_as_a_broken_pool():
