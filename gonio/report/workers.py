@@ -14,14 +14,15 @@ Two uses:
 * ``gonio fit ... --report`` opens a pool (:func:`report_pool`) once its input is checked
   and before it fits. With the ``forkserver`` start method the fork server is started at
   once with :data:`PRELOAD` (matplotlib, :mod:`gonio.report.fit_report`, the scipy parts
-  the figures use): it imports them on another core while the command reads, fits and
-  samples. Each figure is given to the workers as soon as what it shows is known
-  (:class:`ReportDrawing`): the measurement geometry, which needs the measurements alone,
-  before the fit starts (the submission waits for the server in a background thread,
-  :meth:`ReportPool.submit_soon`, so the worker draws it during the MCMC); the others,
-  one job each, as soon as the fit is done, while the command saves the result and prints
-  its summary. The command then receives the PNG bytes and writes the
-  files (:func:`finish_report`); its own process never imports matplotlib.
+  the figures use) and one BLAS thread (:data:`BLAS_THREAD_VARIABLES`): it imports them
+  on another core while the command reads, fits and samples. Each figure is given to the
+  workers as soon as what it shows is known (:class:`ReportDrawing`): the measurement
+  geometry, which needs the measurements alone, before the fit starts (the submission
+  waits for the server in a background thread, :meth:`ReportPool.submit_soon`, so the
+  worker draws it during the MCMC); the others, one job each, as soon as the fit is done,
+  while the command saves the result and prints its summary. The command then receives
+  the PNG bytes and writes the files (:func:`finish_report`); its own process never
+  imports matplotlib.
 * ``write_report(..., processes=2)`` (and ``gonio report`` with
   ``$GONIO_REPORT_PROCESSES`` of 2 or more; :func:`write_report_shared`): the pool is
   opened first, so that the server imports while this process reads the result and
@@ -216,10 +217,11 @@ def _single_thread_blas_environment() -> Iterator[None]:
 
     The fork server and the workers forked from it draw figures, whose matrix products are
     small: one BLAS thread each is what :func:`_prepare_worker` sets anyway. Set before the
-    server imports numpy and scipy, it also spares their BLAS libraries the thread pools
-    they would start and spin up at load: about 0.2 s of CPU (2 cores; numpy's and scipy's
-    OpenBLAS each) taken from the command's own process. The variables are restored on
-    leaving the block, so this process and later children keep the user's settings.
+    server imports numpy and scipy, it also spares their BLAS libraries (numpy's and
+    scipy's OpenBLAS each) the thread pools they would start and spin up at load, which
+    took about 0.3 s of CPU from the cores the command fits on (``gonio fit --report`` on
+    2 cores, docs/fitting.md "Performance"). The variables are restored on leaving the
+    block, so this process and later children keep the user's settings.
     """
     saved = {name: os.environ.get(name) for name in BLAS_THREAD_VARIABLES}
     os.environ.update({name: "1" for name in BLAS_THREAD_VARIABLES})
