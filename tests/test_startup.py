@@ -56,6 +56,16 @@ def test_command_line_parser_loads_no_heavy_library():
     assert _loaded_after("from gonio.cli import build_parser\nbuild_parser()") == []
 
 
+def test_command_line_parser_reads_no_version_and_no_acquisition_code():
+    # Every gonio command builds every sub-command's parser: the package metadata (for
+    # --version) and the acquisition and protocol modules (for gonio run and plan) are
+    # loaded only by what uses them.
+    probe = ("from gonio.cli import build_parser\nbuild_parser()\nimport sys\n"
+             "print([m for m in ('importlib.metadata', 'gonio.acquisition', 'gonio.protocols') if m in sys.modules])")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=True)
+    assert done.stdout.strip() == "[]"
+
+
 def test_lazily_imported_functions_still_work_in_a_fresh_interpreter():
     # Each function imports its scipy routine on first call (no NameError, right value).
     code = ("from gonio.zernike import zernike_radial_of_cos\n"
