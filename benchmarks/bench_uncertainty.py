@@ -3,7 +3,34 @@
 The reduction (:func:`gonio.reduction.reduce_recording`) states an uncertainty budget for
 every radiance reading. This benchmark measures whether that budget describes the scatter
 it claims to, on the emulated wall plaster (``oren-nayar``, sigma = 30 deg, rho = 0.9,
-interreflection weight 1), in two ways:
+interreflection weight 1). Two parts:
+
+**A real lab's rig** (the default realism, ``lab``: misalignment, stray light,
+non-linearity, beam profile, the sample's texture and wedge, remounting, a monitor that
+does not see the sample's beam exactly; docs/emulator.md):
+
+A1. **Remountings.** The bright, dim and grazing geometries below are measured in
+    :data:`REMOUNTS` mountings of the sample (two readings each). The reduction of every
+    group of :data:`GROUP` consecutive mountings (what a user measures) states the
+    ``mounting`` component; the standard deviation of one mounting's value it implies
+    (with the readings' own noise) is compared with the scatter of the values of the
+    mountings outside the group: ``sqrt(mean observed^2 / mean stated^2)`` over the groups.
+    Target: within 0.85 to 1.15 at each geometry.
+A2. **Reduced chi-square with mountings.** The Fig 16 protocol with
+    ``[sample] mountings = 4`` over ``CHI2_SEEDS`` seeds, fitted by least squares with the
+    true model and the rig's errors as parameters (``alignment="all"``,
+    ``stray_light=True``, the calibration per incidence), the full covariance, no
+    extra-noise term. Target: median within 0.8 to 1.25.
+A3. **Texture.** For :data:`TEXTURE_SEEDS` samples (seeds), the offset of the window's
+    mean from the untextured sample (the emulator's ground truth) against the ``texture``
+    component the reduction states from one image: the rms of their ratio (1 when the
+    statement is right; its sampling error ``1 / sqrt(2 n)``).
+A4. **Median stated uncertainty** of the Fig 16 sweep as shipped (one mounting). Target:
+    between 0.1 % and 3 % (real gonioreflectometers: 0.075-0.3 % standard uncertainty at
+    NIST's STARR, 2.6-3.6 % in the CUReT data).
+
+**The idealised rig** (``--realism ideal``, the figures the reduction was first
+validated with):
 
 1. **Repeats.** Three geometries are measured ``REPEATS`` times each: bright
    (theta_i = 30, view = -20 deg), dim (theta_i = 60, view = -80 deg) and grazing
@@ -36,7 +63,7 @@ interreflection weight 1), in two ways:
 
 Writes docs/benchmarks/uncertainty.json and docs/benchmarks/uncertainty.png; the script
 exits 0 whether or not the targets are met (the JSON and the printed table say which).
-Run: ``python benchmarks/bench_uncertainty.py``.
+Run: ``python benchmarks/bench_uncertainty.py`` (``--lab-only`` for part A).
 """
 from __future__ import annotations
 
@@ -58,7 +85,7 @@ from drivers.emulator.lamp import LampParams
 from gonio import acquisition, protocols
 from gonio.cli.run import emulated_rig
 from gonio.fitting import fit
-from gonio.reduction import CHECK_BLOCK, Reduced, read_readings, reduce_recording
+from gonio.reduction import CHECK_BLOCK, REFERENCE_BLOCK, Reduced, read_readings, reduce_recording
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from _common import OUT, machine, write_json
@@ -83,6 +110,16 @@ REDCHI_TARGET = (0.8, 1.25)
 CHECKS_TABLE = "\n[checks]\nevery = 10\nframes = 5\ngeometry = [45, 0, -10]\n"
 #: The shipped protocol of the chi-square study.
 FIG16 = ROOT / "protocols" / "oren-nayar-fig16-plaster.toml"
+#: Mountings of the remount study (A1), the size of a user's group of them, the readings
+#: per mounting and geometry, and the mountings of the chi-square study (A2).
+REMOUNTS, GROUP, REMOUNT_READINGS, CHI2_MOUNTINGS = 40, 4, 2, 4
+#: Samples of the texture study (A3).
+TEXTURE_SEEDS = tuple(range(30))
+#: Target band of the median stated relative uncertainty of the shipped Fig 16 sweep (A4).
+STATED_TARGET = (1e-3, 3e-2)
+#: Components every mounting's readings of a geometry share (not in the scatter between
+#: mountings; gonio.reduction.combining.COMMON_TO_MOUNTINGS).
+COMMON = ("prnu", "texture", "linearity", "mounting")
 
 
 @dataclass(frozen=True)
@@ -111,19 +148,21 @@ class Configuration:
     checks: bool
     seed: int
     options: Mapping[str, Any] = field(default_factory=dict)
+    realism: str = "ideal"
 
     def describe(self) -> dict[str, Any]:
         """JSON-able description of the configuration."""
         return {"key": self.key, "label": self.label, "lamp": self.lamp, "checks": CHECKS_TABLE.strip() if self.checks
-                else None, "repeat_seed": self.seed,
+                else None, "repeat_seed": self.seed, "realism": self.realism,
                 "emulator_options": {k: (v if isinstance(v, (bool, int, float, str)) else repr(v))
                                      for k, v in self.options.items()}}
 
 
 CONFIGURATIONS = (
-    Configuration("monitor", "with monitor", "monitor", False, 101),
-    Configuration("checks", "without monitor, lamp checks", "checks", True, 102, {"monitor": False}),
-    Configuration("steady", "flicker and drift off (CCD-only budget)", "none", False, 103,
+    Configuration("lab", "lab rig (default), with monitor", "monitor", False, 104, realism="lab"),
+    Configuration("monitor", "ideal rig, with monitor", "monitor", False, 101),
+    Configuration("checks", "ideal rig, without monitor, lamp checks", "checks", True, 102, {"monitor": False}),
+    Configuration("steady", "ideal rig, flicker and drift off (CCD-only budget)", "none", False, 103,
                   {"monitor": False, "lamp_params": LampParams(flicker_rms=0.0, drift_amplitude=0.0)}),
 )
 #: Configurations of the chi-square study.
@@ -179,9 +218,10 @@ def measure(text: str, configuration: Configuration, seed: int, folder: Path) ->
     protocol = protocols.loads(text)
     start = time.perf_counter()
     name = f"bench-uncertainty-{configuration.key}-{seed}-{folder.name}"
-    with emulated_rig(SAMPLE, seed, name=name, **configuration.options) as (rig, emulator, change_sample, metadata):
+    with emulated_rig(SAMPLE, seed, name=name, realism=configuration.realism,
+                      **configuration.options) as (rig, emulator, change_sample, metadata):
         acquisition.run_protocol(protocol, rig, folder, metadata=metadata, clock=emulator.control.now,
-                                 change_sample=lambda which: change_sample(which, REFERENCE_REFLECTANCE))
+                                 change_sample=lambda which, **how: change_sample(which, REFERENCE_REFLECTANCE, **how))
     return time.perf_counter() - start
 
 
@@ -382,9 +422,226 @@ def chi_square_study(configuration: Configuration, seeds: Sequence[int]) -> dict
             "wall_s": time.perf_counter() - start}
 
 
+# --------------------------------------------------------------------------- A: a real lab's rig
+def _with_sample_fields(text: str, fields: str) -> str:
+    """Protocol text with ``fields`` (TOML lines) added to its [sample] table."""
+    return text.replace("[sample]\n", "[sample]\n" + fields + "\n", 1)
+
+
+def remount_protocol() -> str:
+    """The bright, dim and grazing geometries, :data:`REMOUNT_READINGS` readings each, in
+    :data:`REMOUNTS` mountings."""
+    return _with_sample_fields(repeats_protocol(REMOUNT_READINGS, False), f"mountings = {REMOUNTS}")
+
+
+def _subrecording(folder: Path, mountings: Sequence[int], out: Path) -> Path:
+    """A copy of a recording holding only the rows (and the metadata) of some mountings:
+    what a user who measured only those would have."""
+    import csv
+    import json
+    import shutil
+
+    out.mkdir(parents=True)
+    meta = json.loads((folder / "metadata.json").read_text())
+    meta["mountings"] = {k: v for k, v in meta.get("mountings", {}).items() if int(k) in mountings}
+    (out / "metadata.json").write_text(json.dumps(meta))
+    shutil.copy(folder / "darks.csv", out / "darks.csv")
+    with open(folder / "points.csv", newline="") as source, open(out / "points.csv", "w", newline="") as target:
+        reader = csv.DictReader(source)
+        writer = csv.DictWriter(target, fieldnames=reader.fieldnames, lineterminator="\n")
+        writer.writeheader()
+        wanted = {str(m) for m in mountings}
+        writer.writerows(row for row in reader if row["mounting"] in wanted)
+    return out
+
+
+def _mounting_means(folder: Path, theta_i: float, view: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each mounting's mean value at a planned geometry and its noise (every component that
+    differs between mountings' readings, the mounting itself excluded), relative."""
+    readings = read_readings(folder, "monitor")
+    rows = readings.index[(np.abs(readings.column("theta_i") - theta_i) < 1e-6)
+                          & (np.abs(readings.column("view") - view) < 1e-6)
+                          & (readings.column("block") != CHECK_BLOCK) & (readings.column("block") != REFERENCE_BLOCK)]
+    mounting = readings.points["mounting"][rows]
+    noise2 = sum(c[rows] ** 2 for name, c in readings.budget.items() if name not in COMMON)
+    labels = np.unique(mounting)
+    means = np.array([readings.value[rows][mounting == m].mean() for m in labels])
+    noise = np.array([math.sqrt(np.mean(noise2[mounting == m]) / np.sum(mounting == m)) for m in labels])
+    return means, noise / np.abs(means)
+
+
+def remount_study() -> dict[str, Any]:
+    """A1: the mounting component stated from groups of :data:`GROUP` mountings against the
+    scatter of the other mountings' values, at each geometry."""
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="gonio-bench-remounts-") as tmp:
+        folder = Path(tmp) / "remounts"
+        lab = Configuration("lab", "lab", "monitor", False, 105, realism="lab")
+        measure_wall = measure(remount_protocol(), lab, lab.seed, folder)
+        records = []
+        groups = [list(range(k, k + GROUP)) for k in range(0, REMOUNTS - GROUP + 1, GROUP)]
+        reduced_groups = [reduce_recording(_subrecording(folder, g, Path(tmp) / f"group-{k}"))
+                          for k, g in enumerate(groups)]
+        for name, theta_i, phi_i, view in GEOMETRIES:
+            means, noise = _mounting_means(folder, theta_i, view)
+            observed, stated = [], []
+            for members, reduced in zip(groups, reduced_groups):
+                k = int(np.argmin(np.abs(reduced.theta_i - theta_i) + np.abs(reduced.view - view)))
+                mounting = reduced.budget["mounting"][k] / abs(reduced.radiance[k]) * math.sqrt(len(members))
+                others = np.array([m for m in range(len(means)) if m not in members])
+                observed.append(np.std(means[others] / np.mean(means[others]), ddof=1))
+                stated.append(math.sqrt(mounting**2 + np.mean(noise[members] ** 2)))
+            ratio = math.sqrt(np.mean(np.square(observed)) / np.mean(np.square(stated)))
+            records.append({
+                "geometry": name, "planned": [theta_i, phi_i, view], "mountings": len(means),
+                "observed_relative": float(math.sqrt(np.mean(np.square(observed)))),
+                "stated_relative_per_group": [float(v) for v in stated],
+                "stated_relative_rms": float(math.sqrt(np.mean(np.square(stated)))),
+                "readings_noise_relative": float(np.sqrt(np.mean(noise**2))),
+                "ratio": ratio, "ratio_sampling_error": ratio / math.sqrt(2.0 * (len(means) - 1)),
+                "within_target": RATIO_TARGET[0] <= ratio <= RATIO_TARGET[1]})
+    return {"mountings": REMOUNTS, "group": GROUP, "readings_per_mounting": REMOUNT_READINGS, "seed": lab.seed,
+            "geometries": records, "all_within_target": all(r["within_target"] for r in records),
+            "measure_wall_s": measure_wall, "wall_s": time.perf_counter() - start}
+
+
+def lab_fit_seed(seed: int, text: str, tmp: Path) -> dict[str, Any]:
+    """A2 for one seed: the Fig 16 protocol in :data:`CHI2_MOUNTINGS` mountings on the lab
+    rig, the true model fitted with the rig's errors as parameters."""
+    folder = tmp / f"fig16-lab-{seed}"
+    lab = Configuration("lab", "lab", "monitor", False, seed, realism="lab")
+    measure(text, lab, seed, folder)
+    reduced = reduce_recording(folder)
+    dataset, priors = reduced.fit_inputs("per-incidence")
+    result = fit(dataset, "oren-nayar", fixed={"ir_weight": 1.0}, priors=priors, mcmc=False, alignment="all",
+                 stray_light=True).least_squares
+    out: dict[str, Any] = {"seed": seed, "redchi": result.redchi, "dof": result.dof, "n_data": len(dataset.value)}
+    for name, truth in TRUTH.items():
+        value, error = result.values[name], result.stderr[name]
+        out.update({name: value, f"{name}_stderr": error, f"{name}_normalised_error": (value - truth) / error})
+    out["median_stated_relative"] = float(np.median(reduced.radiance_sigma / np.abs(reduced.radiance)))
+    out["budget_median_relative"] = {k: v["median_relative"] for k, v in reduced.budget_summary()["components"].items()}
+    out["consistency"] = dict(reduced.consistency)
+    return out
+
+
+def lab_chi_square_study(seeds: Sequence[int]) -> dict[str, Any]:
+    """A2: reduced chi-square of the true model on the Fig 16 sweep in four mountings."""
+    text = _with_sample_fields(FIG16.read_text(), f"mountings = {CHI2_MOUNTINGS}")
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="gonio-bench-uncertainty-") as tmp:
+        per_seed = [lab_fit_seed(seed, text, Path(tmp)) for seed in seeds]
+    median = float(np.median([r["redchi"] for r in per_seed]))
+    rms = {name: float(np.sqrt(np.mean([r[f"{name}_normalised_error"] ** 2 for r in per_seed]))) for name in TRUTH}
+    return {"configuration": {"key": "lab-mountings", "label": f"lab rig, Fig 16 in {CHI2_MOUNTINGS} mountings, "
+                                                              "rig errors fitted", "realism": "lab"},
+            "protocol": f"{FIG16.relative_to(ROOT)} with [sample] mountings = {CHI2_MOUNTINGS}",
+            "fit": "oren-nayar (ir_weight=1), alignment='all', stray_light=True, calibration per incidence, least "
+                   "squares, full covariance, no extra-noise term",
+            "per_seed": per_seed, "median_redchi": median,
+            "within_target": REDCHI_TARGET[0] <= median <= REDCHI_TARGET[1], "rms_normalised_error": rms,
+            "wall_s": time.perf_counter() - start}
+
+
+def _window_offset(emulator, rig, theta_i: float, phi_i: float, view: float) -> float:
+    """The emulator's ground truth: the relative offset of the window's mean radiance from
+    the untextured sample's at a geometry, over the pixels the rig's window covers."""
+    from drivers.emulator.world import footprint_coverage
+
+    scene = emulator.scene
+    positions = (view, theta_i, phi_i)
+    angles = scene.angles(positions)
+    image = scene.holder.relative_image(scene.brdf, angles, ("truth",) + positions)
+    roi = rig.roi_for_view(view)
+    weights = footprint_coverage(emulator.optics, angles[2])[roi.y0:roi.y0 + roi.height, roi.x0:roi.x0 + roi.width]
+    window = image[roi.y0:roi.y0 + roi.height, roi.x0:roi.x0 + roi.width]
+    return float(np.sum(weights * window) / np.sum(weights) - 1.0)
+
+
+def texture_study(seeds: Sequence[int]) -> dict[str, Any]:
+    """A3: the window's true texture offset against the stated ``texture`` component, per sample."""
+    text = ("[protocol]\nname = \"texture\"\n[sample]\nlabel = \"plaster\"\n"
+            "[[block]]\ntheta_i = 30\nphi_i = 0\nview = [0, -20]\n")
+    start = time.perf_counter()
+    records = []
+    with tempfile.TemporaryDirectory(prefix="gonio-bench-texture-") as tmp:
+        for seed in seeds:
+            folder = Path(tmp) / f"texture-{seed}"
+            protocol = protocols.loads(text)
+            with emulated_rig(SAMPLE, seed, name=f"bench-texture-{seed}", realism="lab") as (rig, emulator, change,
+                                                                                              metadata):
+                acquisition.run_protocol(protocol, rig, folder, metadata=metadata, clock=emulator.control.now,
+                                         change_sample=lambda which, **how: change(which, REFERENCE_REFLECTANCE, **how))
+                truth = {view: _window_offset(emulator, rig, 30.0, 0.0, view) for view in (0.0, -20.0)}
+            reduced = reduce_recording(folder)
+            stated = float(reduced.consistency["texture_relative"])
+            records.append({"seed": seed, "stated": stated, "true_offset": truth,
+                            "ratio": {str(v): t / stated for v, t in truth.items()}})
+    ratios = {view: [r["ratio"][view] for r in records] for view in ("0.0", "-20.0")}
+    rms = {view: float(np.sqrt(np.mean(np.square(v)))) for view, v in ratios.items()}
+    return {"seeds": list(seeds), "per_seed": records, "rms_ratio": rms,
+            "rms_ratio_sampling_error": 1.0 / math.sqrt(2.0 * len(seeds)),
+            "median_stated": float(np.median([r["stated"] for r in records])),
+            "true_offset_std": {view: float(np.std([r["true_offset"][float(view)] for r in records]))
+                                for view in ("0.0", "-20.0")},
+            "wall_s": time.perf_counter() - start}
+
+
+def stated_uncertainty_study(seeds: Sequence[int]) -> dict[str, Any]:
+    """A4: the median stated relative uncertainty of the shipped Fig 16 sweep on the lab rig."""
+    start = time.perf_counter()
+    records = []
+    lab = Configuration("lab", "lab", "monitor", False, 0, realism="lab")
+    with tempfile.TemporaryDirectory(prefix="gonio-bench-stated-") as tmp:
+        for seed in seeds:
+            folder = Path(tmp) / f"fig16-{seed}"
+            measure(FIG16.read_text(), lab, seed, folder)
+            reduced = reduce_recording(folder)
+            relative = reduced.radiance_sigma / np.abs(reduced.radiance)
+            records.append({"seed": seed, "median_relative": float(np.median(relative)),
+                            "range_relative": [float(relative.min()), float(relative.max())],
+                            "budget_median_relative": {k: v["median_relative"] for k, v in
+                                                       reduced.budget_summary()["components"].items()}})
+    median = float(np.median([r["median_relative"] for r in records]))
+    return {"protocol": str(FIG16.relative_to(ROOT)), "per_seed": records, "median_relative": median,
+            "within_target": STATED_TARGET[0] <= median <= STATED_TARGET[1], "wall_s": time.perf_counter() - start}
+
+
 # --------------------------------------------------------------------------- output
+def _ratio_panel(ax, studies: Sequence[Mapping[str, Any]], title: str) -> None:
+    """Observed / stated standard deviation per geometry for several studies."""
+    width = 0.8 / max(len(studies), 1)
+    for k, (label, geometries) in enumerate(studies):
+        x = np.arange(len(geometries)) + (k - (len(studies) - 1) / 2) * width
+        ax.errorbar(x, [g["ratio"] for g in geometries], yerr=[g["ratio_sampling_error"] for g in geometries],
+                    fmt="o", color=f"C{k}", capsize=3, label=label)
+    ax.axhspan(*RATIO_TARGET, color="C2", alpha=0.15, label=f"target {RATIO_TARGET[0]}-{RATIO_TARGET[1]}")
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set_xticks(range(len(GEOMETRIES)), [f"{n}\n({ti:g}, {pi:g}, {v:g})" for n, ti, pi, v in GEOMETRIES])
+    ax.set_ylabel("observed / stated standard deviation")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7)
+
+
+def _chi2_panel(ax, studies: Sequence[Mapping[str, Any]], title: str) -> None:
+    """Reduced chi-square per seed of the true model, with each study's median."""
+    for k, study in enumerate(studies):
+        seeds = [r["seed"] for r in study["per_seed"]]
+        ax.plot(seeds, [r["redchi"] for r in study["per_seed"]], "o", color=f"C{k}",
+                label=f"{study['configuration']['label']} (median {study['median_redchi']:.2f})")
+        ax.axhline(study["median_redchi"], color=f"C{k}", ls="--", lw=1.0)
+    ax.axhspan(*REDCHI_TARGET, color="C2", alpha=0.15, label=f"target median {REDCHI_TARGET[0]}-{REDCHI_TARGET[1]}")
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set_xticks(list(CHI2_SEEDS))
+    ax.set_xlabel("emulator seed")
+    ax.set_ylabel("reduced chi-square of the true model")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7)
+
+
 def chart(payload: Mapping[str, Any], path: Path) -> None:
-    """Two panels: ratio per geometry per configuration; reduced chi-square per seed.
+    """Four panels: the lab rig's remountings and repeats, its chi-square with mountings; the
+    idealised rig's repeats and chi-square.
 
     Parameters
     ----------
@@ -395,54 +652,62 @@ def chart(payload: Mapping[str, Any], path: Path) -> None:
     """
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(11.0, 4.2), layout="constrained")
-    left, right = fig.subplots(1, 2)
-    studies = payload["repeats"]
-    width = 0.8 / len(studies)
-    for k, study in enumerate(studies):
-        x = np.arange(len(study["geometries"])) + (k - (len(studies) - 1) / 2) * width
-        ratios = [g["ratio"] for g in study["geometries"]]
-        errors = [g["ratio_sampling_error"] for g in study["geometries"]]
-        left.errorbar(x, ratios, yerr=errors, fmt="o", color=f"C{k}", capsize=3, label=study["configuration"]["label"])
-    left.axhspan(*RATIO_TARGET, color="C2", alpha=0.15, label=f"target {RATIO_TARGET[0]}-{RATIO_TARGET[1]}")
-    left.axhline(1.0, color="k", lw=0.8)
-    left.set_xticks(range(len(GEOMETRIES)), [f"{n}\n({ti:g}, {pi:g}, {v:g})" for n, ti, pi, v in GEOMETRIES])
-    left.set_ylabel("observed / stated standard deviation")
-    left.set_title(f"Repeats ({payload['repeats'][0]['repeats']} per geometry; bars: sampling error)", fontsize=10)
-    left.legend(fontsize=8)
-    for k, study in enumerate(payload["chi_square"]):
-        seeds = [r["seed"] for r in study["per_seed"]]
-        color = f"C{[c.key for c in CONFIGURATIONS].index(study['configuration']['key'])}"
-        right.plot(seeds, [r["redchi"] for r in study["per_seed"]], "o", color=color,
-                   label=f"{study['configuration']['label']} (median {study['median_redchi']:.2f})")
-        right.axhline(study["median_redchi"], color=color, ls="--", lw=1.0)
-    right.axhspan(*REDCHI_TARGET, color="C2", alpha=0.15, label=f"target median {REDCHI_TARGET[0]}-{REDCHI_TARGET[1]}")
-    right.axhline(1.0, color="k", lw=0.8)
-    right.set_xticks(list(CHI2_SEEDS))
-    right.set_xlabel("emulator seed")
-    right.set_ylabel("reduced chi-square of the true model")
-    right.set_title("Fig 16 sweep, oren-nayar least squares, no extra noise", fontsize=10)
-    right.legend(fontsize=8)
-    for ax in (left, right):
+    fig = Figure(figsize=(12.0, 8.4), layout="constrained")
+    (a, b), (c, d) = fig.subplots(2, 2)
+    lab = payload.get("lab", {})
+    studies = []
+    if "remounts" in lab:
+        studies.append((f"remountings ({lab['remounts']['mountings']}; stated from groups of "
+                        f"{lab['remounts']['group']})", lab["remounts"]["geometries"]))
+    studies += [(r["configuration"]["label"] + " (repeats in one mounting)", r["geometries"])
+                for r in payload.get("repeats", []) if r["configuration"].get("realism") == "lab"]
+    _ratio_panel(a, studies, "Lab rig (default realism): remountings and repeats")
+    if "chi_square" in lab:
+        _chi2_panel(b, [lab["chi_square"]], "Lab rig: Fig 16 in 4 mountings, oren-nayar with the rig's errors")
+    ideal = [r for r in payload.get("repeats", []) if r["configuration"].get("realism") != "lab"]
+    _ratio_panel(c, [(r["configuration"]["label"], r["geometries"]) for r in ideal],
+                 f"Idealised rig: repeats ({ideal[0]['repeats'] if ideal else 0} per geometry)")
+    _chi2_panel(d, payload.get("chi_square", []), "Idealised rig: Fig 16, oren-nayar least squares")
+    for ax in (a, b, c, d):
         ax.grid(alpha=0.3)
     fig.savefig(path, dpi=110)
 
 
 def print_table(payload: Mapping[str, Any]) -> None:
     """Print the ratios, the chi-square medians and which targets are met."""
-    print(f"{'configuration':<42}{'geometry':<10}{'n':>5}{'observed':>11}{'stated':>11}{'ratio':>8}{'+-':>7}  target")
-    for study in payload["repeats"]:
+    lab = payload.get("lab", {})
+    if "remounts" in lab:
+        r = lab["remounts"]
+        print(f"A1 remountings ({r['mountings']}, stated from groups of {r['group']}):")
+        for g in r["geometries"]:
+            print(f"  {g['geometry']:<10} observed {g['observed_relative']:.2e}  stated {g['stated_relative_rms']:.2e}  "
+                  f"ratio {g['ratio']:.3f} +- {g['ratio_sampling_error']:.3f}  {'met' if g['within_target'] else 'MISSED'}")
+    if "chi_square" in lab:
+        study = lab["chi_square"]
+        values = " ".join(f"{r['redchi']:.2f}" for r in study["per_seed"])
+        rms = ", ".join(f"{name} {value:.2f}" for name, value in study["rms_normalised_error"].items())
+        print(f"A2 {study['configuration']['label']}: median redchi {study['median_redchi']:.3f} "
+              f"({values}) {'met' if study['within_target'] else 'MISSED'}; rms normalised error {rms}")
+    if "texture" in lab:
+        t = lab["texture"]
+        print(f"A3 texture: rms true offset / stated {t['rms_ratio']} (sampling error "
+              f"{t['rms_ratio_sampling_error']:.2f}); median stated {t['median_stated']:.2e}")
+    if "stated" in lab:
+        print(f"A4 median stated relative uncertainty of the Fig 16 sweep: {lab['stated']['median_relative']:.2e} "
+              f"{'met' if lab['stated']['within_target'] else 'MISSED'}")
+    print(f"\n{'configuration':<50}{'geometry':<10}{'n':>5}{'observed':>11}{'stated':>11}{'ratio':>8}{'+-':>7}  target")
+    for study in payload.get("repeats", []):
         for g in study["geometries"]:
-            print(f"{study['configuration']['label']:<42}{g['geometry']:<10}{g['n']:>5}{g['observed_relative']:>11.2e}"
+            print(f"{study['configuration']['label']:<50}{g['geometry']:<10}{g['n']:>5}{g['observed_relative']:>11.2e}"
                   f"{g['stated_relative']:>11.2e}{g['ratio']:>8.3f}{g['ratio_sampling_error']:>7.3f}  "
                   f"{'met' if g['within_target'] else 'MISSED'}")
-    print(f"\n{'configuration':<42}{'median redchi':>14}  per seed")
-    for study in payload["chi_square"]:
+    print(f"\n{'configuration':<50}{'median redchi':>14}  per seed")
+    for study in payload.get("chi_square", []):
         values = " ".join(f"{r['redchi']:.2f}" for r in study["per_seed"])
-        print(f"{study['configuration']['label']:<42}{study['median_redchi']:>14.3f}  {values}  "
+        print(f"{study['configuration']['label']:<50}{study['median_redchi']:>14.3f}  {values}  "
               f"{'met' if study['within_target'] else 'MISSED'}")
         rms = ", ".join(f"{name} {value:.2f}" for name, value in study["rms_normalised_error"].items())
-        print(f"{'':<42}{'':>14}  rms normalised error: {rms}; "
+        print(f"{'':<50}{'':>14}  rms normalised error: {rms}; "
               f"median |scale - E_0| / u(E_0) = {study['median_abs_scale_pull']:.3g}")
     print()
     for name, met in payload["targets_met"].items():
@@ -450,24 +715,39 @@ def print_table(payload: Mapping[str, Any]) -> None:
     print(f"wall time {payload['wall_s']:.0f} s")
 
 
-def main() -> int:
-    """Run both studies, write the JSON and the chart, print the table; always 0."""
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the studies, write the JSON and the chart, print the table; always 0."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--lab-only", action="store_true", help="part A only (the lab rig)")
+    args = parser.parse_args(argv)
     start = time.perf_counter()
-    repeats = [repeat_study(c, REPEATS) for c in CONFIGURATIONS]
+    lab = {"remounts": remount_study(), "chi_square": lab_chi_square_study(CHI2_SEEDS),
+           "texture": texture_study(TEXTURE_SEEDS), "stated": stated_uncertainty_study((0, 1, 2))}
+    configurations = [c for c in CONFIGURATIONS if c.realism == "lab" or not args.lab_only]
+    repeats = [repeat_study(c, REPEATS) for c in configurations]
     by_key = {c.key: c for c in CONFIGURATIONS}
-    chi_square = [chi_square_study(by_key[key], CHI2_SEEDS) for key in CHI2_CONFIGURATIONS]
+    chi_square = [] if args.lab_only else [chi_square_study(by_key[key], CHI2_SEEDS) for key in CHI2_CONFIGURATIONS]
     targets_met = {f"ratio ({s['configuration']['key']})": s["all_within_target"] for s in repeats}
-    targets_met.update({f"median redchi ({s['configuration']['key']})": s["within_target"] for s in chi_square})
+    targets_met.update({f"median redchi ({s['configuration']['key']}, ideal rig)": s["within_target"]
+                        for s in chi_square})
+    targets_met["remount ratio (lab)"] = lab["remounts"]["all_within_target"]
+    targets_met["median redchi with mountings (lab)"] = lab["chi_square"]["within_target"]
+    targets_met["median stated uncertainty 0.1-3 % (lab)"] = lab["stated"]["within_target"]
     payload = {
         "benchmark": "uncertainty",
-        "command": "python benchmarks/bench_uncertainty.py",
+        "command": "python benchmarks/bench_uncertainty.py" + (" --lab-only" if args.lab_only else ""),
         "machine": machine(),
         "sample": SAMPLE,
         "targets": {"ratio": list(RATIO_TARGET), "median_redchi": list(REDCHI_TARGET),
-                    "ratio_definition": "observed std of one reading / stated std (the varying part of its budget)",
-                    "redchi_definition": "result.least_squares.redchi of gonio.fitting.fit(dataset, 'oren-nayar', "
-                                         "fixed={'ir_weight': 1.0}, priors=priors, mcmc=False) with dataset, priors "
-                                         "= Reduced.fit_inputs() on the Fig 16 sweep; no extra-noise term"},
+                    "median_stated_relative": list(STATED_TARGET),
+                    "ratio_definition": "observed std of one reading (or one mounting's value) / stated std (the "
+                                        "varying part of its budget)",
+                    "redchi_definition": "result.least_squares.redchi of gonio.fitting.fit on Reduced.fit_inputs() "
+                                         "(lab: calibration per incidence, alignment='all', stray_light=True); no "
+                                         "extra-noise term"},
+        "lab": lab,
         "repeats": repeats,
         "chi_square": chi_square,
         "targets_met": targets_met,

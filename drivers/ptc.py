@@ -39,6 +39,8 @@ from typing import Sequence
 
 import numpy as np
 
+from .spatial import spatial_statistics
+
 __all__ = ["PairStatistics", "PhotonTransferResult", "pair_statistics", "photon_transfer", "acquire_photon_transfer"]
 
 #: Quantisation noise variance of a uniform ADC [DN^2].
@@ -50,14 +52,18 @@ class PairStatistics:
     """Mean and temporal variance of a pair of frames over a region [DN], [DN^2].
 
     ``spatial_variance`` is the variance over the region of the pair's mean image
-    ``(A + B) / 2`` [DN^2]: fixed patterns (PRNU, DSNU, illumination) plus half the
-    temporal variance (EMVA 1288, section 8: spatial non-uniformity).
+    ``(A + B) / 2`` [DN^2]: fixed patterns (PRNU, DSNU, illumination, the target's texture)
+    plus half the temporal variance (EMVA 1288, section 8: spatial non-uniformity).
+    ``white_variance`` is its part that is independent from pixel to pixel
+    (:func:`drivers.spatial.spatial_statistics`): the camera's own fixed patterns and the
+    temporal noise, without the texture of the target or the beam's profile.
     """
 
     mean: float
     variance: float
     pixels: int
     spatial_variance: float = float("nan")
+    white_variance: float = float("nan")
 
 
 def pair_statistics(frame_a: np.ndarray, frame_b: np.ndarray) -> PairStatistics:
@@ -79,8 +85,10 @@ def pair_statistics(frame_a: np.ndarray, frame_b: np.ndarray) -> PairStatistics:
     if a.shape != b.shape or a.size < 2:
         raise ValueError(f"frame shapes {a.shape} and {b.shape} must match and hold >= 2 pixels")
     diff = a - b
+    mean_image = 0.5 * (a + b)
+    white = spatial_statistics(mean_image).white_variance if a.ndim == 2 and min(a.shape) >= 8 else float("nan")
     return PairStatistics(float(0.5 * (a.mean() + b.mean())), float(diff.var(ddof=1) / 2.0), int(a.size),
-                          float((0.5 * (a + b)).var(ddof=1)))
+                          float(mean_image.var(ddof=1)), float(white))
 
 
 @dataclass(frozen=True)
@@ -113,7 +121,10 @@ class PhotonTransferResult:
         Photo-response non-uniformity: rms of the pixel-to-pixel response relative to the
         mean [-], from the spatial variance of the brightest fitted pair after removing
         its temporal part and the dark pair's fixed pattern (EMVA 1288, section 8); NaN
-        without spatial statistics. A textured target makes it an upper bound.
+        without spatial statistics. The white part of the spatial variance is used when
+        the frames are images (``PairStatistics.white_variance``), so that a textured
+        target or the beam's profile, correlated over many pixels, is not taken for the
+        camera's non-uniformity.
     exposures, mean, variance, dark_mean, dark_variance : numpy.ndarray
         The per-exposure points [s], [DN], [DN^2].
     used : numpy.ndarray of bool
@@ -215,10 +226,15 @@ def photon_transfer(
 
 
 def _prnu(light: Sequence[PairStatistics], dark: Sequence[PairStatistics], used: np.ndarray) -> float:
-    """PRNU from the brightest used pair: sqrt(light fixed-pattern var - dark fixed-pattern var) / signal."""
+    """PRNU from the brightest used pair: sqrt(light fixed-pattern var - dark fixed-pattern var) / signal
+    (the white parts of the spatial variances when known)."""
     k = int(np.flatnonzero(used)[np.argmax([light[i].mean for i in np.flatnonzero(used)])])
-    fixed_light = light[k].spatial_variance - 0.5 * light[k].variance
-    fixed_dark = dark[k].spatial_variance - 0.5 * dark[k].variance
+
+    def spatial(pair: PairStatistics) -> float:
+        return pair.white_variance if np.isfinite(pair.white_variance) else pair.spatial_variance
+
+    fixed_light = spatial(light[k]) - 0.5 * light[k].variance
+    fixed_dark = spatial(dark[k]) - 0.5 * dark[k].variance
     signal = light[k].mean - dark[k].mean
     if not (np.isfinite(fixed_light) and np.isfinite(fixed_dark) and signal > 0):
         return float("nan")

@@ -17,8 +17,13 @@ uncertainties (:mod:`gonio.reduction`, docs/acquisition.md):
 - with a lamp monitor, its dark offset and noise, measured once per recording with the
   lamp off; every exposure then carries the monitor's reading;
 - without one, the protocol's lamp checks: a fixed geometry re-measured with several
-  frames at the start, every ``checks.every`` points, around the reference standard and
-  at the start of every resumed session.
+  frames at the start, every ``checks.every`` points, around the reference standard, at
+  the start of every resumed session and around every remounting of the sample;
+- in every mounting of the sample (``[sample] mountings``), once, at the photon transfer's
+  geometry: an image of the window, whose spatial statistics measure the sample's texture
+  (:func:`drivers.spatial.spatial_statistics`), and with a lamp monitor a series of
+  exposures whose ratio to the monitor measures what the monitor does not see
+  (:func:`characterise_mounting`).
 
 :func:`reduce_recording` and the other reduction names are re-exported from
 :mod:`gonio.reduction`.
@@ -112,6 +117,35 @@ class RunResult:
             f"{self.wall_seconds:.1f} s wall, {self.instrument_seconds:.1f} s instrument time; "
             f"recording in {self.folder}"
         )
+
+
+@dataclass(frozen=True)
+class SampleMounting:
+    """What the operator is asked to do when the sample goes (back) into its holder.
+
+    Attributes
+    ----------
+    index : int
+        The mounting (0-based).
+    count : int
+        Mountings in the protocol.
+    rotation : float or None
+        Rotation of the sample about its normal [deg]; None: as the operator puts it.
+    spin : bool
+        Spin the sample during the exposures.
+    """
+
+    index: int
+    count: int
+    rotation: float | None = None
+    spin: bool = False
+
+    def instruction(self) -> str:
+        """The operator's instruction, e.g. ``"mounting 2 of 4, rotated to 90 deg about its normal"``."""
+        text = f"mounting {self.index + 1} of {self.count}"
+        if self.rotation is not None:
+            text += f", rotated to {self.rotation:g} deg about its normal"
+        return text + (", spinning" if self.spin else "")
 
 
 @dataclass(frozen=True)
@@ -214,31 +248,37 @@ def build_jobs(protocol: Protocol, the_plan, session: int = 0) -> list[Job]:
     geometry = _check_geometry(protocol, the_plan) if every > 0 else None
     count = 0
 
-    def check() -> Job:
+    def check(mounting: int = 0) -> Job:
         nonlocal count
-        job = Job(PlannedPoint(-1000 - count, CHECK_BLOCK, count, *geometry), "check")
+        job = Job(PlannedPoint(-1000 - count, CHECK_BLOCK, count, *geometry, mounting), "check")
         count += 1
         return job
 
-    if geometry is not None and session > 0:
-        jobs.append(Job(PlannedPoint(-900 - session, CHECK_BLOCK, -session, *geometry), "check"))
-    for k, point in enumerate(the_plan.points):
-        if geometry is not None and k % every == 0:
-            jobs.append(check())
+    points = the_plan.points
+    if geometry is not None and session > 0 and points:
+        jobs.append(Job(PlannedPoint(-900 - session, CHECK_BLOCK, -session, *geometry, points[0].mounting), "check"))
+    for k, point in enumerate(points):
+        remounted = k > 0 and point.mounting != points[k - 1].mounting
+        if geometry is not None and remounted:  # the level the checks see changes with the mounting
+            jobs.append(check(points[k - 1].mounting))
+        if geometry is not None and (k % every == 0 or remounted):
+            jobs.append(check(point.mounting))
         jobs.append(Job(point))
-    if geometry is not None and the_plan.points:
-        jobs.append(check())
+    if geometry is not None and points:
+        jobs.append(check(points[-1].mounting))
     if protocol.reference is not None:
         for k, (ti, pi_, view) in enumerate(protocol.reference.geometries):
-            jobs.append(Job(PlannedPoint(-1 - k, REFERENCE_BLOCK, 0, ti, pi_, view), "reference"))
+            jobs.append(Job(PlannedPoint(-1 - k, REFERENCE_BLOCK, 0, ti, pi_, view, -1), "reference"))
         if geometry is not None:
-            jobs.append(check())
+            jobs.append(check(points[-1].mounting if points else 0))
     return jobs
 
 
-def _point_row(point: PlannedPoint, status: str, message: str = "", session: int = 0) -> dict[str, Any]:
+def _point_row(point: PlannedPoint, status: str, message: str = "", session: int = 0,
+               rotation: float | None = None) -> dict[str, Any]:
     return {
         "index": point.index, "block": point.block, "repeat": point.repeat,
+        "mounting": point.mounting if point.mounting >= 0 else None, "rotation": rotation,
         "theta_i": point.theta_i, "phi_i": point.phi_i, "view": point.view,
         "theta_r": point.theta_r, "phi_r": point.phi_r, "status": status, "message": message,
         "session": session,
@@ -362,6 +402,65 @@ def characterise_camera(rig, point: PlannedPoint, protocol: Protocol) -> dict[st
 SERIES_FAILURES = (DriverError, OSError, ValueError)
 
 
+#: Frames of the window averaged into a mounting's texture image.
+TEXTURE_FRAMES = 2
+#: Exposures of a mounting's monitor-ratio series (11 degrees of freedom for the
+#: irradiance the monitor does not see).
+RATIO_SERIES = 12
+
+
+def characterise_mounting(rig, geometry: tuple[float, float, float], protocol: Protocol,
+                          monitor_offset: float = 0.0) -> dict[str, Any]:
+    """What one mounting of the sample shows: its texture, and the monitor's view of the lamp.
+
+    At ``geometry`` (the photon transfer's, the largest window) with the automatic
+    exposure: the mean of :data:`TEXTURE_FRAMES` frames of the window, dark level
+    subtracted, gives the texture's spatial statistics
+    (:func:`drivers.spatial.spatial_statistics`): the variance that the window's mean has
+    from the sample's texture, relative to the signal, is what the reduction states as
+    the ``texture`` component of every value. With a lamp monitor,
+    :data:`RATIO_SERIES` further exposures give the scatter of the signal's ratio to the
+    monitor, from which the reduction takes the irradiance fluctuation the monitor does
+    not see (component ``monitor_ratio``) once the camera's and the monitor's own noise
+    are removed.
+
+    Returns
+    -------
+    dict
+        For metadata["mountings"][index]: the geometry, exposure, signal, the spatial
+        statistics (relative to the signal) and the monitor series.
+    """
+    from drivers.spatial import spatial_statistics
+
+    theta_i, phi_i, view = geometry
+    first = rig.measure(theta_i, phi_i, view, exposure="auto", target_fraction=protocol.exposure.target_fraction,
+                        max_exposure=protocol.exposure.max_time, start_exposure=protocol.exposure.time,
+                        settle_time=protocol.rig.settle_time)
+    image = np.mean([np.asarray(rig.roi_frame(first.exposure), float) for _ in range(TEXTURE_FRAMES)], axis=0)
+    signal = float(image.mean() - first.dark_level)
+    if not signal > 0:
+        raise ValueError(f"no signal in the texture image at {list(geometry)} ({signal:.3g} DN above the dark level)")
+    stats = spatial_statistics(image)
+    record: dict[str, Any] = {
+        "geometry": [float(g) for g in geometry], "exposure": first.exposure, "gain": first.gain,
+        "frames": TEXTURE_FRAMES, "pixels": stats.pixels, "signal_dn": signal,
+        "texture_relative": math.sqrt(stats.mean_variance) / signal,
+        "texture_pixel_relative": math.sqrt(stats.correlated_variance) / signal,
+        "white_pixel_relative": math.sqrt(stats.white_variance) / signal,
+        "correlation_lengths_px": list(stats.correlation_lengths),
+        "correlation_area_px": stats.correlation_area,
+    }
+    if getattr(rig, "has_monitor", False):
+        series = [rig.measure(exposure=first.exposure) for _ in range(RATIO_SERIES)]
+        record["monitor_series"] = {
+            "signal_rate": [m.radiance for m in series], "monitor": [m.monitor for m in series],
+            "roi_mean": [m.roi_mean for m in series], "dark_mean": [m.dark_level for m in series],
+            "roi_pixels": series[0].roi_pixels, "exposure": first.exposure, "gain": first.gain,
+            "monitor_offset": monitor_offset,
+        }
+    return record
+
+
 def characterise_linearity(rig, camera: Mapping[str, Any], protocol: Protocol,
                            monitor_offset: float = 0.0) -> dict[str, Any]:
     """The camera's linearity series at the photon transfer's geometry (EMVA 1288), or why it failed.
@@ -406,6 +505,10 @@ class _Run:
         self.measured_since_dark: int | None = None
         self.consecutive_errors = 0
         self.on_reference = False
+        # the sample's mounting in the holder: a protocol without declared mountings finds
+        # the sample mounted; one with them has the operator mount it for its first point
+        self.mounting: int | None = None if protocol.mountings.declared else 0
+        self.characterisation_point: PlannedPoint | None = None
         self.prepared = False
         self.start_wall = time.perf_counter()
         self.start_instrument = clock()
@@ -455,20 +558,63 @@ class _Run:
             self.result.messages.append(message)
             return {"error": message}
 
+    # -- the sample in its holder -----------------------------------------------------------
+    def hold(self, job: Job) -> None:
+        """Put what ``job`` measures in the holder: the reference standard, or the sample in
+        the job's mounting (then characterise that mounting once, :meth:`characterise_mounting`)."""
+        if job.kind == "reference":
+            if not self.on_reference:
+                self.change_sample("reference")
+                self.on_reference = True
+            return
+        wanted = max(job.point.mounting, 0)
+        if self.on_reference or self.mounting != wanted:
+            spec = self.protocol.mountings
+            if spec.declared:
+                self.change_sample("sample", mounting=SampleMounting(wanted, spec.count, spec.rotations[wanted],
+                                                                     spec.spin))
+            else:
+                self.change_sample("sample")
+            self.on_reference, self.mounting = False, wanted
+        if job.kind == "sample":
+            self.characterise_mounting(wanted)
+
+    def characterise_mounting(self, index: int) -> None:
+        """The texture image and monitor series of mounting ``index`` (:func:`characterise_mounting`),
+        once per recording, at the photon transfer's geometry; a failure is recorded as the
+        mounting's ``error`` (the reduction then says the texture is not estimated)."""
+        stored = self.writer.stored_metadata.get("mountings", {})
+        if str(index) in stored or not hasattr(self.rig, "roi_frame"):
+            return
+        camera = self.writer.stored_metadata.get("camera", {})
+        point = self.characterisation_point
+        geometry = camera.get("geometry") or ([point.theta_i, point.phi_i, point.view] if point else None)
+        if geometry is None:
+            return
+        offset = self.writer.stored_metadata.get("monitor_dark", {}).get("offset_v", 0.0)
+        try:
+            record = characterise_mounting(self.rig, tuple(geometry), self.protocol, offset)
+        except KeyboardInterrupt:
+            raise
+        except SERIES_FAILURES as error:  # an instrument problem shows again at the points
+            record = {"error": f"mounting characterisation failed ({type(error).__name__}: {error})"}
+            self.result.messages.append(record["error"])
+        spec = self.protocol.mountings
+        record.update(rotation=spec.rotations[index], spin=spec.spin)
+        self.writer.update(mountings={**stored, str(index): record})
+
     # -- one job ---------------------------------------------------------------------------
     def do(self, count: int, total: int, job: Job) -> None:
         point, reason = job.point, job.refusal
-        if reason is None and (job.kind == "reference") != self.on_reference:
-            self.change_sample("reference" if job.kind == "reference" else "sample")
-            self.on_reference = job.kind == "reference"
         if reason is None:
+            self.hold(job)
             reason = self.rig.check_geometry(point.theta_i, point.phi_i, point.view)
         if reason is not None:
             status, message, row = "refused", reason, {}
             self.result.refused += 1
         else:
             status, message, row = self._measure(job)
-        self.writer.append_point({**_point_row(point, status, message, self.session), **row,
+        self.writer.append_point({**_point_row(point, status, message, self.session, self._rotation(job)), **row,
                                   "instrument_time": self.clock(), "wall_time": _now_iso()})
         self._report(count, total, point, status)
         if self.consecutive_errors >= self.max_consecutive_errors:
@@ -476,6 +622,12 @@ class _Run:
                 f"{self.consecutive_errors} points failed in a row (last: {message}); stopping. "
                 "Fix the instrument and resume the run."
             )
+
+    def _rotation(self, job: Job) -> float | None:
+        """The rotation the protocol set for the mounting of ``job`` [deg] (None: not set)."""
+        if job.kind == "reference" or job.point.mounting < 0:
+            return None
+        return self.protocol.mountings.rotations[job.point.mounting]
 
     def _measure(self, job: Job) -> tuple[str, str, dict]:
         point = job.point
@@ -489,7 +641,7 @@ class _Run:
             message = f"{type(error).__name__}: {error}"
             self.result.errors += 1
             if type(error).__name__ == "LampError":
-                self.writer.append_point({**_point_row(point, "error", message, self.session),
+                self.writer.append_point({**_point_row(point, "error", message, self.session, self._rotation(job)),
                                           "instrument_time": self.clock(), "wall_time": _now_iso()})
                 raise AcquisitionError(f"lamp failure at point {point.index}: {error}") from error
             self.consecutive_errors += 1
@@ -577,7 +729,10 @@ def run_protocol(
     change_sample : callable, optional
         ``change_sample("reference")`` / ``change_sample("sample")`` swaps the sample for
         the reference standard and back (a prompt on a real rig, the emulator's sample
-        holder otherwise).  Required when the protocol has a ``[reference]`` section.
+        holder otherwise).  A protocol that declares mountings (``[sample] mountings``,
+        ``rotations`` or ``spin``) calls ``change_sample("sample", mounting=SampleMounting(...))``
+        before the first point of every mounting.  Required when the protocol has a
+        ``[reference]`` section or declares mountings.
     clock : callable, optional
         Instrument clock [s] recorded with each point (default: the rig's ``instrument_clock``,
         the emulator's simulated clock, when it offers one, else wall-clock monotonic time).
@@ -607,6 +762,11 @@ def run_protocol(
             f"{protocol.source}: the protocol measures a reference standard ({protocol.reference.label}) "
             "but no way to swap the sample was given (change_sample)"
         )
+    if protocol.mountings.declared and change_sample is None:
+        raise AcquisitionError(
+            f"{protocol.source}: the protocol mounts the sample {protocol.mountings.count} time(s) "
+            f"{'spinning ' if protocol.mountings.spin else ''}but no way to mount it was given (change_sample)"
+        )
     clock = clock or getattr(rig, "instrument_clock", None) or time.monotonic
     _check_apertures(protocol, metadata)
     the_plan = plan(protocol)
@@ -632,12 +792,14 @@ def run_protocol(
     run = _Run(protocol, rig, writer, result, clock, change_sample, resume, session, progress, max_consecutive_errors)
     try:
         measurable = [job for job in todo if job.refusal is None]
+        run.characterisation_point = _characterisation_point(rig, the_plan)
         if measurable:
-            run.prepare(lamp_voltage, warm_up, _characterisation_point(rig, the_plan))
+            run.prepare(lamp_voltage, warm_up, run.characterisation_point)
         for count, job in enumerate(todo, start=1):
             run.do(count, len(todo), job)
         if run.on_reference:
-            change_sample("sample")
+            last = the_plan.points[-1].mounting if the_plan.points else 0
+            run.hold(Job(PlannedPoint(0, "", 0, 0.0, 0.0, 0.0, last), "check"))  # the sample back, as it was
         run.characterise_linearity(lamp_voltage, warm_up)
     except KeyboardInterrupt:
         run.finish("interrupted")

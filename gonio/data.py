@@ -43,6 +43,7 @@ __all__ = [
     "read_darks",
     "read_metadata",
     "point_key",
+    "row_key",
     "experiment_differences",
     "duplicated_rows",
     "RECORDING_FILES",
@@ -53,6 +54,9 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("index", "-", "index of the point in the protocol's plan (negative: reference standard and lamp checks)"),
     ("block", "-", "name of the protocol block ('reference standard', 'lamp check' for the extra measurements)"),
     ("repeat", "-", "repeat number within the block (0-based; the check number for lamp checks)"),
+    ("mounting", "-", "mounting of the sample the point was measured in (0-based; empty for the reference standard)"),
+    ("rotation", "deg", "rotation of the sample about its normal in that mounting as the protocol set it "
+                        "(empty: the operator's choice)"),
     ("theta_i", "deg", "lamp polar angle (planned)"),
     ("phi_i", "deg", "lamp azimuth from the camera's swing plane (planned)"),
     ("view", "deg", "signed camera angle (planned; + on the azimuth-0 side)"),
@@ -104,7 +108,7 @@ RECORDING_FILES = ("metadata.json", "points.csv", "darks.csv", "points.partial",
 _NAMES = tuple(c[0] for c in COLUMNS)
 _DARK_NAMES = tuple(c[0] for c in DARK_COLUMNS)
 _TEXT = {"block", "status", "flags", "wall_time", "message"}
-_INT = {"index", "repeat", "roi_pixels", "saturated", "frames", "frames_saturated", "session", "after_index"}
+_INT = {"index", "repeat", "mounting", "roi_pixels", "saturated", "frames", "frames_saturated", "session", "after_index"}
 #: A text cell starting with one of these is prefixed with "'" so that a spreadsheet
 #: shows it as text instead of running it as a formula (OWASP, "CSV Injection"); the
 #: quote itself is escaped the same way, so reading strips exactly one.
@@ -115,9 +119,19 @@ class RecordingError(ValueError):
     """A recording folder is missing files, holds rows that do not parse, or cannot be written."""
 
 
-def point_key(block: str, repeat: int, theta_i: float, phi_i: float, view: float) -> tuple:
-    """Identity of a planned point; rows with the same key are the same measurement."""
-    return (str(block), int(repeat), round(float(theta_i), 6), round(float(phi_i), 6), round(float(view), 6))
+def point_key(block: str, repeat: int, theta_i: float, phi_i: float, view: float, mounting: int = 0) -> tuple:
+    """Identity of a planned point; rows with the same key are the same measurement.
+
+    ``mounting`` is the sample's mounting (a missing one, -1, is the first: recordings of
+    older formats and the reference standard's rows).
+    """
+    return (str(block), int(repeat), round(float(theta_i), 6), round(float(phi_i), 6), round(float(view), 6),
+            max(int(mounting), 0))
+
+
+def row_key(row: Mapping[str, Any]) -> tuple:
+    """:func:`point_key` of a row of points.csv (as :func:`read_points` gives it)."""
+    return point_key(row["block"], row["repeat"], row["theta_i"], row["phi_i"], row["view"], row.get("mounting", 0))
 
 
 def _fsync_append(path: Path, text: str) -> None:
@@ -180,7 +194,7 @@ def duplicated_rows(rows: Iterable[Mapping[str, Any]]) -> dict[tuple, list[int]]
     seen: dict[tuple, list[int]] = {}
     for line, r in enumerate(rows, start=2):
         if r["status"] in ("ok", "refused"):
-            seen.setdefault(point_key(r["block"], r["repeat"], r["theta_i"], r["phi_i"], r["view"]), []).append(line)
+            seen.setdefault(row_key(r), []).append(line)
     return {key: lines for key, lines in seen.items() if len(lines) > 1}
 
 
@@ -290,11 +304,7 @@ class RecordingWriter:
     def done_keys(self) -> set[tuple]:
         """Keys of points already recorded with a final status (ok or refused)."""
         rows = read_points(self.folder, as_arrays=False)
-        return {
-            point_key(r["block"], r["repeat"], r["theta_i"], r["phi_i"], r["view"])
-            for r in rows
-            if r["status"] in ("ok", "refused")
-        }
+        return {row_key(r) for r in rows if r["status"] in ("ok", "refused")}
 
     def append_point(self, row: Mapping[str, Any]) -> None:
         """Append one measured point and flush it to disk before returning."""

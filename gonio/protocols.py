@@ -51,6 +51,7 @@ __all__ = [
     "Darks",
     "Reference",
     "Checks",
+    "Mountings",
     "Block",
     "Protocol",
     "PlannedPoint",
@@ -79,6 +80,8 @@ MAX_REPEATS = 10_000
 MAX_FRAMES = 100
 #: Fewest frames of a lamp-stability check (its scatter measures the flicker).
 MIN_CHECK_FRAMES = 2
+#: Most mountings of the sample in one protocol (``[sample] mountings``).
+MAX_MOUNTINGS = 100
 #: Most exposure times of an HDR bracket series.
 MAX_HDR_BRACKETS = 16
 #: Longest exposure the camera takes [s]: the upper end of an HDR bracket.
@@ -129,6 +132,9 @@ class RigLimits:
         Apertures of the lamp and of the camera's pupil seen from the sample [sr]
         (Oren & Nayar 1995, section 5: 0.003 and 0.0009); fits of the recording average
         the model over them (gonio.instrument).
+    remount_time : float
+        Time the operator needs to take the sample out and put it back, or to swap it
+        for the reference standard [s] (the time estimate; the emulated operator takes it).
     """
 
     camera_range: tuple[float, float] = (-90.0, 90.0)
@@ -141,6 +147,7 @@ class RigLimits:
     readout_time: float = 0.1
     lamp_solid_angle: float = 0.003
     camera_solid_angle: float = 0.0009
+    remount_time: float = 60.0
 
     @property
     def estimate_velocity(self) -> float:
@@ -273,6 +280,48 @@ class Block:
 
 
 @dataclass(frozen=True)
+class Mountings:
+    """How often, and how, the sample is put into its holder (``[sample]`` table).
+
+    Every sample point of the protocol is measured once in each mounting: the operator
+    takes the sample out and puts it back between them (rotated as ``rotations`` say), so
+    that the recording shows how much the values change with the sample's seating and
+    with the part of its texture the camera sees, which the reduction then states
+    (docs/acquisition.md, "Mountings").
+
+    Attributes
+    ----------
+    count : int
+        Mountings (1: the sample is mounted once).
+    rotations : tuple of (float or None)
+        Rotation of the sample about its normal in each mounting [deg]; None where the
+        protocol leaves it to the operator.
+    spin : bool
+        The holder spins the sample about its normal during every exposure.
+
+    Examples
+    --------
+    >>> Mountings(4).rotations
+    (None, None, None, None)
+    """
+
+    count: int = 1
+    rotations: tuple = ()
+    spin: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.rotations:
+            object.__setattr__(self, "rotations", (None,) * self.count)
+        if len(self.rotations) != self.count:
+            raise ValueError(f"{len(self.rotations)} rotations for {self.count} mountings")
+
+    @property
+    def declared(self) -> bool:
+        """Whether the protocol asks for anything beyond one plain mounting."""
+        return self.count > 1 or self.spin or any(r is not None for r in self.rotations)
+
+
+@dataclass(frozen=True)
 class Protocol:
     """A validated sweep protocol (see :func:`load`)."""
 
@@ -290,6 +339,8 @@ class Protocol:
     text: str = ""
     #: The sample spec the emulated rig puts on the stage (``[sample] emulated``), or None.
     emulated: str | None = None
+    #: Mountings of the sample (``[sample] mountings``, ``rotations``, ``spin``).
+    mountings: Mountings = Mountings()
 
 
 # --------------------------------------------------------------------------- field reading
@@ -527,7 +578,7 @@ def loads(text: str, source: str = "<string>") -> Protocol:
     f = _Fields(source)
     f.unknown(data, _TOP_LEVEL, "")
     name, description = _read_header(f, data)
-    sample, metadata, emulated = _read_sample(f, data)
+    sample, metadata, emulated, mountings = _read_sample(f, data)
     rig = _read_rig(f, f.table(data, "rig", ""))
     exposure = _read_exposure(f, f.table(data, "exposure", ""))
     darks = _read_darks(f, f.table(data, "darks", ""))
@@ -537,7 +588,7 @@ def loads(text: str, source: str = "<string>") -> Protocol:
     return Protocol(
         name=name, sample=sample, description=description, metadata=dict(metadata), rig=rig,
         exposure=exposure, darks=darks, blocks=tuple(blocks), reference=reference, checks=checks,
-        source=source, text=text, emulated=emulated,
+        source=source, text=text, emulated=emulated, mountings=mountings,
     )
 
 
@@ -563,9 +614,9 @@ def _read_header(f: _Fields, data: Mapping) -> tuple[str, str]:
     return name, description
 
 
-def _read_sample(f: _Fields, data: Mapping) -> tuple[str, Mapping, str | None]:
+def _read_sample(f: _Fields, data: Mapping) -> tuple[str, Mapping, str | None, Mountings]:
     table = f.table(data, "sample", "", required=True)
-    f.unknown(table, ("label", "metadata", "emulated"), "sample")
+    f.unknown(table, ("label", "metadata", "emulated", "mountings", "rotations", "spin"), "sample")
     label = f.string(table, "label", "sample")
     metadata = f.table(table, "metadata", "sample")
     f.finite_tree(metadata, "sample.metadata")
@@ -573,7 +624,27 @@ def _read_sample(f: _Fields, data: Mapping) -> tuple[str, Mapping, str | None]:
     if "emulated" in table:
         emulated = f.string(table, "emulated", "sample").strip()
         _check_emulated_sample(f, emulated)
-    return label, metadata, emulated
+    return label, metadata, emulated, _read_mountings(f, table)
+
+
+def _read_mountings(f: _Fields, table: Mapping) -> Mountings:
+    """``[sample] mountings``, ``rotations`` and ``spin``: a count, or rotations (one mounting
+    each), or both when they agree."""
+    spin = f.boolean(table, "spin", "sample", False)
+    count = f.integer(table, "mountings", "sample", 1, low=1, high=MAX_MOUNTINGS,
+                      limit="the limit on mountings") if "mountings" in table else None
+    if "rotations" not in table:
+        return Mountings(count or 1, spin=spin)
+    value = table["rotations"]
+    if not isinstance(value, list) or not value:
+        raise f.fail("sample.rotations", "a non-empty list of rotations of the sample about its normal, "
+                     "one per mounting, each in [-360, 360] [deg]", value)
+    rotations = f.numbers(value, "sample.rotations", -360.0, 360.0, "deg", what="rotations", max_count=MAX_MOUNTINGS,
+                          limit="the limit on mountings")
+    if count is not None and count != len(rotations):
+        raise f.fail("sample.mountings", f"the number of sample.rotations ({len(rotations)}), or no mountings field",
+                     count)
+    return Mountings(len(rotations), tuple(rotations), spin)
 
 
 def _check_emulated_sample(f: _Fields, spec: str) -> None:
@@ -605,6 +676,7 @@ def _read_rig(f: _Fields, table: Mapping) -> RigLimits:
         readout_time=f.number(table, "readout_time", "rig", base.readout_time, 0.0, unit="s"),
         lamp_solid_angle=f.number(table, "lamp_solid_angle", "rig", base.lamp_solid_angle, 0.0, 1.0, "sr"),
         camera_solid_angle=f.number(table, "camera_solid_angle", "rig", base.camera_solid_angle, 0.0, 1.0, "sr"),
+        remount_time=f.number(table, "remount_time", "rig", base.remount_time, 0.0, 86400.0, "s"),
     )
 
 
@@ -857,6 +929,7 @@ class PlannedPoint:
     theta_i: float
     phi_i: float
     view: float
+    mounting: int = 0  # the sample's mounting (0-based) the point is measured in
 
     @property
     def theta_r(self) -> float:
@@ -869,7 +942,7 @@ class PlannedPoint:
     @property
     def key(self) -> tuple:
         """Identity of the point within its protocol (used to resume without duplicates)."""
-        return (self.block, self.repeat, self.theta_i, self.phi_i, self.view)
+        return (self.block, self.repeat, self.theta_i, self.phi_i, self.view, self.mounting)
 
 
 @dataclass(frozen=True)
@@ -934,6 +1007,11 @@ class Plan:
             f"  exposure: {self.protocol.exposure.mode}",
             f"  estimated instrument time: {_duration(self.estimated_seconds)} (lamp warm-up not included)",
         ]
+        mountings = self.protocol.mountings
+        if mountings.declared:
+            rotations = ", ".join("operator's choice" if r is None else f"{r:g} deg" for r in mountings.rotations)
+            lines.insert(3, f"  mountings of the sample: {mountings.count} (rotations: {rotations})"
+                            + ("; spinning during exposures" if mountings.spin else ""))
         if self.protocol.reference:
             lines.append(f"  reference standard: {self.protocol.reference.label} "
                          f"({len(self.protocol.reference.geometries)} geometries)")
@@ -1064,7 +1142,23 @@ def _exposure_estimate(exposure: Exposure, rig: RigLimits) -> float:
 
 def planned_point_count(protocol: Protocol) -> int:
     """Points the plan of ``protocol`` expands to, refused included (no expansion)."""
-    return sum(len(block.views) * block.repeats for block in protocol.blocks)
+    return protocol.mountings.count * sum(len(block.views) * block.repeats for block in protocol.blocks)
+
+
+#: Camera time of the texture image taken in every mounting [s]: an automatic exposure at
+#: the characterisation geometry and two frames of the window read out at the camera's
+#: 115200 baud (138 x 138 pixels of 2 bytes each: 3.3 s per frame).
+TEXTURE_IMAGE_SECONDS = 8.0
+
+
+def mounting_seconds(protocol: Protocol) -> float:
+    """Instrument time of the mountings [s]: the operator's remounts between them
+    (``rig.remount_time`` each) and one texture image per mounting (a move there, at most
+    90 deg, and :data:`TEXTURE_IMAGE_SECONDS`)."""
+    rig = protocol.rig
+    long_move = move_time(90.0, rig.estimate_velocity, rig.estimate_acceleration)
+    count = protocol.mountings.count
+    return (count - 1) * rig.remount_time + count * (long_move + rig.settle_time + TEXTURE_IMAGE_SECONDS)
 
 
 def check_count(checks: Checks, measured_points: int, reference_measured: bool) -> int:
@@ -1094,10 +1188,13 @@ def check_count(checks: Checks, measured_points: int, reference_measured: bool) 
 def plan(protocol: Protocol) -> Plan:
     """Expand a protocol into measurement points, refusals and a time estimate.
 
-    Points are visited block by block (the lamp moves once per block), camera angles in
-    the order given, each block's sweep repeated ``repeats`` times.  The time estimate adds
-    stage moves (trapezoidal profile; axes move one after another, as a conservative
-    bound), settling, exposures, dark frames, the reference standard and the lamp checks.
+    Points are visited mounting by mounting (``[sample] mountings``), in each block by
+    block (the lamp moves once per block), camera angles in the order given, each block's
+    sweep repeated ``repeats`` times.  The time estimate adds stage moves (trapezoidal
+    profile; axes move one after another, as a conservative bound), settling, exposures,
+    dark frames, the remounts and the texture image of every mounting
+    (:func:`mounting_seconds`), the reference standard (swapped in and out, each
+    ``rig.remount_time``) and the lamp checks.
 
     Raises
     ------
@@ -1119,8 +1216,9 @@ def plan(protocol: Protocol) -> Plan:
     per_point = _exposure_estimate(protocol.exposure, rig) + rig.settle_time
     long_move = move_time(90.0, rig.estimate_velocity, rig.estimate_acceleration)
     reference = protocol.reference
-    if reference:
-        seconds += len(reference.geometries) * (per_point + 2 * long_move)
+    if reference:  # swapping the standard in and the sample back, and its points
+        seconds += 2 * rig.remount_time + len(reference.geometries) * (per_point + 2 * long_move)
+    seconds += mounting_seconds(protocol)
     reference_measured = reference is not None and any(refusal_reason(*g, rig) is None for g in reference.geometries)
     checks = check_count(protocol.checks, len(points), reference_measured)
     # a check: one move there (at most 90 deg, a bound), settling and its frames
@@ -1138,22 +1236,23 @@ def _expand(protocol: Protocol) -> tuple[list[PlannedPoint], list[Refusal], dict
     seconds = 0.0
     moves = {"camera": 0.0, "lamp_theta": 0.0, "lamp_phi": 0.0}
     per_point = _exposure_estimate(protocol.exposure, rig) + rig.settle_time
-    for block in protocol.blocks:
-        reasons = refusal_reasons(block.theta_i, block.phi_i, block.views, rig)
-        for repeat in range(block.repeats):
-            for view, reason in zip(block.views, reasons):
-                point = PlannedPoint(index, block.name, repeat, block.theta_i, block.phi_i, view)
-                index += 1
-                if reason:
-                    refused.append(Refusal(point, reason))
-                    continue
-                target = (view, block.theta_i, block.phi_i)
-                for axis, a, b in zip(moves, position, target):
-                    moves[axis] += abs(b - a)
-                    seconds += move_time(b - a, velocity, acceleration)
-                position = target
-                seconds += per_point
-                points.append(point)
+    reasons = [refusal_reasons(block.theta_i, block.phi_i, block.views, rig) for block in protocol.blocks]
+    for mounting in range(protocol.mountings.count):
+        for block, block_reasons in zip(protocol.blocks, reasons):
+            for repeat in range(block.repeats):
+                for view, reason in zip(block.views, block_reasons):
+                    point = PlannedPoint(index, block.name, repeat, block.theta_i, block.phi_i, view, mounting)
+                    index += 1
+                    if reason:
+                        refused.append(Refusal(point, reason))
+                        continue
+                    target = (view, block.theta_i, block.phi_i)
+                    for axis, a, b in zip(moves, position, target):
+                        moves[axis] += abs(b - a)
+                        seconds += move_time(b - a, velocity, acceleration)
+                    position = target
+                    seconds += per_point
+                    points.append(point)
     return points, refused, moves, seconds
 
 

@@ -31,6 +31,10 @@ __all__ = [
     "interpolation_excess",
     "local_slopes",
     "quantisation_sigma",
+    "texture_relative",
+    "monitor_ratio_variance",
+    "MountingFactors",
+    "mounting_factors",
 ]
 
 #: Budget components of one reduced value: name -> what it is.
@@ -45,6 +49,12 @@ COMPONENTS: dict[str, str] = {
     "angle": "stage readback uncertainty times the local slope of the measured curve",
     "linearity": "camera linearity correction's uncertainty, relative to the reference standard's readings "
                  "(correlated between values)",
+    "monitor_ratio": "irradiance on the sample that the lamp monitor does not see (Type A from each mounting's "
+                     "monitor series)",
+    "texture": "the sample's texture averaged over the camera's window (Type A from each mounting's image; "
+               "common to every value of the sample)",
+    "mounting": "change of the values between mountings of the sample: its seating, tilt and the texture the "
+                "window sees (Type A from the mountings; correlated between values of one mounting)",
 }
 
 
@@ -375,3 +385,154 @@ def quantisation_sigma(resolution: float) -> float:
     0.000289
     """
     return float(resolution) / math.sqrt(12.0)
+
+
+def texture_relative(mountings: Mapping[str, Mapping]) -> tuple[float, int] | None:
+    """Relative standard uncertainty that the sample's texture gives the window's mean [-].
+
+    The root mean square of the mountings' image estimates (``texture_relative`` of
+    :func:`gonio.acquisition.characterise_mounting`; the windows of all mountings cover
+    the sample's central area, so the estimates describe one error, common to every
+    value, and are pooled, not averaged down), with the number of images. None when no
+    mounting has an image.
+
+    Examples
+    --------
+    >>> texture_relative({"0": {"texture_relative": 0.003}, "1": {"texture_relative": 0.004}})
+    (0.0035355339059327377, 2)
+    >>> texture_relative({"0": {"error": "no frame"}}) is None
+    True
+    """
+    values = [float(m["texture_relative"]) for m in mountings.values()
+              if isinstance(m, Mapping) and "texture_relative" in m and math.isfinite(float(m["texture_relative"]))]
+    if not values:
+        return None
+    return math.sqrt(float(np.mean(np.square(values)))), len(values)
+
+
+def monitor_ratio_variance(mountings: Mapping[str, Mapping], camera: CameraModel | None,
+                           monitor_noise, monitor_offset: float) -> tuple[float, int]:
+    """Relative variance of the signal-to-monitor ratio beyond the camera's and the monitor's noise.
+
+    Each mounting's monitor series (exposures at one geometry and exposure time, without
+    moving) gives ratios ``r = rate / (monitor - offset)``; their scatter, relative to
+    their mean, minus the camera's temporal noise of each exposure (shot and read noise of
+    the window's mean, ``(K S + sigma_d^2) / N`` in DN^2 with ``S`` the dark-subtracted
+    signal) and the monitor's reading noise, pooled over the series with their degrees of
+    freedom, is the part of the lamp's fluctuation the monitor does not see.
+
+    Parameters
+    ----------
+    mountings : mapping
+        ``metadata["mountings"]`` of a recording.
+    camera : CameraModel or None
+        The camera's characterisation (None: the CCD noise from the series' pixel spread
+        is not known, and the whole scatter is counted).
+    monitor_noise : callable
+        Rms noise of one monitor reading at an exposure [V] (``MonitorDark.noise``).
+    monitor_offset : float
+        The monitor's dark offset [V].
+
+    Returns
+    -------
+    variance, dof : float, int
+        Clipped at 0; ``(nan, 0)`` without a series.
+    """
+    scatter, known, dof = 0.0, 0.0, 0
+    for record in mountings.values():
+        series = record.get("monitor_series") if isinstance(record, Mapping) else None
+        if not series:
+            continue
+        rate = np.asarray(series["signal_rate"], float)
+        lamp = np.asarray(series["monitor"], float) - monitor_offset
+        good = np.isfinite(rate) & np.isfinite(lamp) & (lamp > 0)
+        if good.sum() < 2:
+            continue
+        ratio = rate[good] / lamp[good]
+        level = float(np.mean(ratio))
+        n = int(good.sum())
+        scatter += float(np.sum((ratio - level) ** 2)) / level**2
+        t = float(series["exposure"])
+        noise = np.full(n, (float(monitor_noise(t)) / np.mean(lamp[good])) ** 2)
+        if camera is not None:
+            signal = np.asarray(series["roi_mean"], float)[good] - np.asarray(series["dark_mean"], float)[good]
+            gain = float(series.get("gain", 1.0))
+            k = camera.system_gain * gain / camera.gain_factor
+            ccd = (k * np.clip(signal, 0, None) + camera.dark_variance_at(np.array(t), np.array(gain))) \
+                / float(series["roi_pixels"]) / signal**2
+            noise = noise + ccd
+        known += float(np.sum(noise)) * (n - 1) / n
+        dof += n - 1
+    if dof == 0:
+        return math.nan, 0
+    return max((scatter - known) / dof, 0.0), dof
+
+
+@dataclass(frozen=True)
+class MountingFactors:
+    """The change of the values between mountings of the sample, as the mountings showed it.
+
+    Attributes
+    ----------
+    relative : numpy.ndarray
+        Factors ``F`` (geometries x components) of the relative covariance
+        ``Sigma = F F^T`` of one mounting's values about the mean mounting [-].
+    sigma : numpy.ndarray
+        ``sqrt(diag(Sigma))`` per geometry [-]; geometries not measured in every mounting get
+        the median of the others (and no factor: their part is taken independent).
+    complete : numpy.ndarray of bool
+        Geometries measured in every mounting (those the factors describe).
+    mountings : int
+        Mountings compared.
+    """
+
+    relative: np.ndarray
+    sigma: np.ndarray
+    complete: np.ndarray
+    mountings: int
+
+
+def mounting_factors(values: np.ndarray, noise: np.ndarray) -> MountingFactors:
+    """How the values change between mountings: a low-rank covariance from the mountings' scatter.
+
+    ``values[k, g]`` is mounting ``k``'s value at geometry ``g`` (NaN where not measured)
+    and ``noise[k, g]`` its standard uncertainty from everything that differs between
+    readings (camera, lamp, angle; not the mounting). Over the geometries measured in
+    every mounting the relative deviations ``d_k = x_k / mean_k(x) - 1`` give the sample
+    covariance ``S = D^T D / (M - 1)`` of rank ``M - 1`` at most: its eigenvectors are the
+    patterns in which the mountings differed (a tilt raises one side of a sweep and lowers
+    the other; the texture moves the whole level). Along each, the expected contribution
+    of the readings' own noise is removed (``v^T diag(mean_k (u_k / x)^2) v``); what
+    remains, clipped at 0, is the mounting's covariance ``F F^T``. No shape is assumed, so
+    its correlation between geometries is the one the data show; with few mountings each
+    eigenvalue is known to ``sqrt(2 / (M - 1))`` of itself (docs/acquisition.md, "Mountings").
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> tilt = np.linspace(-1, 1, 40)                        # a pattern: one side up, the other down
+    >>> x = 1 + 0.01 * rng.standard_normal((400, 1)) * tilt    # 400 mountings
+    >>> f = mounting_factors(x, np.full(x.shape, 1e-6))
+    >>> round(float(f.sigma[-1]), 3), round(float(f.sigma[20]), 4)   # 0.01 at the ends, ~0 in the middle
+    (0.01, 0.0003)
+    """
+    values, noise = np.asarray(values, float), np.asarray(noise, float)
+    m = values.shape[0]
+    complete = np.all(np.isfinite(values), axis=0) & np.all(np.isfinite(noise), axis=0)
+    sigma = np.zeros(values.shape[1])
+    if m < 2 or not complete.any():
+        return MountingFactors(np.zeros((values.shape[1], 0)), sigma, complete, m)
+    x = values[:, complete]
+    level = x.mean(axis=0)
+    deviations = x / level - 1.0
+    noise_rel = np.mean((noise[:, complete] / level) ** 2, axis=0)
+    _, singular, vt = np.linalg.svd(deviations, full_matrices=False)
+    eigen = singular**2 / (m - 1)
+    remaining = np.clip(eigen - np.einsum("jg,g,jg->j", vt, noise_rel, vt), 0.0, None)
+    keep = remaining > 0
+    relative = np.zeros((values.shape[1], int(keep.sum())))
+    relative[complete] = (vt[keep] * np.sqrt(remaining[keep])[:, None]).T
+    sigma = np.sqrt(np.sum(relative**2, axis=1))
+    if (~complete).any():
+        sigma[~complete] = float(np.median(sigma[complete]))
+    return MountingFactors(relative, sigma, complete, m)

@@ -51,7 +51,7 @@ def measured(tmp_path_factory):
     text = (ROOT / "protocols" / "curet-205.toml").read_text() + ABSOLUTE
     protocol = protocols.loads(text, source="curet-205-absolute.toml")
     folder = tmp_path_factory.mktemp("curet-emulated") / "plaster_a"
-    with emulated_rig("curet:plaster_a", 0, name="curet-plaster-a") as (rig, emulator, change, meta):
+    with emulated_rig("curet:plaster_a", 0, name="curet-plaster-a", realism="ideal") as (rig, emulator, change, meta):
         result = acquisition.run_protocol(protocol, rig, folder, metadata=meta, clock=emulator.control.now,
                                           warm_up=False, change_sample=lambda which: change(which, 0.99))
     return result, acquisition.reduce_recording(folder), meta

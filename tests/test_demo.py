@@ -73,7 +73,8 @@ def test_interval_widths_are_calibrated_over_emulator_seeds(tmp_path):
     protocol = protocols.loads(text)
     z, redchi = [], []
     for seed in range(1, 7):
-        with emulated_rig("oren-nayar:sigma=30,rho=0.9", seed, name=f"coverage-{seed}") as (rig, emulator, change, meta):
+        with emulated_rig("oren-nayar:sigma=30,rho=0.9", seed, name=f"coverage-{seed}",
+                          realism="ideal") as (rig, emulator, change, meta):
             folder = tmp_path / f"seed-{seed}"
             acquisition.run_protocol(protocol, rig, folder, metadata=meta, clock=emulator.control.now,
                                      change_sample=lambda which: change(which, 0.99))

@@ -71,9 +71,11 @@ def measure(folder: Path, head: str = HEAD, sample: str = SAMPLE, tables: str = 
     protocol = protocols.loads(protocol_text(head, sample, tables, block), source="fields.toml")
     reflectance = standard
     emulated = protocol.emulated or emulated  # as gonio run chooses (gonio.cli.run.emulated_sample)
-    with emulated_rig(emulated, 0, name=f"fields-{folder.parent.name}-{folder.name}") as (rig, emulator, change, meta):
+    with emulated_rig(emulated, 0, name=f"fields-{folder.parent.name}-{folder.name}", realism="ideal",
+                      remount_time=protocol.rig.remount_time) as (rig, emulator, change, meta):
         result = acquisition.run_protocol(protocol, rig, folder, metadata=meta, clock=emulator.control.now,
-                                          warm_up=False, change_sample=lambda w: change(w, reflectance), **options)
+                                          warm_up=False, change_sample=lambda w, **how: change(w, reflectance, **how),
+                                          **options)
     return Run(folder, protocol, protocols.plan(protocol), data.read_points(folder), data.read_darks(folder),
                data.read_metadata(folder), result.instrument_seconds)
 
@@ -96,6 +98,10 @@ CASES: dict[str, tuple[dict, Callable[[Run], Any]]] = {
                         lambda r: r.meta["sample"]["metadata"]),
     "sample.emulated": ({"sample": 'label = "matte"\nemulated = "lambert:rho=0.3"'},
                         lambda r: [round(x, -2) for x in r.sample_rows()["roi_mean"]]),
+    "sample.mountings": ({"sample": 'label = "matte"\nmountings = 2'}, lambda r: list(r.sample_rows()["mounting"])),
+    "sample.rotations": ({"sample": 'label = "matte"\nrotations = [0, 90]'},
+                         lambda r: list(np.nan_to_num(r.sample_rows()["rotation"], nan=-1.0))),
+    "sample.spin": ({"sample": 'label = "matte"\nspin = true'}, lambda r: r.meta["mountings"]["0"]["spin"]),
     "rig.camera_range": ({"tables": "[rig]\ncamera_range = [-20, 20]"}, _status),
     "rig.lamp_theta_range": ({"tables": "[rig]\nlamp_theta_range = [0, 30]"}, _status),
     "rig.lamp_phi_range": ({"tables": "[rig]\nlamp_phi_range = [-10, 10]", "block": BLOCK + "\nphi_i = 30"}, _status),
@@ -106,6 +112,8 @@ CASES: dict[str, tuple[dict, Callable[[Run], Any]]] = {
     "rig.settle_time": ({"tables": "[rig]\nsettle_time = 5"}, lambda r: round(r.instrument_seconds)),
     # an estimate of the plan only: the camera's readout is the camera's (docs/protocols.md)
     "rig.readout_time": ({"tables": "[rig]\nreadout_time = 1"}, lambda r: round(r.plan.estimated_seconds)),
+    # the operator's time to swap the sample for the reference standard and back
+    "rig.remount_time": ({"tables": REFERENCE}, lambda r: round(r.instrument_seconds)),
     "exposure.mode": ({"tables": '[exposure]\nmode = "fixed"\ntime = 0.01'}, _exposures),
     "exposure.time": ({"tables": '[exposure]\nmode = "fixed"\ntime = 0.015'}, _exposures),
     "exposure.brackets": ({"tables": '[exposure]\nmode = "hdr"\nbrackets = [0.004, 0.008]'}, _exposures),
@@ -141,6 +149,7 @@ REFERENCE_VARIANTS = {
     "reference.geometries": REFERENCE.replace("[[40, 0, -10]]", "[[40, 0, -10], [30, 0, 0]]"),
     "reference.reflectance_uncertainty": REFERENCE + "reflectance_uncertainty = 0.01\n",
     "reference.angular_uncertainty": REFERENCE + "angular_uncertainty = 0.01\n",
+    "rig.remount_time": REFERENCE + "[rig]\nremount_time = 5\n",
 }
 
 
@@ -189,7 +198,8 @@ def test_apertures_of_the_protocol_are_used_when_the_rig_reports_none(tmp_path):
 
 
 def test_the_table_covers_every_field_the_parser_knows():
-    known = {f"protocol.{k}" for k in ("name", "description")} | {"sample.label", "sample.metadata", "sample.emulated"}
+    known = {f"protocol.{k}" for k in ("name", "description")} | {f"sample.{k}" for k in (
+        "label", "metadata", "emulated", "mountings", "rotations", "spin")}
     for section, cls in (("rig", protocols.RigLimits), ("exposure", protocols.Exposure), ("darks", protocols.Darks),
                          ("checks", protocols.Checks), ("block", protocols.Block)):
         known |= {f"{section}.{f.name}" for f in dataclasses.fields(cls)}

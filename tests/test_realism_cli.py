@@ -38,13 +38,23 @@ def test_gonio_run_records_the_realism_and_reads_back_the_planned_geometry(tmp_p
     assert np.all(np.abs(points["stage_camera"][ok] - points["view"][ok]) < 0.01)
 
 
-def test_the_default_realism_is_the_ideal_rig():
+def test_the_default_realism_is_a_real_labs_rig():
     args = build_parser().parse_args(["run", "x.toml", "--out", "y"])
-    assert args.realism == "ideal"
-    assert build_parser().parse_args(["demo"]).realism == "ideal"
-    assert build_parser().parse_args(["demo", "--realism", "lab"]).realism == "lab"
-    args = build_parser().parse_args(["emulator", "--seed", "2", "--realism", "lab", "--no-pty"])
+    assert args.realism == "lab"
+    assert build_parser().parse_args(["demo"]).realism == "lab"
+    assert build_parser().parse_args(["demo", "--realism", "ideal"]).realism == "ideal"
+    args = build_parser().parse_args(["emulator", "--seed", "2", "--no-pty"])
     assert build_rig(args).systematics == realism("lab", 2)
+
+
+def test_the_idealised_rig_says_so(tmp_path, capsys):
+    protocol = tmp_path / "small.toml"
+    protocol.write_text(SMALL)
+    assert main(["run", str(protocol), "--out", str(tmp_path / "ideal"), "--realism", "ideal", "--quiet",
+                 "--no-warm-up"]) == 0
+    assert "IDEALISED" in capsys.readouterr().out
+    assert main(["run", str(protocol), "--out", str(tmp_path / "lab"), "--quiet", "--no-warm-up"]) == 0
+    assert "IDEALISED" not in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("spec, words", [("field", "unknown preset 'field'"),

@@ -25,7 +25,7 @@ view = [-70, -50, -30, -15, 15, 30, 50, 70]
 
 def test_lamp_read_back_below_zero_reduces_to_a_valid_direction(tmp_path):
     protocol = protocols.loads(NORMAL, source="normal.toml")
-    with emulated_rig("lambert:rho=0.5", 0, name="normal-incidence") as (rig, emulator, change, meta):
+    with emulated_rig("lambert:rho=0.5", 0, name="normal-incidence", realism="ideal") as (rig, emulator, change, meta):
         acquisition.run_protocol(protocol, rig, tmp_path / "rec", metadata=meta, clock=emulator.control.now,
                                  warm_up=False, change_sample=lambda which: change(which, 0.99))
     points = data.read_points(tmp_path / "rec")

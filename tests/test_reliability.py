@@ -176,13 +176,13 @@ def _interrupted(tmp_path, sample="lambert:rho=0.5", seed=0, lamp_voltage=120.0,
     ({"sample": "oren-nayar:sigma=30,rho=0.9"}, "rig.sample"),
     ({"seed": 3}, "rig.seed"),
     ({"lamp_voltage": 100.0}, "lamp_voltage"),
-    ({"realism": "lab"}, r"rig.realism.spec: recorded 'ideal', now 'lab'"),
-    ({"realism": "ideal:stray_light=0.001"}, r"rig.realism.stray_light: recorded 0.0, now 0.001"),
+    ({"realism": "ideal"}, r"rig.realism.spec: recorded 'lab', now 'ideal'"),
+    ({"realism": "lab:stray_light=0.001"}, r"rig.realism.stray_light: recorded 0.002, now 0.001"),
 ])
 def test_resume_refuses_a_different_experiment_and_names_the_difference(tmp_path, change, words):
     folder = _interrupted(tmp_path)
     before = (folder / "points.csv").read_bytes(), (folder / "metadata.json").read_bytes()
-    options = {"sample": "lambert:rho=0.5", "seed": 0, "lamp_voltage": 120.0, "text": SMALL, "realism": "ideal",
+    options = {"sample": "lambert:rho=0.5", "seed": 0, "lamp_voltage": 120.0, "text": SMALL, "realism": "lab",
                **change}
     protocol = protocols.loads(options["text"], source="resume.toml")
     with emulated_rig(options["sample"], options["seed"], name="resume-other",

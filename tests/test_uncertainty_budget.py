@@ -44,7 +44,7 @@ def _run(tmp_path, text, sample="oren-nayar:sigma=30,rho=0.9", seed=0, name="bud
     protocol = protocols.loads(text, source="budget.toml")
     folder = tmp_path / name
     reflectance = protocol.reference.reflectance if protocol.reference else None
-    with emulated_rig(sample, seed, name=f"{name}-{seed}", **options) as (rig, emulator, change, meta):
+    with emulated_rig(sample, seed, name=f"{name}-{seed}", **{"realism": "ideal", **options}) as (rig, emulator, change, meta):
         acquisition.run_protocol(protocol, rig, folder, metadata=meta, clock=emulator.control.now,
                                  change_sample=lambda which: change(which, reflectance))
     return folder
@@ -137,7 +137,7 @@ view = [-80, -70, -60, -45, -30, 0, 45, 60, 70, 80]
 """
     params = CCDParams(prnu_rel=0.02)
     protocol = protocols.loads(text, source="windows.toml")
-    with emulated_rig("lambert:rho=0.5", 3, name="prnu", ccd_params=params, lamp_params=STEADY,
+    with emulated_rig("lambert:rho=0.5", 3, name="prnu", realism="ideal", ccd_params=params, lamp_params=STEADY,
                       monitor_params=SILENT_MONITOR) as (rig, emulator, change, meta):
         acquisition.run_protocol(protocol, rig, tmp_path / "prnu", metadata=meta, clock=emulator.control.now)
         response = emulator.sensor.response_map

@@ -25,6 +25,7 @@ import serial
 from .camera_firmware import CameraFirmware
 from .ccd import CCDParams, CCDSensor
 from .clock import SimClock
+from .holder import SampleHolder
 from .lamp import Lamp, LampParams
 from .lamp_firmware import LampFirmware
 from .monitor import LampMonitor, MonitorParams
@@ -120,12 +121,16 @@ class Scene:
     systematics : Systematics, optional
         The rig's systematic errors that act on the scene: misalignment (the true
         directions), stray light and the beam profile (default: none).
+    holder : SampleHolder, optional
+        The sample holder: the mounted sample's texture, wedge and seating and the lamp
+        monitor's mismatch (default: a holder with the sample of ``systematics``, seed 0).
     """
 
     def __init__(self, brdf: Brdf, optics: Optics, lamp: Lamp, stage: Esp300Firmware,
                  lamp_irradiance_w_m2: float, rng: np.random.Generator,
-                 systematics: Systematics | None = None) -> None:
+                 systematics: Systematics | None = None, holder: SampleHolder | None = None) -> None:
         self.systematics = systematics or Systematics()
+        self.holder = holder or SampleHolder(self.systematics, 0, optics)
         self.brdf = brdf
         self.optics = optics
         self.lamp = lamp
@@ -141,9 +146,13 @@ class Scene:
         the sample tilt of a misaligned one (:func:`drivers.rig_geometry.misaligned_angles`)."""
         a1, a2, a3 = positions
         theta_r, phi_r = camera_angles(a1)
-        if not self.systematics.misaligned:
+        extra_x, extra_y = self.holder.tilt()
+        if not self.systematics.misaligned and extra_x == 0.0 and extra_y == 0.0:
             return float(a2), float(a3), theta_r, phi_r
-        angles = misaligned_angles(a2, a3, theta_r, phi_r, **self.systematics.alignment())
+        alignment = self.systematics.alignment()
+        alignment["tilt_x"] += extra_x
+        alignment["tilt_y"] += extra_y
+        angles = misaligned_angles(a2, a3, theta_r, phi_r, **alignment)
         return tuple(float(a) for a in angles)  # type: ignore[return-value]
 
     def reflectance_factor(self, positions: tuple[float, ...]) -> float:
@@ -197,15 +206,21 @@ class Scene:
         The geometry is taken at mid-exposure (true axis positions); shape (height, width).
         """
         positions = self.stage.true_positions(t_start + 0.5 * exposure_s)
+        key = tuple(float(p) for p in positions)
         radiance = self.radiance(positions, lamp)
         if not np.isfinite(radiance) or radiance < 0:
             raise ValueError(f"the sample BRDF gave radiance {radiance!r} at axis positions "
                              f"{tuple(round(p, 3) for p in positions)}")
-        theta_i, phi_i, theta_r, _ = self.angles(positions)
+        angles = self.angles(positions)
+        theta_i, phi_i, theta_r, _ = angles
         per_radiance = self.optics.photon_rate_per_radiance() * exposure_s
-        image = self.coverage(theta_r) * (radiance * per_radiance)
+        image = self.coverage(theta_r) * (radiance * self.holder.beam_mismatch() * per_radiance)
         if self.systematics.beam_falloff and theta_r < 90.0:  # at 90 the sample has no image
             image *= self.beam_map(theta_r, theta_i, phi_i)
+        if theta_r < 90.0:
+            texture = self.holder.relative_image(self.brdf, angles, key)
+            if texture is not None:
+                image *= texture
         if self.systematics.stray_light:
             image += self.stray_radiance(lamp) * per_radiance
         return image
@@ -292,12 +307,15 @@ class RigControl:
 
     # -- sample holder ----------------------------------------------------------------
     def mount_sample(self, brdf: Brdf, handling_s: float = 60.0) -> None:
-        """Put another sample on the holder, e.g. a reference standard for absolute BRDF.
+        """Put another object in the holder, e.g. a reference standard for absolute BRDF.
+
+        The object is uniform, flat and seated square (it shares only the holder's tilt);
+        :meth:`remount` puts the rig's own sample back.
 
         Parameters
         ----------
         brdf : callable
-            The new sample's BRDF ``brdf(theta_i, phi_i, theta_r, phi_r)`` [1/sr], degrees.
+            The object's BRDF ``brdf(theta_i, phi_i, theta_r, phi_r)`` [1/sr], degrees.
         handling_s : float
             Simulated time the operator needs to swap samples [s].
         """
@@ -305,6 +323,34 @@ class RigControl:
             raise ValueError(f"brdf must be callable brdf(theta_i, phi_i, theta_r, phi_r), got {brdf!r}")
         scene = self._rig.scene
         scene.brdf = brdf
+        scene.holder.mount_other()
+        scene._reflectance_cache.clear()
+        if handling_s > 0:
+            self.advance(handling_s)
+
+    def remount(self, mounting: int = 0, rotation_deg: float | None = None, spin: bool = False,
+                handling_s: float = 60.0) -> None:
+        """Put the rig's own sample (back) in the holder as mounting ``mounting``.
+
+        Each mounting sits at its own place and tilt within the holder's play and shows the
+        camera its own part of the texture (:mod:`drivers.emulator.texture`), drawn from the
+        rig's seed and the index: the same index gives the same mounting.
+
+        Parameters
+        ----------
+        mounting : int
+            Index of the mounting (0: the first).
+        rotation_deg : float, optional
+            Rotation of the sample about its normal [deg]; None: as the operator happens to
+            put it (uniform over the turn; 0 for the first mounting).
+        spin : bool
+            Spin the sample about the window's centre during the exposures.
+        handling_s : float
+            Simulated time the operator needs [s].
+        """
+        scene = self._rig.scene
+        scene.brdf = self._rig.sample_brdf
+        scene.holder.mount(int(mounting), rotation_deg, bool(spin))
         scene._reflectance_cache.clear()
         if handling_s > 0:
             self.advance(handling_s)
@@ -424,8 +470,9 @@ class EmulatedRig:
                 axis.motor_on = True
         self.sensor = CCDSensor(self.ccd_params, seed=seeds[2], fixed_pattern=fixed_pattern,
                                 nonlinearity=self.systematics.nonlinearity)
+        self.sample_brdf = brdf
         self.scene = Scene(brdf, self.optics, self.lamp, self.stage, lamp_irradiance_w_m2, rngs[3],
-                           systematics=self.systematics)
+                           systematics=self.systematics, holder=SampleHolder(self.systematics, seed, self.optics))
         self.monitor = LampMonitor(monitor_params or MonitorParams(), rngs[7]) if monitor else None
         self.camera = CameraFirmware(self.clock, self.sensor, self.optics, self.scene, rngs[4],
                                      monitor=self.monitor)

@@ -7,7 +7,7 @@ import signal
 import threading
 
 from . import CLIError
-from .realism import REALISM_HELP, REALISM_SYNTAX, parse_realism
+from .realism import DEFAULT_REALISM, IDEAL_RIG_NOTE, REALISM_HELP, REALISM_SYNTAX, parse_realism
 from .samples import SPEC_SYNTAX, parse_sample_spec
 
 DEVICES = ("stage", "camera", "lamp")
@@ -73,8 +73,11 @@ def _run(args: argparse.Namespace) -> int:
     try:
         mode = "real-time" if args.realtime else "fast"
         print(f"gonio emulator: sample {args.sample}, seed {args.seed}, {mode} mode, realism {args.realism}")
-        if not rig.systematics.is_ideal:
-            print("systematics: " + ", ".join(f"{k}={v:.4g}" for k, v in rig.systematics.to_dict().items()))
+        if rig.systematics.is_ideal:
+            print(IDEAL_RIG_NOTE)
+        else:
+            print("departures from the ideal rig: "
+                  + ", ".join(f"{k}={v:.4g}" for k, v in rig.systematics.to_dict().items()))
         print(format_addresses({d: {k: v for k, v in e.items() if k != "url"} for d, e in addresses.items()}))
         print("serving; press Ctrl-C to stop", flush=True)
         while not stop.wait(0.2):
@@ -106,7 +109,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="sample BRDF, e.g. oren-nayar:sigma=30,rho=0.9, surface:kind=vgrooves,sigma=30,rho=0.9 "
                              "(a rendered surface, docs/surfaces.md) or curet:plaster_a (default lambert)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random process (default 0)")
-    parser.add_argument("--realism", default="ideal", metavar=REALISM_SYNTAX, help=REALISM_HELP)
+    parser.add_argument("--realism", default=DEFAULT_REALISM, metavar=REALISM_SYNTAX, help=REALISM_HELP)
     parser.add_argument("--realtime", action="store_true",
                         help="answer with hardware timing (default: fast mode, simulated clock jumps)")
     parser.add_argument("--min-separation", type=float, default=5.0, metavar="DEG",

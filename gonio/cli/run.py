@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Iterator
 import gonio
 
 from . import CLIError
-from .realism import REALISM_HELP, REALISM_SYNTAX, parse_realism, realism_metadata
+from .realism import DEFAULT_REALISM, IDEAL_RIG_NOTE, REALISM_HELP, REALISM_SYNTAX, parse_realism, realism_metadata
 from .samples import parse_sample_spec
 from .paths import check_output_folder
 from .progress import ProgressLine
@@ -40,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "or a CUReT material (e.g. curet:plaster_a); default: the protocol's [sample] emulated, "
                              f"else {DEFAULT_SAMPLE}")
     parser.add_argument("--seed", type=int, default=0, help="emulator seed (default 0)")
-    parser.add_argument("--realism", default="ideal", metavar=REALISM_SYNTAX, help=REALISM_HELP)
+    parser.add_argument("--realism", default=DEFAULT_REALISM, metavar=REALISM_SYNTAX, help=REALISM_HELP)
     parser.add_argument("--stage", help="stage port or URL of a real rig (e.g. /dev/ttyUSB0)")
     parser.add_argument("--camera", help="camera port or URL of a real rig")
     parser.add_argument("--lamp", help="lamp supply port or URL of a real rig")
@@ -53,13 +53,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 @contextmanager
-def emulated_rig(sample: str, seed: int, name: str = "gonio-run", realism: str = "ideal",
-                 **emulator_options) -> Iterator[tuple]:
+def emulated_rig(sample: str, seed: int, name: str = "gonio-run", realism: str = DEFAULT_REALISM,
+                 remount_time: float = 60.0, **emulator_options) -> Iterator[tuple]:
     """An in-process emulated rig with a sample spec as sample, opened through the drivers.
 
     Yields ``(rig, emulator, change_sample, metadata)``: the driver-level Rig, the emulator
-    (for its clock), a function swapping the sample for a Lambertian reference standard
-    and back, and the configuration to store with the recording. ``realism`` is the rig's
+    (for its clock), a function ``change_sample(which, reflectance=None, mounting=None)``
+    swapping the sample for a Lambertian reference standard of that reflectance and back,
+    or (``mounting``, a :class:`gonio.acquisition.SampleMounting`) remounting the sample,
+    each taking the operator ``remount_time`` seconds, and the configuration to store with
+    the recording. ``realism`` is the rig's
     systematic errors as a spec (:func:`parse_realism`); the spec and every magnitude it
     gave are stored in ``metadata["rig"]["realism"]``, so a resume with another realism is
     refused naming the field. ``emulator_options`` go to
@@ -79,11 +82,14 @@ def emulated_rig(sample: str, seed: int, name: str = "gonio-run", realism: str =
     try:
         rig = Rig.open(emulator.url("stage"), emulator.url("camera"), emulator.url("lamp"))
         try:
-            def change_sample(which: str, reflectance: float | None = None) -> None:
+            def change_sample(which: str, reflectance: float | None = None, mounting=None) -> None:
                 if which == "sample":
-                    emulator.control.mount_sample(brdf)
+                    index, rotation, spin = (0, 0.0, False) if mounting is None else (
+                        mounting.index, mounting.rotation, mounting.spin)
+                    emulator.control.remount(index, rotation, spin, handling_s=remount_time)
                 else:
-                    emulator.control.mount_sample(functools.partial(gonio.brdf, "lambert", rho=reflectance))
+                    emulator.control.mount_sample(functools.partial(gonio.brdf, "lambert", rho=reflectance),
+                                                  handling_s=remount_time)
 
             metadata = {"rig": {"kind": "emulator", "sample": sample, "model": parsed.model,
                                 "parameters": parsed.parameters, "seed": seed,
@@ -156,9 +162,11 @@ def _run(args: argparse.Namespace) -> int:
         if all(ports):
             from drivers.rig import Rig
 
-            def prompt(which: str) -> None:
+            def prompt(which: str, mounting: acquisition.SampleMounting | None = None) -> None:
                 what = f"the reference standard ({protocol.reference.label})" if which == "reference" else "the sample"
-                input(f"Mount {what} on the sample holder, then press Enter: ")
+                how = f" ({mounting.instruction()})" if mounting is not None else ""
+                spin = ", switch the holder's spinner on" if mounting is not None and mounting.spin else ""
+                input(f"Mount {what} on the sample holder{how}{spin}, then press Enter: ")
 
             with Rig.open(*ports) as rig:
                 result = acquisition.run_protocol(
@@ -170,12 +178,14 @@ def _run(args: argparse.Namespace) -> int:
         else:
             options = {"monitor": False} if args.no_monitor else {}
             sample = emulated_sample(args.sample, protocol)
-            with emulated_rig(sample, args.seed, realism=args.realism, **options) as (rig, emulator, change_sample,
-                                                                                   metadata):
+            with emulated_rig(sample, args.seed, realism=args.realism, remount_time=protocol.rig.remount_time,
+                              **options) as (rig, emulator, change_sample, metadata):
+                if emulator.systematics.is_ideal:
+                    print(IDEAL_RIG_NOTE)
                 result = acquisition.run_protocol(
                     protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
                     warm_up=not args.no_warm_up,
-                    change_sample=lambda which: change_sample(which, reflectance),
+                    change_sample=lambda which, **how: change_sample(which, reflectance, **how),
                     clock=emulator.control.now, metadata=metadata,
                     progress=_progress_printer(args.quiet),
                 )

@@ -6,13 +6,17 @@ from typing import TYPE_CHECKING, Mapping, NamedTuple
 
 import numpy as np
 
-from ..uncertainty import quantisation_sigma
+from ..uncertainty import MountingFactors, mounting_factors, quantisation_sigma
 from .geometry import AXES, DEFAULT_RESOLUTION, geometry_slopes
 
 if TYPE_CHECKING:
     from .readings import Readings
 
-__all__ = ["scatter_fraction", "Combined", "combine", "combine_groups"]
+__all__ = ["scatter_fraction", "Combined", "combine", "combine_groups", "mounting_scatter", "COMMON_TO_MOUNTINGS"]
+
+#: Components that every mounting's reading of one geometry shares (the window's PRNU, the
+#: texture of the sample's central area): they do not make the mountings differ.
+COMMON_TO_MOUNTINGS = ("prnu", "texture", "linearity")
 
 def scatter_fraction(labels: np.ndarray) -> float:
     """Share of a component's variance that shows in the scatter of readings about their mean.
@@ -133,3 +137,47 @@ def combine_groups(groups: list[np.ndarray], rows: Readings, readback: np.ndarra
                           "stated_std": float(np.sqrt(np.mean(varying**2)))})
     combined = {name: np.array([p[name] for p in parts]) for name in budget}
     return geometry, np.array(values), combined, counts, stats, None if carried is None else np.array(means)
+
+
+def mounting_scatter(groups: list[np.ndarray], rows: Readings, mounting: np.ndarray
+                     ) -> tuple[np.ndarray, MountingFactors] | None:
+    """The ``mounting`` component of every reading, from the scatter between mountings.
+
+    Each geometry's readings of one mounting are combined (:func:`combine`) into that
+    mounting's value, with the uncertainty of everything that differs between mountings'
+    readings but the mounting itself (every component but :data:`COMMON_TO_MOUNTINGS`);
+    :func:`~gonio.uncertainty.mounting_factors` turns the values of every mounting at every
+    geometry into the mounting's relative covariance between geometries.
+
+    Parameters
+    ----------
+    groups : list of arrays
+        Rows of each geometry (every mounting).
+    rows : Readings
+    mounting : numpy.ndarray
+        Mounting of every row.
+
+    Returns
+    -------
+    (component, factors) or None
+        The component of every row (``|value| sigma_g``, 0 outside the groups) and the
+        factors per group; None with fewer than two mountings.
+    """
+    members = np.concatenate(groups) if groups else np.zeros(0, int)
+    labels = np.unique(mounting[members])
+    if labels.size < 2:
+        return None
+    values = np.full((labels.size, len(groups)), np.nan)
+    noise = np.full(values.shape, np.nan)
+    for g, group in enumerate(groups):
+        for k, label in enumerate(labels):
+            own = group[mounting[group] == label]
+            if own.size:
+                mean, parts, *_ = combine(own, rows.value, rows.budget, rows.shared)
+                values[k, g] = mean
+                noise[k, g] = math.sqrt(sum(v**2 for n, v in parts.items() if n not in COMMON_TO_MOUNTINGS))
+    factors = mounting_factors(values, noise)
+    component = np.zeros(len(rows.value))
+    for g, group in enumerate(groups):
+        component[group] = np.abs(rows.value[group]) * factors.sigma[g]
+    return component, factors

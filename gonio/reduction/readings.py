@@ -15,7 +15,9 @@ from ..uncertainty import (
     ccd_components,
     interpolate_drift,
     interpolation_excess,
+    monitor_ratio_variance,
     pooled_excess_variance,
+    texture_relative,
 )
 from .geometry import planned_groups, readback_geometry, geometry_slopes
 
@@ -306,13 +308,14 @@ def readings_of(meta: Mapping[str, Any], points: dict[str, np.ndarray], lamp: st
     rate, budget, correction, jacobian = correct_linearity(meta, points, rate, budget, usable, warnings, linearity)
     monitored = "monitor_dark" in meta and np.isfinite(points["monitor"][usable]).all() and usable.any()
     checked = (usable & (points["block"] == CHECK_BLOCK)).any()
-    sessions = np.where(points["session"] >= 0, points["session"], 0)
+    sessions = _segments(points)
     if lamp == "auto":
         lamp = "monitor" if monitored else ("checks" if checked else "repeats")
     if (lamp == "monitor" and not monitored) or (lamp == "checks" and not checked):
         raise ValueError(f"lamp={lamp!r}: the recording has no {'monitor readings' if lamp == 'monitor' else 'lamp checks'}")
     if lamp == "monitor":
         value, budget = _normalise_by_monitor(points, np.arange(len(rate)), rate, budget, meta["monitor_dark"])
+        budget["monitor_ratio"] = _monitor_ratio(meta, camera, value, points, warnings, consistency)
         unit = "DN/s per V of lamp monitor"
     elif lamp == "checks":
         value, budget, drift_labels = _normalise_by_checks(points, usable, rate, budget, sessions, exposure,
@@ -329,8 +332,62 @@ def readings_of(meta: Mapping[str, Any], points: dict[str, np.ndarray], lamp: st
     shared = {"prnu": np.zeros(len(rate), int), "dark": _dark_labels(points), "angle": _arrival_labels(points)}
     if lamp == "checks":
         shared["lamp_drift"] = drift_labels
+    texture = _texture(meta, value, points, usable, warnings, consistency)
+    if texture is not None:
+        budget["texture"], shared["texture"] = texture, np.zeros(len(rate), int)  # one sample, one window
     return Readings(points, np.flatnonzero(usable), value, budget, warnings, consistency, unit, shared,
                     correction, jacobian)
+
+
+def _monitor_ratio(meta: Mapping[str, Any], camera: CameraModel | None, value: np.ndarray, points,
+                   warnings: list[str], consistency: dict[str, float]) -> np.ndarray:
+    """Every reading's ``monitor_ratio`` component: the lamp's fluctuation the monitor does not
+    see, relative ``sqrt(v / frames)`` with ``v`` from the mountings' monitor series
+    (:func:`~gonio.uncertainty.monitor_ratio_variance`); 0 (and a warning) without a series."""
+    from drivers.monitor import MonitorDark
+
+    dark = MonitorDark.from_dict(meta["monitor_dark"])
+    variance, dof = monitor_ratio_variance(meta.get("mountings", {}), camera, dark.noise, dark.offset)
+    if dof == 0:
+        warnings.append("the lamp monitor's ratio to the sample's irradiance was not measured (no monitor series "
+                        "in the recording): what the monitor does not see of the lamp is not in the budget")
+        return np.zeros(len(value))
+    consistency["monitor_ratio_relative"] = math.sqrt(variance)
+    consistency["monitor_ratio_dof"] = float(dof)
+    return np.abs(value) * math.sqrt(variance) / np.sqrt(np.maximum(points["frames"], 1))
+
+
+def _texture(meta: Mapping[str, Any], value: np.ndarray, points, usable: np.ndarray, warnings: list[str],
+             consistency: dict[str, float]) -> np.ndarray | None:
+    """Every sample reading's ``texture`` component (0 for the reference standard and the lamp
+    checks): the window mean's relative uncertainty from the sample's texture, from the
+    mountings' images (:func:`~gonio.uncertainty.texture_relative`); None, with a warning,
+    when the recording has no image."""
+    sample = usable & (points["block"] != REFERENCE_BLOCK) & (points["block"] != CHECK_BLOCK)
+    if not sample.any():
+        return None
+    estimate = texture_relative(meta.get("mountings", {}))
+    if estimate is None:
+        warnings.append("the sample's texture was not measured (no image of the window in the recording): how much "
+                        "the window's mean differs from the sample's mean reflectance is not in the budget")
+        return None
+    relative, images = estimate
+    consistency["texture_relative"] = relative
+    consistency["texture_images"] = float(images)
+    return np.where(sample, np.abs(value) * relative, 0.0)
+
+
+def _segments(points) -> np.ndarray:
+    """A label per row for the stretches of a recording over which the lamp checks see one
+    level: a session, within it a mounting of the sample (the checks measure the sample,
+    whose level changes when it is remounted). Rows without a mounting (the reference
+    standard) belong to the mounting of the row before them, whose checks bracket them."""
+    session = np.where(points["session"] >= 0, points["session"], 0)
+    mounting = np.asarray(points["mounting"], int).copy()
+    for k in range(len(mounting)):
+        if mounting[k] < 0:
+            mounting[k] = mounting[k - 1] if k > 0 else 0
+    return _labels(list(zip(session.tolist(), mounting.tolist())))
 
 
 def _labels(keys: list) -> np.ndarray:

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..data import RecordingError, _describe_duplicates, duplicated_rows, read_metadata, read_points
 from ..protocols import loads
-from .combining import combine, combine_groups
+from .combining import combine, combine_groups, mounting_scatter
 from .geometry import planned_groups, readback_geometry, readback_or_plan
 from .readings import CHECK_BLOCK, REFERENCE_BLOCK, Readings, readings_of
 from .result import (ANGULAR_BEHAVIOUR, COMMON_CALIBRATION, INCONSISTENT_INCIDENCES, LOW_SIGNAL_SIGMAS,
@@ -183,9 +183,19 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
     if reference is not None:
         _check_incidences(reference.incidences, [k[0] for k in keys], rows.warnings)
     resolution = {int(k): float(v) for k, v in meta.get("stage", {}).get("encoder_resolution_deg", {}).items()}
-    combined = combine_groups([np.array(groups[k]) for k in keys], rows, readback_geometry(points), resolution,
+    member_lists = [np.array(groups[k]) for k in keys]
+    mounting = np.maximum(np.asarray(points["mounting"], int), 0)
+    scatter = _add_mounting_component(member_lists, rows, mounting)
+    combined = combine_groups(member_lists, rows, readback_geometry(points), resolution,
                               carried=rows.linearity_jacobian)
     geometry, values, budget, counts, repeat_stats, jacobian = combined
+    factors = None
+    if scatter is not None:
+        present = np.array([np.unique(mounting[m]).size for m in member_lists], float)
+        factors = values[:, None] * scatter.relative / np.sqrt(present)[:, None]
+        described = scatter.complete
+        budget["mounting"] = np.where(described, np.sqrt(np.sum(factors**2, axis=1)), budget["mounting"])
+        factors[~described] = 0.0
     if jacobian is not None:
         budget["linearity"] = _linearity_component(values, jacobian, rows.linearity.covariance_matrix,
                                                    reference.linearity if reference is not None else None)
@@ -215,12 +225,33 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
                   **({"reference_standard": reference.record} if reference else {})},
         budget=budget, calibration=reference.calibration if reference else {}, flags=flags, excluded=excluded,
         warnings=tuple(rows.warnings), consistency=consistency, unit=rows.unit, repeat_statistics=tuple(repeat_stats),
-        window=window, linearity_jacobian=jacobian,
+        window=window, linearity_jacobian=jacobian, mounting_factors=factors,
         linearity_covariance=None if jacobian is None else rows.linearity.covariance_matrix,
         reference_linearity=reference.linearity if reference else None,
         incidences=reference.incidences if reference else (),
         incidence=_incidence_of([k[0] for k in keys], reference.incidences if reference else ()),
     )
+
+
+def _add_mounting_component(groups: list[np.ndarray], rows: Readings, mounting: np.ndarray):
+    """Add the ``mounting`` component to every reading (shared by the readings of one mounting)
+    when the sample was mounted more than once, and return its factors
+    (:func:`~gonio.reduction.combining.mounting_scatter`); else warn that the mountings'
+    scatter is not in the budget and return None."""
+    found = mounting_scatter(groups, rows, mounting)
+    if found is None:
+        rows.warnings.append(
+            "the sample was mounted once: how much its values change when it is taken out and put back (its "
+            "seating and tilt, the part of its texture the camera sees) is not in the budget. Measure it: add "
+            "'mountings = 4' (or 'rotations = [0, 90, 180, 270]') to [sample] in the protocol; a fit can take "
+            "this mounting's tilt as a parameter (--alignment tilt_x,tilt_y)")
+        return None
+    component, factors = found
+    rows.budget["mounting"] = component
+    rows.shared["mounting"] = mounting
+    rows.consistency["mountings"] = float(factors.mountings)
+    rows.consistency["mounting_median_relative"] = float(np.median(factors.sigma))
+    return factors
 
 
 def _linearity_component(values: np.ndarray, jacobian: np.ndarray, covariance: np.ndarray,
@@ -326,7 +357,23 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
         window=None if any(p.window is None for p in parts) else np.concatenate([p.window for p in parts]),
         linearity_jacobian=jacobian, linearity_covariance=coefficients, reference_linearity=reference,
         incidences=incidences, incidence=_incidence_of(planned_theta_i, incidences),
+        mounting_factors=_joint_factors(parts),
     )
+
+
+def _joint_factors(parts: "list[Reduced]") -> np.ndarray | None:
+    """The joined recordings' mounting factors, block-diagonal (each recording's mountings are
+    its own); None when no part has any."""
+    blocks = [p.mounting_factors if p.mounting_factors is not None else np.zeros((len(p.radiance), 0)) for p in parts]
+    columns = sum(b.shape[1] for b in blocks)
+    if columns == 0:
+        return None
+    out = np.zeros((sum(len(p.radiance) for p in parts), columns))
+    row = column = 0
+    for b in blocks:
+        out[row:row + b.shape[0], column:column + b.shape[1]] = b
+        row, column = row + b.shape[0], column + b.shape[1]
+    return out
 
 
 @dataclass(frozen=True)

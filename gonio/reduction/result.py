@@ -143,6 +143,11 @@ class Reduced:
         The reference standard's irradiance at each lamp polar angle it was measured at.
     incidence : numpy.ndarray or None
         For each value, its entry in ``incidences`` (-1: no reference at its polar angle).
+    mounting_factors : numpy.ndarray or None
+        Factors ``F`` (n, r) of the covariance ``F F^T`` the mountings of the sample give the
+        values [``unit``] (:func:`gonio.uncertainty.mounting_factors`, scaled by each value
+        and divided by the square root of its number of mountings); None when the sample
+        was mounted once.
     """
 
     theta_i: np.ndarray
@@ -171,13 +176,19 @@ class Reduced:
     reference_linearity: np.ndarray | None = None
     incidences: tuple[IncidenceCalibration, ...] = ()
     incidence: np.ndarray | None = None
+    mounting_factors: np.ndarray | None = None
 
     # -- correlations --------------------------------------------------------------------
     def covariance(self) -> np.ndarray:
         """Covariance matrix of the values' errors [``unit``^2].
 
-        Every component is independent between values except PRNU and the linearity
-        correction. The camera windows of a recording are centred and nested (they shrink
+        Every component is independent between values except PRNU, the linearity
+        correction, the sample's texture and its mountings. The texture of the sample's
+        central area, which every window covers, is one error of every value of the sample:
+        values share ``t_i t_j`` (their ``texture`` components). The mountings' scatter
+        enters as the low-rank covariance :attr:`mounting_factors` ``F F^T`` (its diagonal is
+        the ``mounting`` component; values measured in fewer mountings than the others keep
+        theirs independent). The camera windows of a recording are centred and nested (they shrink
         with cos(theta_r) along one image axis), so the PRNU error of a window relative to
         the largest one is a random walk in the window size: values i and j share
         ``p^2 x_i x_j min(a_i, a_j)`` with ``a = 1/N - 1/N_max``
@@ -203,6 +214,12 @@ class Reduced:
             correlation = np.nan_to_num(correlation)  # a window with a = 0 has no PRNU term
             sign = np.sign(self.radiance)
             covariance += np.outer(sign * prnu, sign * prnu) * correlation
+        texture = np.asarray(self.budget.get("texture", np.zeros_like(total)), float)
+        if np.any(texture > 0):
+            signed = np.sign(self.radiance) * texture
+            covariance += np.outer(signed, signed)
+        if self.mounting_factors is not None and self.mounting_factors.size:
+            covariance += self.mounting_factors @ self.mounting_factors.T
         np.fill_diagonal(covariance, total**2 - linear**2)
         if self.linearity_jacobian is not None:
             reference = 0.0 if linearity_reference is None else linearity_reference

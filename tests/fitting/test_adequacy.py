@@ -207,7 +207,7 @@ def test_no_walker_is_stuck_on_lambertian_rig_data(tmp_path):
 
     root = Path(__file__).resolve().parents[2]
     text = (root / "protocols" / "oren-nayar-fig16-plaster.toml").read_text().replace("step = 5", "step = 10")
-    with emulated_rig("lambert:rho=0.8", 4, name="stuck-walkers") as (rig, emulator, change, meta):
+    with emulated_rig("lambert:rho=0.8", 4, name="stuck-walkers", realism="ideal") as (rig, emulator, change, meta):
         acquisition.run_protocol(protocols.loads(text), rig, tmp_path / "rec", metadata=meta,
                                  clock=emulator.control.now, change_sample=lambda which: change(which, 0.99))
     dataset, priors = acquisition.reduce_recording(tmp_path / "rec").fit_inputs()
