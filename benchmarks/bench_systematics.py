@@ -6,7 +6,10 @@ its diffuse reflectance standard (read at every lamp polar angle), on a sample o
 fitted model's own family (``oren-nayar``, sigma = 30 deg, rho = 0.9, ir_weight = 1), so
 that what a fit gets wrong is the systematic's doing.  Each condition switches on one
 systematic error of the ``lab`` preset (docs/emulator.md, "Systematic errors") with its
-seeded magnitude, or all of them (``lab``), or none (``ideal``); the two recordings are
+seeded magnitude, or all of them (``lab``), or the sample's departures (its texture, wedge,
+seating and the monitor's mismatch: ``sample``, docs/emulator.md "The sample as labs meet
+it"), or everything the ``lab`` preset has, the commands' default realism
+(``lab_default``), or none (``ideal``); the two recordings are
 reduced and joined, and ``oren-nayar`` (ir_weight fixed at 1) is fitted twice with the
 relative radiance and calibration prior of ``Reduced.fit_inputs()``:
 
@@ -17,7 +20,9 @@ relative radiance and calibration prior of ``Reduced.fit_inputs()``:
   readings (corrected by the camera's linearity series): the alignment parameters for zero
   offsets and sample tilt, the stray-light parameter for stray light, the linearity
   correction alone for the camera's non-linearity, the calibration per lamp polar angle
-  for the beam profile, all of these for ``lab``; on the ideal rig all of them too (their
+  for the beam profile, all of these for ``lab`` and ``lab_default``, the tilt parameters
+  for the sample's departures (which take the mounting's tilt; its texture and the
+  monitor's mismatch are in the reduction's budget); on the ideal rig all of them too (their
   price), the rig-error parameters alone, and the calibration per incidence alone (its
   price on a uniform beam).
 
@@ -89,6 +94,8 @@ class Condition:
 
 
 LAB = ANGULAR + ("stray_light", "nonlinearity", "beam_falloff")
+#: The sample's departures from the ideal (docs/emulator.md, "The sample as labs meet it").
+SAMPLE_DEPARTURES = ("texture_albedo", "texture_slope", "wedge", "mount_tilt", "monitor_mismatch")
 CONDITIONS = (
     Condition("ideal", "ideal rig", (), "every remedy (their price): the six rig-error parameters, the calibration "
               "per incidence, the linearity correction", ANGULAR, True, "per-incidence"),
@@ -104,8 +111,14 @@ CONDITIONS = (
               "the camera's linearity series: every reading corrected"),
     Condition("beam", "lamp beam profile", ("beam_falloff",), "calibration per lamp polar angle",
               calibration="per-incidence"),
-    Condition("lab", "lab preset (all)", LAB, "all of the above: alignment and stray_light parameters, the "
-              "calibration per incidence, the linearity correction", ANGULAR, True, "per-incidence"),
+    Condition("lab", "the rig's errors (all above)", LAB, "all of the above: alignment and stray_light parameters, "
+              "the calibration per incidence, the linearity correction", ANGULAR, True, "per-incidence",
+              short="rig errors (all)"),
+    Condition("sample", "the sample as labs meet it", SAMPLE_DEPARTURES, "tilt_x, tilt_y (the mounting's tilt: "
+              "holder 0, the wedge, the seat, the texture's mean slope); texture and monitor mismatch in the budget",
+              ANGULAR[3:], short="sample (texture, wedge, seat, monitor)"),
+    Condition("lab_default", "lab preset (the default realism: all)", LAB + SAMPLE_DEPARTURES,
+              "all of the above", ANGULAR, True, "per-incidence", short="lab (all, the default)"),
 )
 
 
@@ -128,7 +141,7 @@ def measure(condition: Condition, seed: int, scratch: Path):
             folder = scratch / f"{condition.key}-{seed}" / protocol.name
             reflectance = protocol.reference.reflectance
             acquisition.run_protocol(protocol, rig, folder, metadata=metadata, clock=emulator.control.now,
-                                     change_sample=lambda which, r=reflectance: change_sample(which, r))
+                                     change_sample=lambda which, r=reflectance, **how: change_sample(which, r, **how))
             folders.append(folder)
     reduced = {linear: acquisition.combine_reduced([acquisition.reduce_recording(f, linearity=linear)
                                                     for f in folders]) for linear in (False, True)}

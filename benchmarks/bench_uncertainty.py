@@ -48,7 +48,9 @@ validated with):
    - ``steady``: no lamp monitor, flicker and drift switched off in the emulated lamp, no
      checks, and a CCD-only budget (``lamp="none"``).
 
-   Target: every ratio within 0.85 to 1.15.
+   Target: every ratio within 0.85 to 1.15, or (the lab rig) within two of its combined
+   sampling errors of 1: there the stated deviation rests mostly on the monitor series'
+   Type A estimate (47 degrees of freedom in one mounting: 10 % of itself).
 
 2. **Reduced chi-square of the true model.** The shipped Fig 16 protocol
    (protocols/oren-nayar-fig16-plaster.toml, with its reference standard) is measured for
@@ -114,7 +116,7 @@ FIG16 = ROOT / "protocols" / "oren-nayar-fig16-plaster.toml"
 #: per mounting and geometry, and the mountings of the chi-square study (A2).
 REMOUNTS, GROUP, REMOUNT_READINGS, CHI2_MOUNTINGS = 40, 4, 2, 4
 #: Samples of the texture study (A3).
-TEXTURE_SEEDS = tuple(range(30))
+TEXTURE_SEEDS = tuple(range(100))
 #: Target band of the median stated relative uncertainty of the shipped Fig 16 sweep (A4).
 STATED_TARGET = (1e-3, 3e-2)
 #: Components every mounting's readings of a geometry share (not in the scatter between
@@ -290,15 +292,31 @@ def geometry_record(reduced: Reduced, folder: Path, lamp: str, geometry: tuple) 
     value = nearest_value(reduced, stats["geometry"])
     ratio = stats["observed_std"] / stats["stated_std"]
     n = int(stats["n"])
+    budget = reading_budget(folder, lamp, theta_i, view)
+    statement = _statement_error(reduced, budget, stats["stated_std"] / abs(value))
+    combined = ratio * math.sqrt(1.0 / (2.0 * (n - 1)) + statement**2)
     return {
         "geometry": name, "planned": [theta_i, phi_i, view], "readback_mean": stats["geometry"], "n": n,
         "value": value, "observed_std": stats["observed_std"], "stated_std": stats["stated_std"],
         "observed_relative": stats["observed_std"] / abs(value), "stated_relative": stats["stated_std"] / abs(value),
         "ratio": ratio, "ratio_sampling_error": ratio / math.sqrt(2.0 * (n - 1)),
         "reduced_chi2": stats["chi2"] / (n - 1),
-        "within_target": RATIO_TARGET[0] <= ratio <= RATIO_TARGET[1],
-        "reading_budget_median_relative": reading_budget(folder, lamp, theta_i, view),
+        "statement_sampling_error": statement, "combined_sampling_error": combined,
+        "within_target": RATIO_TARGET[0] <= ratio <= RATIO_TARGET[1] or abs(ratio - 1.0) <= 2.0 * combined,
+        "reading_budget_median_relative": budget,
     }
+
+
+def _statement_error(reduced: Reduced, budget: Mapping[str, float], stated_relative: float) -> float:
+    """Relative sampling error of a stated standard deviation from the Type A estimate of the
+    lamp monitor's ratio in it (its degrees of freedom in the reduction's consistency
+    checks; 0 where the budget has none): the estimate's ``1 / sqrt(2 dof)`` times that
+    term's share of the stated variance."""
+    dof = reduced.consistency.get("monitor_ratio_dof")
+    ratio = budget.get("monitor_ratio", 0.0)
+    if not dof or not ratio or not stated_relative:
+        return 0.0
+    return (ratio / stated_relative) ** 2 / math.sqrt(2.0 * dof)
 
 
 def repeat_study(configuration: Configuration, repeats: int) -> dict[str, Any]:

@@ -40,6 +40,14 @@ and apertures as built), each run measured with a shortened protocol, reduced wi
    candidate, and the smallest roughness of ``oren-nayar-exact`` that is told from
    Lambert (the choice is not ``lambert``) in >= 95 % of seeds.
 
+**Realism.** ``--realism lab`` (what the commands default to) measures on a real lab's rig
+(misalignment, stray light, non-linearity, beam profile, the sample's texture and wedge,
+a monitor that does not see the sample's beam exactly; docs/emulator.md), and every fit
+and comparison then does what a user must there: the calibration per incidence and the
+rig's errors as parameters (``alignment="all"``, ``stray_light=True``; docs/fitting.md).
+``--realism ideal`` (the default of this script, the study's first figures) is the
+idealised rig. Outputs of the lab study are named with ``_lab``.
+
 Writes docs/benchmarks/calibration.json and calibration_coverage.png,
 calibration_ranks.png, calibration_zscores.png, calibration_confusion.png (``--quick``:
 the same names with ``_quick``). Exits 0 whether or not the targets are met.
@@ -246,8 +254,23 @@ def warm_up() -> None:
     gonio.models.get("oren-nayar-tabulated").at(*geometry)(rho=0.9, sigma=20.0)
 
 
+#: The realism of the runs (``--realism``) and what fits do about it (set by :func:`main`).
+REALISM = {"spec": "ideal"}
+
+
+def rig_errors() -> dict[str, Any]:
+    """What every fit and comparison models of the rig: nothing on the ideal rig; the
+    alignment and the stray light on a rig with systematic errors."""
+    return {} if REALISM["spec"] == "ideal" else {"alignment": "all", "stray_light": True}
+
+
+def calibration() -> str:
+    """The dataset's calibration: one E_0 on the ideal rig, per incidence on a lab's."""
+    return "common" if REALISM["spec"] == "ideal" else "per-incidence"
+
+
 def measure(text: str, sample: str, seed: int, folder: Path) -> float:
-    """Run a protocol on the emulated rig (default noise) into ``folder``; wall time [s]."""
+    """Run a protocol on the emulated rig (the study's realism) into ``folder``; wall time [s]."""
     from gonio import acquisition, protocols
     from gonio.cli.run import emulated_rig
 
@@ -255,9 +278,9 @@ def measure(text: str, sample: str, seed: int, folder: Path) -> float:
     start = time.perf_counter()
     # the rig's name travels in a URL query (gonio-sim://...?rig=NAME), where "+" would read as a space
     name = "".join(c if c.isalnum() or c == "-" else "-" for c in f"calibration-{os.getpid()}-{seed}-{folder.name}")
-    with emulated_rig(sample, seed, name=name) as (rig, emulator, change_sample, metadata):
+    with emulated_rig(sample, seed, name=name, realism=REALISM["spec"]) as (rig, emulator, change_sample, metadata):
         acquisition.run_protocol(protocol, rig, folder, metadata=metadata, clock=emulator.control.now,
-                                 change_sample=lambda which: change_sample(which, REFERENCE_REFLECTANCE))
+                                 change_sample=lambda which, **how: change_sample(which, REFERENCE_REFLECTANCE, **how))
     return time.perf_counter() - start
 
 
@@ -285,13 +308,13 @@ def coverage_run(arm: CoverageArm, seed: int, scratch: Path) -> dict[str, Any]:
     start = time.perf_counter()
     measure_wall = measure(coverage_protocol_text(), sample, arm.seed_offset + seed, folder)
     reduced = reduce_recording(folder)
-    dataset, priors = reduced.fit_inputs()
+    dataset, priors = reduced.fit_inputs(calibration())
     shutil.rmtree(folder, ignore_errors=True)
     fit_priors = {**priors, **{name: Uniform(lo, hi) for name, (lo, hi) in PRIOR.items()}}
     fit_start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
-        result = fit(dataset, arm.fit_model, fixed=dict(arm.fit_fixed), priors=fit_priors, seed=seed)
+        result = fit(dataset, arm.fit_model, fixed=dict(arm.fit_fixed), priors=fit_priors, seed=seed, **rig_errors())
     fit_wall = time.perf_counter() - fit_start
     samples = result.samples()
     rng = np.random.default_rng([TRUTH_STREAM, 7, arm.seed_offset + seed])
@@ -341,12 +364,12 @@ def selection_run(truth: SelectionTruth, seed: int, scratch: Path) -> dict[str, 
     shutil.rmtree(folder, ignore_errors=True)
     start = time.perf_counter()
     measure_wall = measure(SELECTION_PROTOCOL, truth.spec, seed, folder)
-    dataset, priors = reduce_recording(folder).fit_inputs()
+    dataset, priors = reduce_recording(folder).fit_inputs(calibration())
     shutil.rmtree(folder, ignore_errors=True)
     compare_start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        comparison = compare_models(dataset, CANDIDATES, priors=priors)
+        comparison = compare_models(dataset, CANDIDATES, priors=priors, **rig_errors())
     rows = [{"label": r["label"], "model": r["model"], "k": r["k"], "chi2": r["chi2"], "redchi": r["redchi"],
              "chi2_p": r["chi2_p"], "adequate": bool(r["adequate"]), "log_evidence": r["log_evidence"],
              "bic": r["bic"]} for r in comparison.rows]
@@ -936,6 +959,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="seeds of the exact-sample / tabulated-fit arm (default 30; 0 skips it)")
     parser.add_argument("--selection-seeds", type=int, default=None, help="seeds per true sample (default 20)")
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--realism", choices=("ideal", "lab"), default="ideal",
+                        help="the emulated rig: 'ideal' (the study's first figures) or 'lab' (the commands' default: "
+                             "fits model the rig's errors); outputs of 'lab' are named *_lab")
     parser.add_argument("--records", type=Path, default=None,
                         help="JSON-lines file of finished runs (appended; runs already in it are not repeated); "
                              "default a file in the temporary directory, removed after a complete run")
@@ -943,15 +969,16 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="redraw the charts from the JSON a previous run wrote; run nothing")
     args = parser.parse_args(argv)
     quick = args.quick
+    REALISM["spec"] = args.realism
+    suffix = ("_lab" if args.realism == "lab" else "") + ("_quick" if quick else "")
     if args.charts_only:
-        payload = json.loads((OUT / f"calibration{'_quick' if quick else ''}.json").read_text())
-        draw_charts(payload, "_quick" if quick else "")
+        payload = json.loads((OUT / f"calibration{suffix}.json").read_text())
+        draw_charts(payload, suffix)
         print_tables(payload)
         return 0
     n_cov = args.seeds if args.seeds is not None else (4 if quick else 160)
     n_tab = args.tabulated_seeds if args.tabulated_seeds is not None else (2 if quick else 30)
     n_sel = args.selection_seeds if args.selection_seeds is not None else (2 if quick else 20)
-    suffix = "_quick" if quick else ""
     records_path = args.records or Path(tempfile.gettempdir()) / f"gonio-calibration{suffix}-records.jsonl"
     start = time.perf_counter()
     # longest runs first, so that the pool's two workers finish together
@@ -959,7 +986,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     tasks += [("coverage", "closed-form", s) for s in range(1, n_cov + 1)]
     tasks += [("selection", t.key, s) for s in range(1, n_sel + 1) for t in SELECTION_TRUTHS]
     outcomes = run_tasks(tasks, args.workers, records_path)
-    noise_free = noise_free_study() if not quick else None
+    noise_free = noise_free_study() if not quick and args.realism == "ideal" else None
     session = {"kind": "session", "wall_s": time.perf_counter() - start, "tasks": len(tasks),
                "ran": sum(1 for o in outcomes if o.get("session") == "this"), "git": git_state(),
                "finished": time.strftime("%Y-%m-%dT%H:%M:%S")}
@@ -982,9 +1009,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     targets.update(selection["targets_met"])
     payload = {
         "benchmark": "calibration",
-        "command": "python benchmarks/calibration.py" + (" --quick" if quick else ""),
+        "command": "python benchmarks/calibration.py" + (" --quick" if quick else "")
+                   + (f" --realism {args.realism}" if args.realism != "ideal" else ""),
         "arguments": {"coverage_seeds": n_cov, "tabulated_seeds": n_tab, "selection_seeds": n_sel,
-                      "workers": args.workers},
+                      "workers": args.workers, "realism": args.realism},
         "machine": machine(),
         "git": git_state(),
         "design": {
@@ -992,8 +1020,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                                  "(view = -80..80 step 10 at theta_i = 30, 45, 60 deg; reference standard at "
                                  "(30, 0, -10), (45, 0, -10), (60, 0, -10))",
             "selection_protocol": SELECTION_PROTOCOL,
-            "noise": "emulator defaults (gonio.cli.run.emulated_rig): CCD shot, read and dark noise, PRNU, "
-                     "lamp flicker and drift on, lamp monitor on, lamp already warm",
+            "noise": (f"realism {args.realism} (gonio.cli.run.emulated_rig): CCD shot, read and dark noise, PRNU, "
+                      "lamp flicker and drift on, lamp monitor on, lamp already warm"
+                      + ("; the lab rig's misalignment, stray light, non-linearity, beam profile, texture, wedge, "
+                         "remounting and monitor mismatch, fitted with the calibration per incidence and the rig's "
+                         "errors as parameters" if args.realism == "lab" else "")),
             "reference_reflectance": REFERENCE_REFLECTANCE,
             "prior": {k: list(v) for k, v in PRIOR.items()},
             "mcmc": mcmc_design(),

@@ -1145,10 +1145,11 @@ def planned_point_count(protocol: Protocol) -> int:
     return protocol.mountings.count * sum(len(block.views) * block.repeats for block in protocol.blocks)
 
 
-#: Camera time of the texture image taken in every mounting [s]: an automatic exposure at
-#: the characterisation geometry and two frames of the window read out at the camera's
-#: 115200 baud (138 x 138 pixels of 2 bytes each: 3.3 s per frame).
-TEXTURE_IMAGE_SECONDS = 8.0
+#: Camera time of the texture image and monitor series taken in every mounting [s]: an
+#: automatic exposure at the characterisation geometry, two frames of the window read out
+#: at the camera's 115200 baud (138 x 138 pixels of 2 bytes each: 3.3 s per frame) and 48
+#: exposures of the monitor series.
+TEXTURE_IMAGE_SECONDS = 16.0
 
 
 def mounting_seconds(protocol: Protocol) -> float:

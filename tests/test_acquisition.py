@@ -32,10 +32,10 @@ view = [-60, -20, 0, 20, 38, 40, 60]
 """
 
 
-def _run(tmp_path, text, sample="lambert:rho=0.5", seed=0, **kwargs):
+def _run(tmp_path, text, sample="lambert:rho=0.5", seed=0, realism="lab", **kwargs):
     protocol = protocols.loads(text, source="small.toml")
     reflectance = protocol.reference.reflectance if protocol.reference else None
-    with emulated_rig(sample, seed, name=f"test-{seed}-{id(text)}") as (rig, emulator, change, meta):
+    with emulated_rig(sample, seed, name=f"test-{seed}-{id(text)}", realism=realism) as (rig, emulator, change, meta):
         return protocol, acquisition.run_protocol(
             protocol, rig, tmp_path / "rec", metadata=meta, clock=emulator.control.now,
             change_sample=lambda which: change(which, reflectance), **kwargs)
@@ -62,10 +62,12 @@ def test_run_records_every_point_with_refusals_darks_and_reference(tmp_path):
 
 
 def test_reduction_gives_the_lambertian_brdf_through_the_reference_standard(tmp_path):
-    """rho/pi recovered through the rig (Forsyth & Ponce 2.3.3) after calibrating E0 on a
-    0.99 standard: within 0.3 % (aperture averaging of cos(theta_i) and lamp drift are
-    ~0.05 %; 0.3 % leaves room for the noise of one reference point)."""
-    _run(tmp_path, SMALL)
+    """rho/pi recovered through the idealised rig (Forsyth & Ponce 2.3.3) after calibrating
+    E0 on a 0.99 standard: within 0.3 % (aperture averaging of cos(theta_i) and lamp drift
+    are ~0.05 %; 0.3 % leaves room for the noise of one reference point). (On the lab rig
+    the holder's tilt alone moves it by 0.6 % at theta_i = 40 deg: a fit's business,
+    docs/fitting.md.)"""
+    _run(tmp_path, SMALL, realism="ideal")
     reduced = acquisition.reduce_recording(tmp_path / "rec")
     brdf = reduced.brdf()
     np.testing.assert_allclose(brdf.value * np.pi, 0.5, rtol=3e-3)

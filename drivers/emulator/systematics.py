@@ -82,7 +82,7 @@ LAB_SPREAD_DEG = {"view_offset": 0.1, "theta_i_offset": 0.2, "phi_i_offset": 0.3
 #: as labs meet it"): fractions [-], except ``texture_slope``, ``wedge`` and ``mount_tilt``
 #: [deg] and ``texture_length`` [mm].
 LAB_FIXED = {"stray_light": 2e-3, "nonlinearity": 5e-3, "beam_falloff": 0.02,
-             "texture_albedo": 0.03, "texture_slope": 1.0, "texture_length": 1.0, "wedge": 0.1,
+             "texture_albedo": 0.03, "texture_slope": 0.3, "texture_length": 1.0, "wedge": 0.1,
              "mount_tilt": 0.05, "monitor_mismatch": 5e-4}
 #: Index of the ``lab`` preset's random stream among the children of the rig's seed (the
 #: rig itself uses children 0 to 7, so drawing the misalignment changes nothing else).

@@ -32,8 +32,8 @@ renders that, as pure functions of seeded random fields:
   tilts that turn with the sample (its wedge and its seat) average out to first order
   (their second-order residual, ``tilt^2 / 2`` ~ 1e-6, is left out).
 
-Mesoscale shadowing and masking between facets are not modelled: with slopes of a degree
-they matter only within a degree or two of grazing, where the rig refuses to measure.
+Mesoscale shadowing and masking between facets are not modelled: with slopes of a fraction
+of a degree they matter only within a degree of grazing, where the rig refuses to measure.
 
 References
 ----------

@@ -5,11 +5,15 @@
    sigma = 30 deg, rho = 0.9 (Fig 16), not a formula the fit could be handed.
 2. Run the Fig 16 (plane of incidence) and Fig 19 (off-plane) protocols, with a diffuse
    reflectance standard for absolute calibration; every point is recorded as measured.
-3. Reduce the recordings (every value with its uncertainty budget: CCD, lamp monitor,
-   angle; the calibration from the reference standard) and compare the candidate models
-   of :data:`CANDIDATES` under the fit's own likelihood (the model averaged over the rig's
-   apertures, the calibration as a prior, no extra-noise term: the stated uncertainties
-   are the whole noise). The comparison chooses the simplest model that passes the
+3. Reduce the recordings (every value with its uncertainty budget: CCD, lamp monitor and
+   what it does not see, the sample's texture, angle; the calibration from the reference
+   standard) and compare the candidate models of :data:`CANDIDATES` under the fit's own
+   likelihood (the model averaged over the rig's apertures, the calibration as a prior, no
+   extra-noise term: the stated uncertainties are the whole noise). On a rig with
+   systematic errors (the default realism, ``lab``) every candidate gets the rig's errors
+   as parameters (:data:`RIG_ERRORS`: the axes' zero offsets and the sample's tilt, stray
+   light) and the calibration per incidence (docs/fitting.md, "The rig's errors as
+   parameters"). The comparison chooses the simplest model that passes the
    goodness-of-fit test (:mod:`gonio.fitting.selection`).
 4. Fit the chosen model with MCMC, write the fitting report, and print the fitted
    parameters against the truth; a truth outside its 95 % interval is flagged with the
@@ -29,7 +33,7 @@ from pathlib import Path
 
 from . import CLIError
 from .progress import ProgressLine
-from .realism import REALISM_HELP, REALISM_SYNTAX
+from .realism import DEFAULT_REALISM, IDEAL_RIG_NOTE, REALISM_HELP, REALISM_SYNTAX
 
 #: The emulated sample and its true parameters.
 SAMPLE_MODEL = "oren-nayar-exact"
@@ -42,6 +46,9 @@ TRUTH_PARAMETERS = ("rho", "sigma")
 #: approximation (eq 33-35, its interreflection term at full weight) and the table of the
 #: exact model (docs/tabulated.md).
 CANDIDATES = ("lambert", "oren-nayar-qualitative", ("oren-nayar", {"ir_weight": 1.0}), "oren-nayar-tabulated")
+#: What the demo's fits model of a rig with systematic errors: every alignment parameter and
+#: the stray light, with the calibration per incidence (the remedies of docs/fitting.md).
+RIG_ERRORS = {"alignment": "all", "stray_light": True}
 #: The folder (in the output folder) of the chosen model's fit.
 FIT_FOLDER = "fit"
 #: The fit folder of older demos (the layout an old text marker stands for).
@@ -190,8 +197,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help=f"the emulated sample (default {DEFAULT_SAMPLE}, the paper's wall plaster); e.g. "
                              "surface:kind=vgrooves,sigma=30,rho=0.9, a rendered V-groove field (docs/surfaces.md)")
     parser.add_argument("--seed", type=int, default=0, help="emulator and sampler seed (default 0)")
-    parser.add_argument("--realism", default="ideal", metavar=REALISM_SYNTAX,
-                        help=REALISM_HELP + "; the demo's fits do not model them, so they show what ignoring them does")
+    parser.add_argument("--realism", default=DEFAULT_REALISM, metavar=REALISM_SYNTAX,
+                        help=REALISM_HELP + "; with any systematic error the demo's fits take the rig's errors as "
+                             "parameters and calibrate per incidence")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.set_defaults(func=_run)
 
@@ -220,7 +228,7 @@ def sample_truth(sample: str) -> dict[str, float]:
 
 
 def measure_demo(out: Path, seed: int = 0, quiet: bool = True, sample: str = DEFAULT_SAMPLE,
-                 realism: str = "ideal"):
+                 realism: str = DEFAULT_REALISM):
     """Measure the demo protocols on the emulated sample into ``out/recordings``.
 
     Parameters
@@ -234,8 +242,8 @@ def measure_demo(out: Path, seed: int = 0, quiet: bool = True, sample: str = DEF
     sample : str
         The sample spec (default: the paper's wall plaster, :data:`DEFAULT_SAMPLE`).
     realism : str
-        The rig's systematic errors (:func:`gonio.cli.realism.parse_realism`; default the
-        ideal rig).
+        The rig's departures from the ideal (:func:`gonio.cli.realism.parse_realism`;
+        default a real lab's rig).
 
     Returns
     -------
@@ -250,6 +258,8 @@ def measure_demo(out: Path, seed: int = 0, quiet: bool = True, sample: str = DEF
     _say(quiet, f"gonio demo: emulated rig with sample {sample} (seed {seed}, realism {realism})")
     with emulated_rig(sample, seed, name=f"gonio-demo-{seed}", realism=realism) as (rig, emulator, change_sample,
                                                                                    metadata):
+        if emulator.systematics.is_ideal:
+            _say(quiet, IDEAL_RIG_NOTE)
         for name in PROTOCOLS:
             protocol = protocols.load(protocols_folder() / name)
             folder = out / "recordings" / protocol.name
@@ -258,7 +268,7 @@ def measure_demo(out: Path, seed: int = 0, quiet: bool = True, sample: str = DEF
             reflectance = protocol.reference.reflectance if protocol.reference else None
             result = acquisition.run_protocol(
                 protocol, rig, folder, metadata=metadata, clock=emulator.control.now,
-                change_sample=lambda which, r=reflectance: change_sample(which, r),
+                change_sample=lambda which, r=reflectance, **how: change_sample(which, r, **how),
                 progress=None if line is None else (lambda p, line=line: line.update(p.done, p.total, p.eta_wall)),
             )
             _say(quiet, "  " + result.summary())
@@ -267,14 +277,27 @@ def measure_demo(out: Path, seed: int = 0, quiet: bool = True, sample: str = DEF
     return acquisition.combine_reduced([acquisition.reduce_recording(f) for f in folders], label=label)
 
 
-def fit_demo(reduced, seed: int = 0, quiet: bool = True):
+def rig_errors_modelled(realism: str) -> bool:
+    """Whether the demo's fits take the rig's errors as parameters: on any rig with a
+    systematic error (misalignment, stray light, non-linearity, beam profile, wedge), not on
+    the ideal one."""
+    from .realism import parse_realism
+
+    systematics = parse_realism(realism, 0)
+    return not systematics.only("view_offset", "theta_i_offset", "phi_i_offset", "tilt_x", "tilt_y", "stray_light",
+                                "nonlinearity", "beam_falloff", "wedge", "mount_tilt").is_ideal
+
+
+def fit_demo(reduced, seed: int = 0, quiet: bool = True, realism: str = DEFAULT_REALISM):
     """Compare the :data:`CANDIDATES` and fit the chosen model with MCMC, as the demo does.
 
     The dataset is relative radiance with the reference-standard prior on its scale, the
     models are averaged over the rig's apertures. No extra-noise term: the lamp monitor
     removes the lamp's flicker and drift and the reduction's budget states every remaining
     noise, so the least-squares reduced chi-square of an adequate model is near 1
-    (docs/acquisition.md); the comparison and the fit share this likelihood.
+    (docs/acquisition.md); the comparison and the fit share this likelihood. On a rig with
+    systematic errors (:func:`rig_errors_modelled`) the dataset is calibrated per
+    incidence and every fit has the rig's errors as parameters (:data:`RIG_ERRORS`).
 
     Returns
     -------
@@ -283,10 +306,14 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True):
     """
     from gonio.fitting import ConvergenceWarning, compare_models, fit
 
-    dataset, priors = reduced.fit_inputs()
+    modelled = rig_errors_modelled(realism)
+    errors = RIG_ERRORS if modelled else {}
+    dataset, priors = reduced.fit_inputs("per-incidence" if modelled else "common")
     _say(quiet, f"comparing models on {dataset.n} {dataset.quantity} values "
-                f"(averaged over the rig's apertures {dataset.metadata.get('aperture_sr')} sr)")
-    comparison = compare_models(dataset, CANDIDATES, priors=priors)
+                f"(averaged over the rig's apertures {dataset.metadata.get('aperture_sr')} sr"
+                + ("; the rig's errors as parameters: alignment (5), stray light; calibrated per incidence)"
+                   if modelled else ")"))
+    comparison = compare_models(dataset, CANDIDATES, priors=priors, **errors)
     _say(quiet, comparison.summary())
     chosen = comparison.row(comparison.chosen)
     _say(quiet, f"fitting {comparison.chosen} with MCMC")
@@ -298,7 +325,8 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)  # reported in the result, loudly
-        result = fit(dataset, chosen["model"], fixed=chosen["fixed"], priors=priors, seed=seed, progress=progress)
+        result = fit(dataset, chosen["model"], fixed=chosen["fixed"], priors=priors, seed=seed, progress=progress,
+                     **errors)
     return result, comparison
 
 
@@ -313,7 +341,7 @@ def _run(args: argparse.Namespace) -> int:
     truth = sample_truth(args.sample)
     out = _prepare_output(args.out)
     reduced = measure_demo(out, args.seed, args.quiet, args.sample, args.realism)
-    result, comparison = fit_demo(reduced, args.seed, args.quiet)
+    result, comparison = fit_demo(reduced, args.seed, args.quiet, args.realism)
     fit_folder = out / FIT_FOLDER
     result.save(fit_folder)
     (fit_folder / COMPARISON_FILE).write_text(comparison.summary() + "\n")
@@ -341,23 +369,22 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def truth_table(result, truth: dict[str, float] | None = None, sample: str = DEFAULT_SAMPLE,
-                realism: str = "ideal") -> str:
+                realism: str = DEFAULT_REALISM) -> str:
     """Fitted parameters against the emulator's truth, with the 95 % interval.
 
     ``truth`` defaults to :data:`TRUTH` (the default sample's).  A truth outside its
     interval is flagged with the bias (median - truth) in units of the interval's
-    half-width on that side, blamed on the fitted model on the ideal rig and on the rig's
-    systematic errors (``realism``, not modelled by the demo's fits) otherwise; a
-    parameter the fitted model does not have is named as such.
+    half-width on that side, blamed on the fitted model: on the ideal rig the model alone,
+    on a rig with systematic errors the model with the rig's errors as parameters (the
+    demo's fits, :func:`rig_errors_modelled`); a parameter the fitted model does not have
+    is named as such.
     """
-    from .realism import parse_realism
-
     truth = TRUTH if truth is None else truth
     described = SAMPLE_MODEL if sample == DEFAULT_SAMPLE else sample
     cause = (f"{result.model} does not reproduce the sample's {described} within these data's noise"
-             if parse_realism(realism, 0).is_ideal else
-             f"the rig's systematic errors (--realism {realism}) are not modelled by the demo's fits "
-             "(docs/fitting.md, \"The rig's errors as parameters\")")
+             if not rig_errors_modelled(realism) else
+             f"{result.model} with the rig's errors as parameters (--realism {realism}) does not reproduce the "
+             f"sample's {described} within these data's noise")
     rows = {row["name"]: row for row in result.parameter_rows()}
     lines = ["parameter   truth     fitted (median)   95 % interval           truth inside"]
     if not truth:

@@ -26,6 +26,16 @@ Lambert is the same loop with the coefficients (rho/pi, 0, 0).  The lamp sub-ray
 the lamp direction only and the camera sub-rays on the camera direction only, so a
 recording's three lamp directions cost 3 x 7 sub-rays per walker, not N x 7.
 
+``oren-nayar-tabulated`` (the exact V-cavity model read from its table) is the same loop
+with the table read at every (lamp, camera) pair instead of eq 33-35
+(:func:`rig_radiance_table`): each walker's table is first reduced along the roughness
+axis at its sigma (:func:`gonio.models.tabulated.interpolation.contract_first_axis`, four
+slabs), then every pair's table coordinates and tricubic sum are those of the model's own
+compiled kernel (:func:`gonio.models.tabulated.kernel.table_coordinates`, the same
+``_tricubic_into``), and ``f = rho f1 + rho^2 f2`` with
+``f1, f2`` from the logarithms exactly as :class:`gonio.models.tabulated.oren_nayar.OrenNayarTable`
+takes them.
+
 The arithmetic of eq 33-35 is the models' own scalar form
 (:func:`gonio.models.oren_nayar.compiled.eq33_35`), the cubature's points those of
 :func:`gonio.instrument.cone_offsets`; the rotations are those of
@@ -45,19 +55,30 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from drivers.rig_geometry import ALIGNMENT_ERRORS
 from gonio.instrument import cone_offsets
 from gonio.models import Model
 from gonio.models._compiled import JIT_OPTIONS
 from gonio.models.oren_nayar.compiled import eq33_35
+from gonio.models.tabulated.coordinates import Y_OFFSET, Y_SLOPE, y_coordinate
+from gonio.models.tabulated.kernel import _tricubic_into
+from gonio.models.tabulated.oren_nayar_table import F2_FLOOR
 
 from .rig_errors import COMPILED_MODELS
 
-__all__ = ["CompiledRigRadiance", "rig_radiance"]
+__all__ = ["CompiledRigRadiance", "rig_radiance", "rig_radiance_table"]
+
+#: The model whose table the compiled loop reads (:func:`rig_radiance_table`).
+TABULATED = "oren-nayar-tabulated"
 
 _RAD = math.pi / 180.0
+_HALF_PI = 0.5 * math.pi
+_Y_FLOOR = float(y_coordinate(0.0))
+#: The tabulated loop's options: walkers in parallel threads (measured on two cores,
+#: docs/fitting.md "The rig's errors as parameters").
+JIT_OPTIONS_PARALLEL = dict(JIT_OPTIONS, parallel=True)
 #: cos(theta_i) of an axis at or below which the aperture average is not weighted by the
 #: sub-rays' cosines (as :class:`gonio.instrument._SubRays` does at grazing incidence).
 _GRAZING_COS = 1e-12
@@ -195,6 +216,156 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
             out[w, n] = total * lamp_cos[lamp] if grazing else total
 
 
+@njit(**JIT_OPTIONS)
+def _table_fields(rays, count: int, out) -> None:
+    """Per sub-ray quantities of the table's coordinates (:func:`gonio.models.tabulated.kernel.table_coordinates`),
+    computed once per direction instead of once per pair: ``z = max(pi/2 - theta, 0)``, the
+    y coordinate ``log(z + Y_OFFSET) + Y_SLOPE z``, ``sin`` and ``cos`` of ``theta / 2``."""
+    for k in range(count):
+        for j in range(7):
+            theta = rays[k, j, 0]
+            z = max(_HALF_PI - theta, 0.0)
+            out[k, j, 0] = z
+            out[k, j, 1] = math.log(z + Y_OFFSET) + Y_SLOPE * z
+            out[k, j, 2] = math.sin(0.5 * theta)
+            out[k, j, 3] = math.cos(0.5 * theta)
+
+
+@njit(**JIT_OPTIONS)
+def _pair_coordinates(t_i, z_i, y_i, sh_i, ch_i, t_r, z_r, y_r, sh_r, ch_r, cos_dphi):
+    """(y, zeta, t) of a (lamp, camera) sub-ray pair from their per-ray fields
+    (:func:`_table_fields`): :func:`gonio.models.tabulated.kernel.table_coordinates` with
+    ``sin^2(dphi / 2) = (1 - cos dphi) / 2`` and the half-angle sines of ``alpha - beta`` and
+    ``alpha + beta`` from those of the two polar angles."""
+    if t_i >= t_r:
+        alpha, beta, z_alpha, z_beta, y_alpha, y = t_i, t_r, z_i, z_r, y_i, y_r
+        s_a, c_a, s_b, c_b = sh_i, ch_i, sh_r, ch_r
+    else:
+        alpha, beta, z_alpha, z_beta, y_alpha, y = t_r, t_i, z_r, z_i, y_r, y_i
+        s_a, c_a, s_b, c_b = sh_r, ch_r, sh_i, ch_i
+    if z_beta > 0.0:
+        zeta = 1.0 - math.sqrt(max(1.0 - 0.5 * (z_alpha / z_beta + (y_alpha - _Y_FLOOR) / (y - _Y_FLOOR)), 0.0))
+    else:
+        zeta = 1.0
+    limit = min(max(0.5 * (1.0 - cos_dphi), 0.0), 1.0)
+    half_diff = s_a * c_b - c_a * s_b
+    half_sum = s_a * c_b + c_a * s_b
+    half = half_diff * half_diff * (1.0 - limit) + half_sum * half_sum * limit
+    phase = 2.0 * math.asin(math.sqrt(min(max(half, 0.0), 1.0)))
+    if beta > 1e-6:
+        p = (phase - (alpha - beta)) / (2.0 * beta)
+    else:
+        p = limit
+    p = min(max(p, 0.0), 1.0)
+    return y, zeta, 0.5 * (math.sqrt(p) + 1.0 - math.sqrt(math.sqrt(1.0 - p)))
+
+
+@njit(**JIT_OPTIONS)
+def _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camera_rule, ring, lamp_rays, camera_rays,
+                 lamp_cos, camera_cos, w) -> None:
+    """The sub-rays of every distinct lamp and camera direction at walker ``w``'s alignment
+    (as :func:`rig_radiance` computes them)."""
+    swing = alignment[w, 0] * _RAD
+    cs, ss = math.cos(swing), math.sin(swing)
+    ta, tb = alignment[w, 3] * _RAD, alignment[w, 4] * _RAD
+    ca, sa, cb, sb = math.cos(ta), math.sin(ta), math.cos(tb), math.sin(tb)
+    for k in range(lamp_directions.shape[0]):
+        t = (lamp_directions[k, 0] + alignment[w, 1]) * _RAD
+        p = (lamp_directions[k, 1] + alignment[w, 2]) * _RAD
+        x, y, z = _to_sample(math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t), ca, sa, cb, sb)
+        lamp_cos[k] = _cone_rays(x, y, z, lamp_rule[0], lamp_rule[1], ring[0], ring[1], lamp_rays[k])
+    for k in range(camera_directions.shape[0]):
+        t, p = camera_directions[k, 0] * _RAD, camera_directions[k, 1] * _RAD
+        cx, cy, cz = math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)
+        x, y, z = _to_sample(cx * cs + cz * ss, cy, cz * cs - cx * ss, ca, sa, cb, sb)
+        camera_cos[k] = _cone_rays(x, y, z, camera_rule[0], camera_rule[1], ring[0], ring[1], camera_rays[k])
+
+
+@njit(**JIT_OPTIONS)
+def _reduce_along_sigma(table, first: int, s_weights, out) -> None:
+    """``out = sum_k s_weights[k] table[first + k]``: the table at one roughness
+    (:func:`gonio.models.tabulated.interpolation.contract_first_axis`, flattened)."""
+    size = out.shape[0]
+    for m in range(size):
+        out[m] = (s_weights[0] * table[first, m] + s_weights[1] * table[first + 1, m]
+                  + s_weights[2] * table[first + 2, m] + s_weights[3] * table[first + 3, m])
+
+
+@njit(**JIT_OPTIONS_PARALLEL)
+def rig_radiance_table(lamp_directions, camera_directions, lamp_of, camera_of, alignment, table, s_first, s_weights,
+                       rho, lambertian, shape, lo, step, lamp_rule, camera_rule, ring, weights, out) -> None:
+    """:func:`rig_radiance` for ``oren-nayar-tabulated``: the table read at every sub-ray pair.
+
+    Walkers are independent and run in parallel (numba ``prange``).
+
+    Parameters
+    ----------
+    table : numpy.ndarray
+        (S, ny * nz * nt * 2) the table of (log pi f1, log pi (f2 + F2_FLOOR f1)) per roughness
+        node, each node's (y, zeta, t, component) slab flattened.
+    s_first, s_weights : numpy.ndarray
+        (W,) first roughness node and (W, 4) the cubic weights of each walker's sigma.
+    rho : numpy.ndarray
+        (W,) albedo.
+    lambertian : numpy.ndarray of bool
+        (W,) walkers at sigma = 0, where the model is Lambert exactly (footnote 10).
+    shape : tuple of int
+        (ny, nz, nt, 2) of a slab.
+    lo, step : numpy.ndarray
+        (3,) first node and spacing of the table's geometry axes.
+
+    The other parameters and ``out`` as :func:`rig_radiance`.
+    """
+    for w in prange(alignment.shape[0]):
+        lamp_rays = np.empty((lamp_directions.shape[0], 7, 6))
+        camera_rays = np.empty((camera_directions.shape[0], 7, 6))
+        lamp_fields = np.empty((lamp_directions.shape[0], 7, 4))
+        camera_fields = np.empty((camera_directions.shape[0], 7, 4))
+        lamp_cos = np.empty(lamp_directions.shape[0])
+        camera_cos = np.empty(camera_directions.shape[0])
+        logs = np.empty((2, 1))
+        slab = np.empty(table.shape[1])
+        _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camera_rule, ring, lamp_rays,
+                     camera_rays, lamp_cos, camera_cos, w)
+        _table_fields(lamp_rays, lamp_directions.shape[0], lamp_fields)
+        _table_fields(camera_rays, camera_directions.shape[0], camera_fields)
+        if not lambertian[w]:
+            _reduce_along_sigma(table, s_first[w], s_weights[w], slab)
+        r = rho[w]
+        for n in range(lamp_of.shape[0]):
+            lamp, camera = lamp_of[n], camera_of[n]
+            if lamp_cos[lamp] < 0.0 or camera_cos[camera] < 0.0:  # an axis below the horizon
+                out[w, n] = 0.0
+                continue
+            grazing = lamp_cos[lamp] <= _GRAZING_COS
+            total = 0.0
+            for i in range(7):
+                c_i = lamp_rays[lamp, i, 4]
+                if c_i < 0.0:  # a sub-ray below the horizon reflects nothing
+                    continue
+                weight = weights[i] * (1.0 if grazing else c_i)
+                cp_i, sp_i = lamp_rays[lamp, i, 1], lamp_rays[lamp, i, 2]
+                for j in range(7):
+                    c_r = camera_rays[camera, j, 4]
+                    if c_r < 0.0:
+                        continue
+                    if lambertian[w]:
+                        f = r / math.pi
+                    else:
+                        cos_dphi = cp_i * camera_rays[camera, j, 1] + sp_i * camera_rays[camera, j, 2]
+                        y, zeta, t = _pair_coordinates(
+                            lamp_rays[lamp, i, 0], lamp_fields[lamp, i, 0], lamp_fields[lamp, i, 1],
+                            lamp_fields[lamp, i, 2], lamp_fields[lamp, i, 3],
+                            camera_rays[camera, j, 0], camera_fields[camera, j, 0], camera_fields[camera, j, 1],
+                            camera_fields[camera, j, 2], camera_fields[camera, j, 3], cos_dphi)
+                        _tricubic_into(slab, shape, lo, step, y, zeta, t, logs, 0)
+                        f1 = math.exp(logs[0, 0])
+                        f2 = max(math.exp(logs[1, 0]) - F2_FLOOR * f1, 0.0)
+                        f = (r * f1 + r * r * f2) / math.pi
+                    total += weight * weights[j] * f
+            out[w, n] = total * lamp_cos[lamp] if grazing else total
+
+
 def _rule(solid_angle_sr: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The cubature of a cone (:func:`gonio.instrument.cone_offsets`) as the kernel takes it:
     cos and sin of the points' angles from the axis, (2, 7); cos and sin of their angles
@@ -209,8 +380,9 @@ class CompiledRigRadiance:
     Parameters
     ----------
     base : Model
-        ``oren-nayar`` or ``lambert`` (:data:`gonio.fitting.rig_errors.COMPILED_MODELS`:
-        eq 33-35 and its sigma = 0 limit).
+        ``oren-nayar``, ``lambert`` or ``oren-nayar-tabulated``
+        (:data:`gonio.fitting.rig_errors.COMPILED_MODELS`: eq 33-35 and its sigma = 0 limit,
+        and the exact model's table).
     geometry : tuple of numpy.ndarray
         Recorded (theta_i, phi_i, theta_r, phi_r) [deg], flat, equal length.
     apertures : (float, float)
@@ -236,6 +408,11 @@ class CompiledRigRadiance:
         self._camera, self._camera_of = _distinct(tr, pr)
         (lamp_rule, self._ring, self._weights), (camera_rule, _, _) = _rule(apertures[0]), _rule(apertures[1])
         self._rules = (lamp_rule, camera_rule)
+        if base.name == TABULATED:
+            from gonio.models.tabulated.oren_nayar import table
+
+            self._table = table().lookup
+            return
         probe = base.at(30.0, 0.0, 10.0, 180.0).linear_form()
         self._coefficients = probe.coefficients
 
@@ -250,19 +427,40 @@ class CompiledRigRadiance:
     def __call__(self, params: Mapping[str, Any], alignment: Mapping[str, Any]) -> np.ndarray:
         """``<f cos theta_i>`` [1/sr], shape (W, N) for parameter and alignment columns of
         W rows (shape (W, 1)), (N,) when every value is a scalar."""
-        coefficients = self.coefficients(params)
-        rows = max([coefficients.shape[0]] + [np.size(v) for v in alignment.values()])
+        if self.base.name == TABULATED:
+            rows = max([np.size(v) for v in (*params.values(), *alignment.values())] + [1])
+        else:
+            coefficients = self.coefficients(params)
+            rows = max([coefficients.shape[0]] + [np.size(v) for v in alignment.values()])
         offsets = np.zeros((rows, len(ALIGNMENT_ERRORS)))
         for k, name in enumerate(ALIGNMENT_ERRORS):
             if name in alignment:
                 offsets[:, k] = np.broadcast_to(np.reshape(np.asarray(alignment[name], float), -1), (rows,))
-        coefficients = np.ascontiguousarray(np.broadcast_to(coefficients, (rows, 3)))
         out = np.empty((rows, self.n))
-        rig_radiance(self._lamp, self._camera, self._lamp_of, self._camera_of, offsets, coefficients,
-                     self._rules[0], self._rules[1], self._ring, self._weights, out)
+        if self.base.name == TABULATED:
+            self._tabulated(params, rows, offsets, out)
+        else:
+            coefficients = np.ascontiguousarray(np.broadcast_to(coefficients, (rows, 3)))
+            rig_radiance(self._lamp, self._camera, self._lamp_of, self._camera_of, offsets, coefficients,
+                         self._rules[0], self._rules[1], self._ring, self._weights, out)
         if all(np.ndim(v) == 0 for v in (*params.values(), *alignment.values())):
             return out[0]
         return out
+
+    def _tabulated(self, params: Mapping[str, Any], rows: int, offsets: np.ndarray, out: np.ndarray) -> None:
+        """:func:`rig_radiance_table` for parameter rows of ``rho`` and ``sigma`` [deg]."""
+        from gonio.models.tabulated.coordinates import sigma_coordinate
+        from gonio.models.tabulated.interpolation import axis_stencil
+
+        column = lambda name: np.broadcast_to(np.reshape(np.asarray(params[name], float), -1), (rows,))  # noqa: E731
+        rho, sigma = np.ascontiguousarray(column("rho")), column("sigma")
+        lookup = self._table
+        first, s_weights = axis_stencil(lookup.axes[3], np.asarray(sigma_coordinate(sigma), float))
+        flat = lookup.values.reshape(lookup.values.shape[0], -1)
+        rig_radiance_table(self._lamp, self._camera, self._lamp_of, self._camera_of, offsets, flat,
+                           np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(s_weights), rho,
+                           np.ascontiguousarray(sigma == 0.0), tuple(int(n) for n in lookup.values.shape[1:]),
+                           lookup.lo, lookup.step, self._rules[0], self._rules[1], self._ring, self._weights, out)
 
 
 def _distinct(theta: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

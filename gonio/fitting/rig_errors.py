@@ -92,7 +92,7 @@ STRAY_LIGHT = Param("stray_light", "-", 0.0, (0.0, 0.05),
 #: Every rig-error parameter.
 RIG_ERROR_NAMES = ALIGNMENT_NAMES + (STRAY_LIGHT.name,)
 #: Models whose misaligned aperture average has a compiled path (gonio.fitting.compiled_rig).
-COMPILED_MODELS = ("oren-nayar", "lambert")
+COMPILED_MODELS = ("oren-nayar", "lambert", "oren-nayar-tabulated")
 
 
 def parse_alignment(names: str | Iterable[str] | None) -> tuple[str, ...]:
@@ -213,6 +213,38 @@ def incidence_weights(metadata: Mapping[str, Any]) -> np.ndarray:
     return np.where(matched, within[None, :], 0.0)
 
 
+#: Largest distance [deg] of a prediction's lamp polar angle from the calibrated incidence it
+#: is matched to (a readback differs from its planned angle by the stage's tolerance).
+INCIDENCE_MATCH_DEG = 1.0
+
+
+def incidences_at(metadata: Mapping[str, Any], theta_i: np.ndarray) -> Mapping[str, Any]:
+    """The dataset metadata for predictions at lamp polar angles ``theta_i`` [deg] other
+    than the dataset's own (a report's curves): each is calibrated by the incidence the
+    reference standard was read at nearest to it, within :data:`INCIDENCE_MATCH_DEG`;
+    metadata whose ``incidence_theta_i`` already has one angle per value is returned as is.
+
+    Raises
+    ------
+    ValueError
+        A lamp angle farther than :data:`INCIDENCE_MATCH_DEG` from every calibrated incidence.
+    """
+    theta_i = np.asarray(theta_i, float).reshape(-1)
+    given = metadata.get("incidence_theta_i")
+    if given is not None and np.size(given) == theta_i.size:
+        return metadata
+    record = metadata.get("reference_standard") or {}
+    angles = np.unique(np.round(np.asarray(record.get("incidence", []), float), 6))
+    if angles.size == 0:
+        return metadata
+    nearest = angles[np.argmin(np.abs(theta_i[:, None] - angles[None, :]), axis=1)]
+    far = np.abs(nearest - theta_i) > INCIDENCE_MATCH_DEG
+    if far.any():
+        raise ValueError(f"calibration per incidence: no reference reading within {INCIDENCE_MATCH_DEG:g} deg of "
+                         f"theta_i = {theta_i[far][0]:g} deg (the readings are at {angles.tolist()} deg)")
+    return {**metadata, "incidence_theta_i": nearest.tolist()}
+
+
 class RigPrediction:
     """The measured quantity of a misaligned rig with stray light at recorded geometries
     (module docstring).
@@ -233,7 +265,7 @@ class RigPrediction:
     compiled : bool
         Evaluate misaligned geometries with the compiled kernel
         (:mod:`gonio.fitting.compiled_rig`) when the model is one it knows (``oren-nayar``,
-        ``lambert``) seen through the rig's apertures: the same values to rounding, about
+        ``lambert``, ``oren-nayar-tabulated``) seen through the rig's apertures: the same values to rounding, about
         15 times faster, after loading numba (worth it for a fit, which evaluates the rig
         thousands of times; not for one prediction).
     """
@@ -267,6 +299,7 @@ class RigPrediction:
         #: weights of the reference readings, (N, K): those of its lamp polar angle.
         self.value_weights = None
         if self.reference is not None and metadata.get("calibration") == "per-incidence":
+            metadata = incidences_at(metadata, self.geometry[0])
             self.value_weights = incidence_weights(metadata)
             if self.value_weights.shape[0] != self.geometry[0].size:
                 raise ValueError(f"dataset metadata incidence_theta_i: {self.value_weights.shape[0]} angles for "

@@ -19,6 +19,11 @@ APERTURES = (0.003, 0.0009)
 #: model's zero crossings while any error in a formula (a sign, a cosine weight, a sub-ray)
 #: shows at 1e-4 or more.
 RTOL = 1e-12
+#: The tabulated model's zeta coordinate has a square root that vanishes at theta_i =
+#: theta_r (gonio.models.tabulated.coordinates); there a rounding of 1e-16 in the angles,
+#: which the two paths compute by different identities, moves it by 1e-8 or more and the value by
+#: up to 2.1e-8 (measured, sigma = 20 deg). Any error in a formula still shows at 1e-4.
+RTOL_TABLE = 1e-7
 
 
 def _geometry() -> tuple[np.ndarray, ...]:
@@ -48,6 +53,8 @@ def _numpy_path(model: str, geometry, params, alignment) -> np.ndarray:
     ("oren-nayar", {"rho": 0.9, "sigma": 30.0, "ir_weight": 1.0}),
     ("oren-nayar", {"rho": 0.3, "sigma": 85.0, "ir_weight": 0.0}),  # eq 33's floor at 0 acts (forward grazing)
     ("lambert", {"rho": 0.7}),
+    ("oren-nayar-tabulated", {"rho": 0.9, "sigma": 30.0}),  # the exact model's table
+    ("oren-nayar-tabulated", {"rho": 0.5, "sigma": 60.0}),
 ])
 def test_compiled_radiance_equals_the_numpy_path(model, params):
     rng = np.random.default_rng(3)
@@ -58,7 +65,7 @@ def test_compiled_radiance_equals_the_numpy_path(model, params):
     expected = _numpy_path(model, geometry, columns, alignment)
     got = CompiledRigRadiance(gonio.models.get(model), geometry, APERTURES)(columns, alignment)
     assert got.shape == expected.shape == (8, geometry[0].size)
-    np.testing.assert_allclose(got, expected, rtol=RTOL, atol=1e-15)
+    np.testing.assert_allclose(got, expected, rtol=RTOL_TABLE if "tabulated" in model else RTOL, atol=1e-15)
     # the test can fail: some values are 0 (below the horizon), the rest differ between walkers
     assert (got == 0.0).any() and (got > 0.0).sum() > got.size // 2
     assert np.ptp(got[:, 30]) > 1e-4 * got[:, 30].mean()
@@ -72,6 +79,18 @@ def test_scalars_give_one_row_like_the_numpy_path():
     expected = _numpy_path("oren-nayar", geometry, values, {"tilt_x": 0.3, "view_offset": -0.2})
     assert got.shape == (geometry[0].size,)
     np.testing.assert_allclose(got, expected, rtol=RTOL, atol=1e-15)
+
+
+def test_the_tabulated_model_at_sigma_zero_is_lambert_in_both_paths():
+    """Footnote 10: sigma = 0 is Lambert exactly, in the table's model and in the loop."""
+    geometry = _geometry()
+    params = {"rho": np.array([[0.8], [0.8]]), "sigma": np.array([[0.0], [20.0]])}
+    alignment = {"tilt_x": np.array([[0.1], [0.1]])}
+    got = CompiledRigRadiance(gonio.models.get("oren-nayar-tabulated"), geometry, APERTURES)(params, alignment)
+    lambert = _numpy_path("lambert", geometry, {"rho": 0.8}, {"tilt_x": 0.1})
+    np.testing.assert_allclose(got[0], lambert, rtol=RTOL, atol=1e-15)
+    np.testing.assert_allclose(got[1], _numpy_path("oren-nayar-tabulated", geometry, {"rho": 0.8, "sigma": 20.0},
+                                                   {"tilt_x": 0.1}), rtol=RTOL_TABLE, atol=1e-15)
 
 
 def test_other_models_are_refused():

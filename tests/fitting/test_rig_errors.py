@@ -220,3 +220,18 @@ def test_stray_light_at_zero_is_the_plain_likelihood_and_stays_vectorised(misali
     walkers = np.array([vector + [v, s] for v, s in ((0.1, 1e-3), (-0.2, 3e-3), (0.0, 0.0))])
     np.testing.assert_allclose(both.log_likelihood_batch(walkers), [both.log_likelihood(w) for w in walkers],
                                rtol=1e-12)
+
+
+def test_predictions_at_other_angles_are_calibrated_by_the_nearest_incidence():
+    """A report draws curves at geometries the dataset does not have: per incidence, each is
+    calibrated by the standard's readings at the nearest calibrated lamp angle (a readback
+    a hair off its planned angle included), and an angle far from every reading is refused."""
+    from gonio.fitting.rig_errors import incidences_at
+
+    metadata = {"calibration": "per-incidence", "incidence_theta_i": [30.0, 60.0],
+                "reference_standard": {"incidence": [30.0, 30.0, 60.0]}}
+    at = incidences_at(metadata, np.array([29.998, 30.0, 60.003, 59.5]))
+    assert at["incidence_theta_i"] == [30.0, 30.0, 60.0, 60.0]
+    assert incidences_at(metadata, np.array([31.0, 60.0])) is metadata  # one per value: as given
+    with pytest.raises(ValueError, match="no reference reading within 1 deg of theta_i = 45"):
+        incidences_at(metadata, np.array([45.0, 30.0, 60.0]))
