@@ -63,7 +63,7 @@ from gonio.models import Model
 from gonio.models._compiled import JIT_OPTIONS
 from gonio.models.oren_nayar.compiled import eq33_35
 from gonio.models.tabulated.coordinates import Y_OFFSET, Y_SLOPE, y_coordinate
-from gonio.models.tabulated.kernel import _tricubic_into
+from gonio.models.tabulated.kernel import _tricubic_into, phase_coordinate
 from gonio.models.tabulated.oren_nayar_table import F2_FLOOR
 
 from .rig_errors import COMPILED_MODELS
@@ -151,6 +151,27 @@ def _oren_nayar(t_i: float, cp_i: float, sp_i: float, s_i: float, c_i: float, ta
 
 
 @njit(**JIT_OPTIONS)
+def _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camera_rule, ring, lamp_rays, camera_rays,
+                 lamp_cos, camera_cos, w) -> None:
+    """The sub-rays of every distinct lamp and camera direction at walker ``w``'s alignment
+    (as :func:`rig_radiance` computes them)."""
+    swing = alignment[w, 0] * _RAD
+    cs, ss = math.cos(swing), math.sin(swing)
+    ta, tb = alignment[w, 3] * _RAD, alignment[w, 4] * _RAD
+    ca, sa, cb, sb = math.cos(ta), math.sin(ta), math.cos(tb), math.sin(tb)
+    for k in range(lamp_directions.shape[0]):
+        t = (lamp_directions[k, 0] + alignment[w, 1]) * _RAD
+        p = (lamp_directions[k, 1] + alignment[w, 2]) * _RAD
+        x, y, z = _to_sample(math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t), ca, sa, cb, sb)
+        lamp_cos[k] = _cone_rays(x, y, z, lamp_rule[0], lamp_rule[1], ring[0], ring[1], lamp_rays[k])
+    for k in range(camera_directions.shape[0]):
+        t, p = camera_directions[k, 0] * _RAD, camera_directions[k, 1] * _RAD
+        cx, cy, cz = math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)
+        x, y, z = _to_sample(cx * cs + cz * ss, cy, cz * cs - cx * ss, ca, sa, cb, sb)
+        camera_cos[k] = _cone_rays(x, y, z, camera_rule[0], camera_rule[1], ring[0], ring[1], camera_rays[k])
+
+
+@njit(**JIT_OPTIONS)
 def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignment, coefficients,
                  lamp_rule, camera_rule, ring, weights, out) -> None:
     """``<f cos theta_i>`` through the apertures at the true geometry of every alignment [1/sr].
@@ -177,20 +198,8 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
     lamp_cos = np.empty(lamp_directions.shape[0])
     camera_cos = np.empty(camera_directions.shape[0])
     for w in range(alignment.shape[0]):
-        swing = alignment[w, 0] * _RAD
-        cs, ss = math.cos(swing), math.sin(swing)
-        ta, tb = alignment[w, 3] * _RAD, alignment[w, 4] * _RAD
-        ca, sa, cb, sb = math.cos(ta), math.sin(ta), math.cos(tb), math.sin(tb)
-        for k in range(lamp_directions.shape[0]):
-            t = (lamp_directions[k, 0] + alignment[w, 1]) * _RAD
-            p = (lamp_directions[k, 1] + alignment[w, 2]) * _RAD
-            x, y, z = _to_sample(math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t), ca, sa, cb, sb)
-            lamp_cos[k] = _cone_rays(x, y, z, lamp_rule[0], lamp_rule[1], ring[0], ring[1], lamp_rays[k])
-        for k in range(camera_directions.shape[0]):
-            t, p = camera_directions[k, 0] * _RAD, camera_directions[k, 1] * _RAD
-            cx, cy, cz = math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)
-            x, y, z = _to_sample(cx * cs + cz * ss, cy, cz * cs - cx * ss, ca, sa, cb, sb)
-            camera_cos[k] = _cone_rays(x, y, z, camera_rule[0], camera_rule[1], ring[0], ring[1], camera_rays[k])
+        _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camera_rule, ring, lamp_rays,
+                     camera_rays, lamp_cos, camera_cos, w)
         a, b, c = coefficients[w, 0], coefficients[w, 1], coefficients[w, 2]
         for n in range(lamp_of.shape[0]):
             lamp, camera = lamp_of[n], camera_of[n]
@@ -248,37 +257,7 @@ def _pair_coordinates(t_i, z_i, y_i, sh_i, ch_i, t_r, z_r, y_r, sh_r, ch_r, cos_
     else:
         zeta = 1.0
     limit = min(max(0.5 * (1.0 - cos_dphi), 0.0), 1.0)
-    half_diff = s_a * c_b - c_a * s_b
-    half_sum = s_a * c_b + c_a * s_b
-    half = half_diff * half_diff * (1.0 - limit) + half_sum * half_sum * limit
-    phase = 2.0 * math.asin(math.sqrt(min(max(half, 0.0), 1.0)))
-    if beta > 1e-6:
-        p = (phase - (alpha - beta)) / (2.0 * beta)
-    else:
-        p = limit
-    p = min(max(p, 0.0), 1.0)
-    return y, zeta, 0.5 * (math.sqrt(p) + 1.0 - math.sqrt(math.sqrt(1.0 - p)))
-
-
-@njit(**JIT_OPTIONS)
-def _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camera_rule, ring, lamp_rays, camera_rays,
-                 lamp_cos, camera_cos, w) -> None:
-    """The sub-rays of every distinct lamp and camera direction at walker ``w``'s alignment
-    (as :func:`rig_radiance` computes them)."""
-    swing = alignment[w, 0] * _RAD
-    cs, ss = math.cos(swing), math.sin(swing)
-    ta, tb = alignment[w, 3] * _RAD, alignment[w, 4] * _RAD
-    ca, sa, cb, sb = math.cos(ta), math.sin(ta), math.cos(tb), math.sin(tb)
-    for k in range(lamp_directions.shape[0]):
-        t = (lamp_directions[k, 0] + alignment[w, 1]) * _RAD
-        p = (lamp_directions[k, 1] + alignment[w, 2]) * _RAD
-        x, y, z = _to_sample(math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t), ca, sa, cb, sb)
-        lamp_cos[k] = _cone_rays(x, y, z, lamp_rule[0], lamp_rule[1], ring[0], ring[1], lamp_rays[k])
-    for k in range(camera_directions.shape[0]):
-        t, p = camera_directions[k, 0] * _RAD, camera_directions[k, 1] * _RAD
-        cx, cy, cz = math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)
-        x, y, z = _to_sample(cx * cs + cz * ss, cy, cz * cs - cx * ss, ca, sa, cb, sb)
-        camera_cos[k] = _cone_rays(x, y, z, camera_rule[0], camera_rule[1], ring[0], ring[1], camera_rays[k])
+    return y, zeta, phase_coordinate(alpha, beta, s_a * c_b - c_a * s_b, s_a * c_b + c_a * s_b, limit)
 
 
 @njit(**JIT_OPTIONS)

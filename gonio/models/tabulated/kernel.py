@@ -28,7 +28,7 @@ from numba import njit
 
 from .coordinates import Y_OFFSET, Y_SLOPE, y_coordinate
 
-__all__ = ["table_coordinates", "cubic_stencil", "interpolate_points", "interpolate_geometries"]
+__all__ = ["table_coordinates", "phase_coordinate", "cubic_stencil", "interpolate_points", "interpolate_geometries"]
 
 _HALF_PI = 0.5 * math.pi
 _Y_FLOOR = float(y_coordinate(0.0))
@@ -47,13 +47,19 @@ def table_coordinates(theta_i: float, theta_r: float, delta_phi: float) -> tuple
         zeta = 1.0 - math.sqrt(max(1.0 - 0.5 * (z_alpha / z_beta + (y_alpha - _Y_FLOOR) / (y - _Y_FLOOR)), 0.0))
     else:
         zeta = 1.0
-    # phase angle by the haversine formula (sin(alpha) sin(beta) written as
-    # sin^2((alpha + beta)/2) - sin^2((alpha - beta)/2): two positive terms, three sines),
-    # then its position p between the extremes
     half_dphi = math.sin(0.5 * delta_phi)
     limit = half_dphi * half_dphi
-    half_diff = math.sin(0.5 * (alpha - beta))
-    half_sum = math.sin(0.5 * (alpha + beta))
+    return y, zeta, phase_coordinate(alpha, beta, math.sin(0.5 * (alpha - beta)), math.sin(0.5 * (alpha + beta)),
+                                     limit)
+
+
+@njit(cache=True, nogil=True)
+def phase_coordinate(alpha: float, beta: float, half_diff: float, half_sum: float, limit: float) -> float:
+    """The t coordinate of the phase angle between two directions at polar angles ``alpha``
+    >= ``beta`` [rad], given ``sin((alpha - beta)/2)``, ``sin((alpha + beta)/2)`` and
+    ``sin^2(dphi / 2)``: the phase angle by the haversine formula (``sin(alpha) sin(beta)``
+    written as ``sin^2((alpha + beta)/2) - sin^2((alpha - beta)/2)``: two positive terms),
+    then its position p between the extremes, mapped to t."""
     half = half_diff * half_diff * (1.0 - limit) + half_sum * half_sum * limit
     phase = 2.0 * math.asin(math.sqrt(min(max(half, 0.0), 1.0)))
     if beta > 1e-6:
@@ -61,8 +67,7 @@ def table_coordinates(theta_i: float, theta_r: float, delta_phi: float) -> tuple
     else:
         p = limit
     p = min(max(p, 0.0), 1.0)
-    t = 0.5 * (math.sqrt(p) + 1.0 - math.sqrt(math.sqrt(1.0 - p)))
-    return y, zeta, t
+    return 0.5 * (math.sqrt(p) + 1.0 - math.sqrt(math.sqrt(1.0 - p)))
 
 
 @njit(cache=True, nogil=True)
