@@ -20,9 +20,9 @@ relative radiance and calibration prior of ``Reduced.fit_inputs()``:
   readings (corrected by the camera's linearity series): the alignment parameters for zero
   offsets and sample tilt, the stray-light parameter for stray light, the linearity
   correction alone for the camera's non-linearity, the calibration per lamp polar angle
-  for the beam profile, all of these for ``lab`` and ``lab_default``, the tilt parameters
-  for the sample's departures (which take the mounting's tilt; its texture and the
-  monitor's mismatch are in the reduction's budget); on the ideal rig all of them too (their
+  for the beam profile, all of these for ``lab`` and ``lab_default`` (with the sample's own tilt
+  too), the sample's own tilt for the sample's departures (its wedge and seat; its texture
+  and the monitor's mismatch are in the reduction's budget); on the ideal rig all of them too (their
   price), the rig-error parameters alone, and the calibration per incidence alone (its
   price on a uniform beam).
 
@@ -67,6 +67,8 @@ PROTOCOLS = ("oren-nayar-fig16-plaster.toml", "oren-nayar-fig19-off-plane.toml")
 #: z of a two-sided 95 % interval.
 Z95 = 1.959963984540054
 ANGULAR = ("view_offset", "theta_i_offset", "phi_i_offset", "tilt_x", "tilt_y")
+#: The sample's own tilt beyond the holder's (gonio.fitting.rig_errors.SAMPLE_TILT_NAMES).
+SAMPLE_TILT_NAMES = ("sample_tilt_x", "sample_tilt_y")
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,7 @@ CONDITIONS = (
               "the calibration per incidence alone (its price on a uniform beam)", calibration="per-incidence",
               short="ideal: per incidence"),
     Condition("offsets", "axis zero offsets", ANGULAR[:3], "view_offset, theta_i_offset, phi_i_offset", ANGULAR[:3]),
-    Condition("tilt", "sample tilt", ANGULAR[3:], "tilt_x, tilt_y", ANGULAR[3:]),
+    Condition("tilt", "holder tilt", ANGULAR[3:], "tilt_x, tilt_y", ANGULAR[3:]),
     Condition("stray", "stray light", ("stray_light",), "stray_light", stray_light=True),
     Condition("nonlinearity", "camera non-linearity", ("nonlinearity",),
               "the camera's linearity series: every reading corrected"),
@@ -114,11 +116,12 @@ CONDITIONS = (
     Condition("lab", "the rig's errors (all above)", LAB, "all of the above: alignment and stray_light parameters, "
               "the calibration per incidence, the linearity correction", ANGULAR, True, "per-incidence",
               short="rig errors (all)"),
-    Condition("sample", "the sample as labs meet it", SAMPLE_DEPARTURES, "tilt_x, tilt_y (the mounting's tilt: "
-              "holder 0, the wedge, the seat, the texture's mean slope); texture and monitor mismatch in the budget",
-              ANGULAR[3:], short="sample (texture, wedge, seat, monitor)"),
+    Condition("sample", "the sample as labs meet it", SAMPLE_DEPARTURES, "sample_tilt_x, sample_tilt_y (the "
+              "sample's own tilt: its wedge, its seat, the texture's mean slope); texture and monitor mismatch in the "
+              "budget", SAMPLE_TILT_NAMES, short="the sample"),
     Condition("lab_default", "lab preset (the default realism: all)", LAB + SAMPLE_DEPARTURES,
-              "all of the above", ANGULAR, True, "per-incidence", short="lab (all, the default)"),
+              "all of the above (the seven alignment parameters)", ANGULAR + SAMPLE_TILT_NAMES, True, "per-incidence",
+              short="lab (all, the default)"),
 )
 
 

@@ -631,13 +631,14 @@ def _ratio_panel(ax, studies: Sequence[Mapping[str, Any]], title: str) -> None:
     width = 0.8 / max(len(studies), 1)
     for k, (label, geometries) in enumerate(studies):
         x = np.arange(len(geometries)) + (k - (len(studies) - 1) / 2) * width
-        ax.errorbar(x, [g["ratio"] for g in geometries], yerr=[g["ratio_sampling_error"] for g in geometries],
+        ax.errorbar(x, [g["ratio"] for g in geometries],
+                    yerr=[g.get("combined_sampling_error") or g["ratio_sampling_error"] for g in geometries],
                     fmt="o", color=f"C{k}", capsize=3, label=label)
     ax.axhspan(*RATIO_TARGET, color="C2", alpha=0.15, label=f"target {RATIO_TARGET[0]}-{RATIO_TARGET[1]}")
     ax.axhline(1.0, color="k", lw=0.8)
     ax.set_xticks(range(len(GEOMETRIES)), [f"{n}\n({ti:g}, {pi:g}, {v:g})" for n, ti, pi, v in GEOMETRIES])
     ax.set_ylabel("observed / stated standard deviation")
-    ax.set_title(title, fontsize=10)
+    ax.set_title(title + " (bars: sampling error)", fontsize=10)
     ax.legend(fontsize=7)
 
 
@@ -654,7 +655,7 @@ def _chi2_panel(ax, studies: Sequence[Mapping[str, Any]], title: str) -> None:
     ax.set_xlabel("emulator seed")
     ax.set_ylabel("reduced chi-square of the true model")
     ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper left")
 
 
 def chart(payload: Mapping[str, Any], path: Path) -> None:

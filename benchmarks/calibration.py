@@ -44,7 +44,9 @@ and apertures as built), each run measured with a shortened protocol, reduced wi
 (misalignment, stray light, non-linearity, beam profile, the sample's texture and wedge,
 a monitor that does not see the sample's beam exactly; docs/emulator.md), and every fit
 and comparison then does what a user must there: the calibration per incidence and the
-rig's errors as parameters (``alignment="all"``, ``stray_light=True``; docs/fitting.md).
+rig's errors as parameters (``alignment="all"``, ``stray_light=True``; docs/fitting.md);
+the selection protocol then reads the reference standard at theta_i = 75 deg too
+(:func:`selection_protocol`), since each lamp polar angle needs its own reading.
 ``--realism ideal`` (the default of this script, the study's first figures) is the
 idealised rig. Outputs of the lab study are named with ``_lab``.
 
@@ -160,6 +162,16 @@ label = "diffuse reflectance standard, 99 %"
 reflectance = 0.99
 geometries = [[30, 0, -10], [45, 0, -10], [60, 0, -10]]
 """
+
+
+
+
+def selection_protocol() -> str:
+    """:data:`SELECTION_PROTOCOL`, with the standard read at theta_i = 75 deg too when
+    every incidence is calibrated by its own reading (``--realism lab``)."""
+    if calibration() == "common":
+        return SELECTION_PROTOCOL
+    return SELECTION_PROTOCOL.replace("[60, 0, -10]]", "[60, 0, -10], [75, 0, -10]]")
 
 
 @dataclass(frozen=True)
@@ -363,7 +375,7 @@ def selection_run(truth: SelectionTruth, seed: int, scratch: Path) -> dict[str, 
     folder = scratch / f"{truth.key}-{seed}"
     shutil.rmtree(folder, ignore_errors=True)
     start = time.perf_counter()
-    measure_wall = measure(SELECTION_PROTOCOL, truth.spec, seed, folder)
+    measure_wall = measure(selection_protocol(), truth.spec, seed, folder)
     dataset, priors = reduce_recording(folder).fit_inputs(calibration())
     shutil.rmtree(folder, ignore_errors=True)
     compare_start = time.perf_counter()
@@ -1019,7 +1031,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "coverage_protocol": "protocols/oren-nayar-fig16-plaster.toml with the camera every 10 deg "
                                  "(view = -80..80 step 10 at theta_i = 30, 45, 60 deg; reference standard at "
                                  "(30, 0, -10), (45, 0, -10), (60, 0, -10))",
-            "selection_protocol": SELECTION_PROTOCOL,
+            "selection_protocol": selection_protocol(),
             "noise": (f"realism {args.realism} (gonio.cli.run.emulated_rig): CCD shot, read and dark noise, PRNU, "
                       "lamp flicker and drift on, lamp monitor on, lamp already warm"
                       + ("; the lab rig's misalignment, stray light, non-linearity, beam profile, texture, wedge, "

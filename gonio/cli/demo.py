@@ -305,13 +305,14 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True, realism: str = DEFAULT_
     comparison : gonio.fitting.ModelComparison
     """
     from gonio.fitting import ConvergenceWarning, compare_models, fit
+    from gonio.fitting.rig_errors import ALIGNMENT_NAMES
 
     modelled = rig_errors_modelled(realism)
     errors = RIG_ERRORS if modelled else {}
     dataset, priors = reduced.fit_inputs("per-incidence" if modelled else "common")
     _say(quiet, f"comparing models on {dataset.n} {dataset.quantity} values "
                 f"(averaged over the rig's apertures {dataset.metadata.get('aperture_sr')} sr"
-                + ("; the rig's errors as parameters: alignment (5), stray light; calibrated per incidence)"
+                + (f"; the rig's errors as parameters: alignment ({len(ALIGNMENT_NAMES)}), stray light; calibrated per incidence)"
                    if modelled else ")"))
     comparison = compare_models(dataset, CANDIDATES, priors=priors, **errors)
     _say(quiet, comparison.summary())

@@ -223,14 +223,31 @@ def _start_points(problem: FitProblem, start: Mapping[str, float] | None, n_star
         first.append(min(max(value, lo + 1e-3 * width), hi - 1e-3 * width))
     points = [np.array(first)]
     for _ in range(max(n_starts - 1, 0)):
-        point = []
-        for name, lo, hi, centre in zip(names, lower, upper, first):
-            if math.isfinite(lo) and math.isfinite(hi):
-                point.append(rng.uniform(lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo)))
-            else:
-                point.append(centre * math.exp(rng.normal(0.0, 1.0)) if centre > 0 else centre + rng.normal())
-        points.append(np.array(point))
+        points.append(np.array([_random_start(lo, hi, centre, rng) for lo, hi, centre in zip(lower, upper, first)]))
     return [_with_nuisances(problem, names, p, start) for p in points]
+
+
+def _random_start(lo: float, hi: float, centre: float, rng) -> float:
+    """A random starting value strictly inside (lo, hi), given a first start ``centre`` inside.
+
+    Uniform over a finite range (1e-3 of it kept clear of each bound). Over a half-open
+    range the first start's distance from the finite bound is scaled by a log-normal
+    factor, so that a start never crosses the bound (a refractive index on (1, inf) starts
+    above 1, not at 1.5 times a random factor); over the whole line, log-normal about a
+    positive start, normal about another.
+
+    >>> rng = np.random.default_rng(0)
+    >>> all(_random_start(1.0, math.inf, 1.5, rng) > 1.0 for _ in range(1000))
+    True
+    """
+    if math.isfinite(lo) and math.isfinite(hi):
+        return float(rng.uniform(lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo)))
+    z = float(rng.normal(0.0, 1.0))
+    if math.isfinite(lo):
+        return lo + (centre - lo) * math.exp(z)
+    if math.isfinite(hi):
+        return hi - (hi - centre) * math.exp(z)
+    return centre * math.exp(z) if centre > 0 else centre + z
 
 
 def _with_nuisances(problem: FitProblem, names, point, start) -> np.ndarray:
@@ -323,7 +340,8 @@ def fit_least_squares(
         Starting values (default: the parameters' defaults).
     n_starts : int
         Number of starting points: ``start`` plus ``n_starts - 1`` drawn uniformly within the
-        bounds (log-normally around the start for unbounded parameters).  The lowest
+        bounds (for a bound on one side only, the start's distance from it scaled
+        log-normally; log-normally around the start for unbounded parameters).  The lowest
         chi-square wins.
     seed : int, optional
         Seed of the random starting points.

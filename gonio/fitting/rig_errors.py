@@ -13,9 +13,21 @@ name               unit   meaning
 ``phi_i_offset``   deg    zero offset of the lamp's azimuth axis (axis 3)
 ``tilt_x``         deg    tilt of the sample's normal toward +x (in the camera's swing plane)
 ``tilt_y``         deg    tilt of the sample's normal toward +y (along the swing axis)
+``sample_tilt_x``  deg    the sample's own tilt toward +x beyond the holder's (its wedge, its seat)
+``sample_tilt_y``  deg    the sample's own tilt toward +y beyond the holder's
 ``stray_light``    -      stray radiance over the image, as a fraction of the radiance
                           ``E_0 / pi`` of a white Lambertian sample at normal incidence
 =================  =====  ===================================================================
+
+``tilt_x`` and ``tilt_y`` tip the holder's face, and with it everything mounted there, the
+reference standard included; ``sample_tilt_x`` and ``sample_tilt_y`` tip the sample alone (a
+wedge between its faces, a speck under one edge of its seat), so the reference standard
+does not share them. The distinction matters under calibration: a tilt both share changes
+the irradiance the reference reported and the one the sample saw alike, and it cancels from
+their ratio; a tilt of the sample alone changes the sample's irradiance by
+``tan(theta_i) * tilt`` (0.45 % for 0.15 deg at theta_i = 60 deg), which no tilt of the
+holder can mimic. The sample sees the holder's tilt plus its own (the two add, as in the
+emulator, ``drivers.emulator.rig``).
 
 The geometry is :func:`drivers.rig_geometry.misaligned_angles`, the function the emulator
 places its lamp and camera with, and ``stray_light`` means what the emulator's switch of
@@ -66,7 +78,7 @@ from gonio.models import Model, Param
 
 from .priors import Normal
 
-__all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG", "STRAY_LIGHT",
+__all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "SAMPLE_TILT_NAMES", "rig_alignment", "sample_alignment", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG", "STRAY_LIGHT",
            "RIG_ERROR_NAMES", "COMPILED_MODELS", "parse_alignment", "alignment_prior",
            "reference_calibration", "incidence_weights", "RigPrediction", "is_identity"]
 
@@ -78,11 +90,16 @@ _DESCRIPTIONS = {
     "phi_i_offset": "zero offset of the lamp's azimuth axis (axis 3): true angle = readback + offset",
     "tilt_x": "tilt of the sample's normal toward +x (in the camera's swing plane)",
     "tilt_y": "tilt of the sample's normal toward +y (along the camera's swing axis)",
+    "sample_tilt_x": "the sample's own tilt toward +x beyond the holder's (wedge, seat); the reference does not share it",
+    "sample_tilt_y": "the sample's own tilt toward +y beyond the holder's (wedge, seat); the reference does not share it",
 }
-#: The alignment parameters, in :func:`drivers.rig_geometry.misaligned_angles` order.
+#: The tilts of the sample alone, beyond the holder's (module docstring).
+SAMPLE_TILT_NAMES = ("sample_tilt_x", "sample_tilt_y")
+#: The alignment parameters: :func:`drivers.rig_geometry.misaligned_angles`' in its order,
+#: then the sample's own tilt.
 ALIGNMENT_PARAMETERS = tuple(
     Param(name, "deg", 0.0, (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG), _DESCRIPTIONS[name])
-    for name in ALIGNMENT_ERRORS)
+    for name in ALIGNMENT_ERRORS + SAMPLE_TILT_NAMES)
 ALIGNMENT_NAMES = tuple(p.name for p in ALIGNMENT_PARAMETERS)
 #: Standard deviation of each parameter's default normal prior [deg] (module docstring).
 DEFAULT_PRIOR_SD = {name: 0.5 for name in ALIGNMENT_NAMES}
@@ -123,6 +140,30 @@ def parse_alignment(names: str | Iterable[str] | None) -> tuple[str, ...]:
         raise ValueError(f"unknown alignment parameter {unknown[0]!r}; expected 'all' or names from "
                          f"{list(ALIGNMENT_NAMES)}")
     return tuple(n for n in ALIGNMENT_NAMES if n in items)
+
+
+def rig_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
+    """The alignment the reference standard sees: the rig's, without the sample's own tilt.
+
+    >>> rig_alignment({"tilt_x": 0.1, "sample_tilt_x": 0.2})
+    {'tilt_x': 0.1}
+    """
+    return {name: value for name, value in alignment.items() if name not in SAMPLE_TILT_NAMES}
+
+
+def sample_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
+    """The alignment the sample sees, as :func:`~drivers.rig_geometry.misaligned_angles`
+    keywords: the holder's tilt plus the sample's own.
+
+    >>> sample_alignment({"tilt_x": 0.1, "sample_tilt_x": 0.2, "sample_tilt_y": 0.0})
+    {'tilt_x': 0.30000000000000004, 'tilt_y': 0.0}
+    """
+    out = rig_alignment(alignment)
+    for axis in ("x", "y"):
+        own = alignment.get(f"sample_tilt_{axis}")
+        if own is not None:
+            out[f"tilt_{axis}"] = out.get(f"tilt_{axis}", 0.0) + own
+    return out
 
 
 def alignment_prior(name: str) -> Normal:
@@ -318,6 +359,7 @@ class RigPrediction:
         if self.reference is None:
             return 1.0
         lambert, geometry, weights, reflectance, recorded = self.reference
+        alignment = rig_alignment(alignment)
         if is_identity(alignment):
             signal = self._signal(lambert, geometry)
         elif self._kernel is not None:
@@ -348,6 +390,7 @@ class RigPrediction:
         """``f cos(theta_i)`` at the true geometry of the recorded ``which`` ('data' or
         'normal' view) geometries [1/sr]; the fixed-geometry path when nothing moves."""
         recorded = self.geometry if which == "data" else self.normal_geometry
+        alignment = sample_alignment(alignment)
         if is_identity(alignment):
             if which not in self._fixed:
                 self._fixed[which] = self.model.at(*recorded, **self.options)
@@ -361,8 +404,8 @@ class RigPrediction:
                  stray_light: Any = 0.0) -> np.ndarray:
         """The predicted measured values: shape (N,) or (W, N) for parameter columns (W, 1).
 
-        ``params`` are the model's (checked), ``alignment`` the five alignment values (or
-        some of them) [deg], ``scale`` and ``stray_light`` as in the module docstring.
+        ``params`` are the model's (checked), ``alignment`` the alignment values
+        (:data:`ALIGNMENT_NAMES`, or some of them) [deg], ``scale`` and ``stray_light`` as in the module docstring.
         """
         stray = np.asarray(stray_light, float) / np.pi
         radiance = self._model_at("data", params, alignment) + stray

@@ -244,7 +244,7 @@ def _add_mounting_component(groups: list[np.ndarray], rows: Readings, mounting: 
             "the sample was mounted once: how much its values change when it is taken out and put back (its "
             "seating and tilt, the part of its texture the camera sees) is not in the budget. Measure it: add "
             "'mountings = 4' (or 'rotations = [0, 90, 180, 270]') to [sample] in the protocol; a fit can take "
-            "this mounting's tilt as a parameter (--alignment tilt_x,tilt_y)")
+            "this mounting's tilt as a parameter (--alignment sample_tilt_x,sample_tilt_y)")
         return None
     component, factors = found
     rows.budget["mounting"] = component

@@ -78,3 +78,22 @@ def test_photon_transfer_rejects_bad_input():
         photon_transfer([0.1, 0.2, 0.3], [s] * 2, [s] * 3)
     with pytest.raises(ValueError, match="must match"):
         pair_statistics(np.zeros(4), np.zeros(5))
+
+
+def test_a_textured_target_is_not_taken_for_the_cameras_prnu():
+    """Frames of a textured target (3 % albedo correlated over 5 pixels, as the `lab`
+    sample's) through a camera of 0.5 % PRNU: the pair's white spatial variance is the
+    camera's fixed pattern and half the temporal noise (within 5 %), while the plain
+    spatial variance holds the texture too, more than 30 times more."""
+    from drivers.emulator.texture import gaussian_random_field
+
+    rng = np.random.default_rng(8)
+    shape = (138, 138)
+    texture = 1.0 + 0.03 * gaussian_random_field(shape, 1.0, 5.5, rng)
+    prnu = 1.0 + 0.005 * rng.standard_normal(shape)
+    signal = 1500.0 * texture * prnu
+    a, b = (signal + rng.normal(0.0, 3.0, shape) for _ in range(2))
+    s = pair_statistics(a, b)
+    expected = (1500.0 * 0.005) ** 2 + 0.5 * 9.0
+    assert s.white_variance == pytest.approx(expected, rel=0.05)
+    assert s.spatial_variance > 30 * expected

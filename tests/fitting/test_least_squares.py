@@ -143,3 +143,26 @@ def test_normal_view_reference_points_are_not_degrees_of_freedom():
     exact = Dataset(*data.geometry, np.where(normal, 1.0, data.value), data.sigma, quantity="normalised_radiance")
     fit = fit_least_squares(FitProblem("minnaert", exact))
     assert fit.dof == data.n - int(normal.sum()) - 2
+
+
+@pytest.mark.parametrize("model, truth", [
+    ("torrance-sparrow", {"ks": 0.3, "sigma_s": 10.0, "n": 1.5}),
+    ("wolff", {"rho": 0.8, "n": 1.5, "omega": 0.5}),
+    ("wolff-oren-nayar", {"rho": 0.8, "sigma": 20.0, "n": 1.5}),
+])
+def test_a_refractive_index_is_fitted_from_starts_inside_its_one_sided_range(model, truth):
+    """n lives on (1, inf): random starts scaled log-normally about 1.5 used to land below 1
+    and stop the fit with "n = 0.42 outside (1, inf)" (an internal fault reported as bad
+    input). Every start now lies inside, and the fit runs to the truth."""
+    from gonio.fitting.least_squares import _start_points
+
+    data = synthetic_dataset(model, truth, noise=1e-3, relative=True, seed=3)
+    problem = FitProblem(model, data)
+    points = _start_points(problem, None, 200, np.random.default_rng(0))
+    for name in problem.free:
+        lo, hi = problem.spec(name).bounds
+        column = np.array([p[problem.free.index(name)] for p in points])
+        assert np.all((column > lo) & (column < hi)), (name, column.min(), column.max())
+    result = fit_least_squares(problem, n_starts=12, seed=1)
+    assert result.values["n"] > 1.0
+    assert result.chi2 / result.dof < 3.0

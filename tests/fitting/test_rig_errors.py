@@ -84,7 +84,7 @@ def test_offsets_at_zero_give_the_plain_likelihood_exactly(misaligned):
         plain = FitProblem("oren-nayar", dataset, FIXED)
         aligned = FitProblem("oren-nayar", dataset, FIXED, alignment="all")
         vector = [0.9, 30.0] + ([misaligned.reference_irradiance] if dataset.quantity == "radiance" else [])
-        assert aligned.log_likelihood(vector + [0.0] * 5) == plain.log_likelihood(vector)
+        assert aligned.log_likelihood(vector + [0.0] * len(ALIGNMENT_NAMES)) == plain.log_likelihood(vector)
         fixed_zero = FitProblem("oren-nayar", dataset, {**FIXED, **{n: 0.0 for n in ALIGNMENT_NAMES}})
         assert fixed_zero.log_likelihood(vector) == plain.log_likelihood(vector)
         assert not fixed_zero.has_rig_errors and fixed_zero.vectorised == plain.vectorised
@@ -95,9 +95,9 @@ def test_broadcast_evaluation_equals_one_at_a_time(misaligned):
     for dataset in (misaligned.fit_inputs()[0], misaligned.normalised_radiance()):
         problem = FitProblem("oren-nayar", dataset, FIXED, alignment="all")
         centre = [0.9, 30.0] + ([misaligned.reference_irradiance] if dataset.quantity == "radiance" else [])
-        walkers = np.array([centre + [0.0] * 5] * 7)
+        walkers = np.array([centre + [0.0] * len(ALIGNMENT_NAMES)] * 7)
         walkers[:, :2] += rng.normal(0, [0.01, 0.5], (7, 2))
-        walkers[:, -5:] = rng.normal(0, 0.3, (7, 5))
+        walkers[:, -len(ALIGNMENT_NAMES):] = rng.normal(0, 0.3, (7, len(ALIGNMENT_NAMES)))
         batch = problem.log_likelihood_batch(walkers)
         one = np.array([problem.log_likelihood(w) for w in walkers])
         # the same arithmetic per walker but for the order of sums: 1e-12 relative
@@ -235,3 +235,19 @@ def test_predictions_at_other_angles_are_calibrated_by_the_nearest_incidence():
     assert incidences_at(metadata, np.array([31.0, 60.0])) is metadata  # one per value: as given
     with pytest.raises(ValueError, match="no reference reading within 1 deg of theta_i = 45"):
         incidences_at(metadata, np.array([45.0, 30.0, 60.0]))
+
+
+def test_a_tilt_of_the_sample_alone_is_its_own_parameter(tmp_path):
+    """The emulated sample's wedge (0.4 deg, direction from the seed) tips the sample but not
+    the reference standard: the sample's own tilt finds it and the true rho and sigma; the
+    holder's tilt, which the standard shares, cannot (rho biased by many of its errors)."""
+    reduced = acquisition.reduce_recording(_record(tmp_path / "wedge", "ideal:wedge=0.4"))
+    dataset, priors = reduced.fit_inputs("per-incidence")
+    own = fit(dataset, "oren-nayar", FIXED, priors=priors, mcmc=False, alignment="sample_tilt_x,sample_tilt_y")
+    holder = fit(dataset, "oren-nayar", FIXED, priors=priors, mcmc=False, alignment="tilt_x,tilt_y")
+    ls = own.least_squares
+    assert math.hypot(ls.values["sample_tilt_x"], ls.values["sample_tilt_y"]) == pytest.approx(0.4, abs=0.02)
+    for name, truth in {"sigma": 30.0, "rho": 0.9}.items():
+        assert abs(ls.values[name] - truth) < 3 * ls.stderr[name], (name, ls.values[name], ls.stderr[name])
+    assert own.adequate is True and holder.adequate is False
+    assert abs(holder.least_squares.values["rho"] - 0.9) > 10 * holder.least_squares.stderr["rho"]
