@@ -650,11 +650,11 @@ def _read_mountings(f: _Fields, table: Mapping) -> Mountings:
 def _check_emulated_sample(f: _Fields, spec: str) -> None:
     """Refuse a ``[sample] emulated`` that the emulator's sample parser refuses.
 
-    The parser of ``--sample`` (:func:`gonio.cli.samples.check_sample_spec`, imported here
+    The rules of ``--sample`` (:func:`gonio.sample_specs.check_sample_spec`, imported here
     so that this module stays light); a CUReT spec is checked for its form only, its data
     are read when a rig is emulated.
     """
-    from .cli.samples import SPEC_SYNTAX, check_sample_spec
+    from .sample_specs import SPEC_SYNTAX, check_sample_spec
 
     try:
         check_sample_spec(spec)

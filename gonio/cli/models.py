@@ -5,33 +5,7 @@ import argparse
 from pathlib import Path
 
 from gonio import models
-
-from . import CLIError
-
-
-def parse_model_spec(text: str) -> tuple[str, dict[str, float | str]]:
-    """Parse ``NAME[:key=value,key=value]`` into a model name and its values.
-
-    Numbers become floats; anything else stays a string (model options).
-
-    Examples
-    --------
-    >>> parse_model_spec("oren-nayar:sigma=30,rho=0.9")
-    ('oren-nayar', {'sigma': 30.0, 'rho': 0.9})
-    """
-    name, _, rest = text.partition(":")
-    values: dict[str, float | str] = {}
-    for item in filter(None, (part.strip() for part in rest.split(","))):
-        key, eq, raw = item.partition("=")
-        if not eq or not key.strip():
-            raise CLIError(f"model spec {text!r}: expected key=value after ':', got {item!r}")
-        try:
-            values[key.strip()] = float(raw)
-        except ValueError:
-            values[key.strip()] = raw.strip()
-    model = models.get(name.strip())
-    model.resolve(values)  # unknown names and out-of-range values fail here, by name
-    return model.name, values
+from gonio.sample_specs import parse_model_spec
 
 
 def format_model_table() -> str:

@@ -5,7 +5,7 @@ in-process rig of tests and the demo, :func:`gonio.cli.run.emulated_rig`):
 
 ``MODEL[:key=value,...]``
     A registered model with parameter values, e.g. ``oren-nayar:sigma=30,rho=0.9``
-    (:func:`gonio.cli.models.parse_model_spec`).
+    (:func:`gonio.sample_specs.parse_model_spec`).
 ``surface:kind=KIND,key=value,...``
     A micro-surface rendered by Monte Carlo path tracing (:mod:`gonio.surfaces`), e.g.
     ``surface:kind=vgrooves,sigma=30,rho=0.9``: a surface no model wrote.  Its BRDF table
@@ -30,19 +30,12 @@ from typing import Callable
 
 import numpy as np
 
+from gonio.sample_specs import CURET_PREFIX, SPEC_SYNTAX, SURFACE_PREFIX, check_sample_spec, parse_model_spec
+
 from . import CLIError
-from .models import parse_model_spec
 
 __all__ = ["CURET_PREFIX", "SURFACE_PREFIX", "SPEC_SYNTAX", "EmulatedSample", "parse_sample_spec",
            "check_sample_spec", "table_progress"]
-
-#: Prefix of a CUReT sample spec.
-CURET_PREFIX = "curet:"
-#: Prefix of a rendered-surface sample spec.
-SURFACE_PREFIX = "surface:"
-#: The accepted forms, for help texts and error messages.
-SPEC_SYNTAX = "MODEL[:key=value,...] or surface:kind=KIND,... or curet:NUMBER|NAME"
-
 
 @dataclass(frozen=True)
 class EmulatedSample:
@@ -147,10 +140,10 @@ def parse_sample_spec(text: str) -> EmulatedSample:
 
     Raises
     ------
-    CLIError
+    ValueError
         Unknown model, surface kind or parameter, out-of-range value, unknown CUReT
         sample (naming the key and the valid numbers and names), missing CUReT files
-        (naming the folder).
+        (naming the folder); a :class:`gonio.cli.CLIError` for surfaces and CUReT.
 
     Examples
     --------
@@ -167,39 +160,3 @@ def parse_sample_spec(text: str) -> EmulatedSample:
         return _surface_sample(spec)
     name, values = parse_model_spec(spec)
     return EmulatedSample(text, functools.partial(gonio.brdf, name, **values), name, dict(values))
-
-
-def check_sample_spec(text: str) -> None:
-    """Check a sample spec without building its BRDF (for protocol files).
-
-    Model and surface specs are checked completely (model, kind, parameter names and
-    ranges; no table is read or rendered); a CUReT spec for its form (``curet:`` and a
-    number or name), since its data need not be present where the protocol is read.
-
-    Raises
-    ------
-    CLIError
-        What :func:`parse_sample_spec` would say.
-
-    Examples
-    --------
-    >>> check_sample_spec("surface:kind=vgrooves,sigma=30,rho=0.9")
-    >>> check_sample_spec("surface:kind=vgrooves,sigma=300,rho=0.9")
-    Traceback (most recent call last):
-    ...
-    gonio.cli.CLIError: surface spec 'kind=vgrooves,sigma=300,rho=0.9': sigma [deg] = 300 is outside its valid range [0, 90]
-    """
-    spec = text.strip()
-    if spec.lower().startswith(CURET_PREFIX):
-        if not spec[len(CURET_PREFIX):].strip():
-            raise CLIError(f"sample spec {spec!r}: expected curet:NUMBER or curet:NAME, e.g. curet:10")
-        return
-    if spec.lower().startswith(SURFACE_PREFIX):
-        from gonio.surfaces.spec import parse_surface_spec
-
-        try:
-            parse_surface_spec(spec[len(SURFACE_PREFIX):])
-        except ValueError as error:
-            raise CLIError(str(error)) from None
-        return
-    parse_model_spec(spec)

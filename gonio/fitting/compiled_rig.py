@@ -66,7 +66,7 @@ from gonio.models.tabulated.coordinates import Y_OFFSET, Y_SLOPE, y_coordinate
 from gonio.models.tabulated.kernel import _tricubic_into, phase_coordinate
 from gonio.models.tabulated.oren_nayar_table import F2_FLOOR
 
-from .rig_errors import COMPILED_MODELS
+from .evaluation import COMPILED_MODELS
 
 __all__ = ["CompiledRigRadiance", "rig_radiance", "rig_radiance_table"]
 
@@ -360,7 +360,7 @@ class CompiledRigRadiance:
     ----------
     base : Model
         ``oren-nayar``, ``lambert`` or ``oren-nayar-tabulated``
-        (:data:`gonio.fitting.rig_errors.COMPILED_MODELS`: eq 33-35 and its sigma = 0 limit,
+        (:data:`gonio.fitting.evaluation.COMPILED_MODELS`: eq 33-35 and its sigma = 0 limit,
         and the exact model's table).
     geometry : tuple of numpy.ndarray
         Recorded (theta_i, phi_i, theta_r, phi_r) [deg], flat, equal length.

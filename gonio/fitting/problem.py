@@ -42,8 +42,6 @@ value)), so chi^2 = r^T C^-1 r and the Gaussian log-likelihood is
 """
 from __future__ import annotations
 
-import json
-
 import math
 from typing import Any, Mapping, Sequence
 
@@ -52,9 +50,10 @@ import numpy as np
 from gonio import models
 from gonio.models import Model, Param
 
+from .dataset import Dataset
+from .evaluation import combine_prediction, evaluated_model
 from .rig_errors import ALIGNMENT_NAMES, ALIGNMENT_PARAMETERS, RIG_ERROR_NAMES, STRAY_LIGHT, RigPrediction, \
     alignment_prior, is_identity, parse_alignment
-from .dataset import Dataset
 from .priors import Prior
 
 __all__ = ["FitProblem", "combine_prediction", "predict_quantity"]
@@ -78,46 +77,6 @@ def jitter_mode(jitter: bool | str | None) -> str | None:
     if jitter not in NOISE_PARAMETERS:
         raise ValueError(f"jitter={jitter!r} is not one of False, True, 'absolute', 'relative'")
     return str(jitter)
-
-
-def combine_prediction(
-    quantity: str, brdf: np.ndarray, brdf_normal_view: np.ndarray | None, cos_theta_i: np.ndarray, scale: float
-) -> np.ndarray:
-    """The measured quantity predicted from model BRDF values (one formula, two callers).
-
-    Parameters
-    ----------
-    quantity : {'brdf', 'normalised_radiance', 'radiance'}
-        See :mod:`gonio.fitting.dataset`.
-    brdf : ndarray
-        Model BRDF at the measurement geometry [1/sr].
-    brdf_normal_view : ndarray or None
-        Model BRDF at the normal view (theta_r = 0) of the same incidence [1/sr]; needed
-        for ``normalised_radiance``.
-    cos_theta_i : ndarray
-        Cosine of the incidence angle [-] (for ``radiance``).
-    scale : float
-        Free scale of relative radiance [data units sr].
-
-    Returns
-    -------
-    ndarray
-        Predicted values.  For normalised radiance where the normal-view BRDF is 0 (a
-        black sample) the ratio is undefined and NaN is returned (no warning).
-
-    Notes
-    -----
-    Normalised radiance L_r(theta_r)/L_r(0) for a fixed source equals f_r(theta_r)/f_r(0)
-    because L_r = f_r E_0 cos(theta_i) (Oren & Nayar 1995, section 5, discussion of
-    Fig 16); the factor E_0 cos(theta_i) cancels.
-    """
-    if quantity == "brdf":
-        return brdf
-    if quantity == "radiance":
-        return scale * brdf * cos_theta_i
-    out = np.full(np.shape(brdf), np.nan)
-    np.divide(brdf, brdf_normal_view, out=out, where=brdf_normal_view > 0)
-    return out
 
 
 def predict_quantity(
@@ -150,32 +109,6 @@ def predict_quantity(
     brdf = model(ti, pi_, tr, pr, **params, **dict(options or {}))
     normal = model(ti, pi_, np.zeros_like(tr), pi_, **params, **dict(options or {})) if quantity == "normalised_radiance" else None
     return combine_prediction(quantity, brdf, normal, np.cos(np.radians(ti)), float(values.get("scale", 1.0)))
-
-
-def evaluated_model(model: str | Model, dataset: Dataset) -> Model:
-    """The model a fit of ``dataset`` evaluates: ``model`` itself, or its average over the
-    instrument's apertures when the dataset carries them (``metadata["aperture_sr"]`` =
-    [lamp, camera] solid angles [sr]; :func:`gonio.instrument.aperture_averaged`)."""
-    base = models.get(model) if isinstance(model, str) else model
-    aperture = apertures_of(dataset.metadata)
-    if not aperture:
-        return base
-    from gonio.instrument import aperture_averaged
-
-    return aperture_averaged(base, *aperture)
-
-
-def apertures_of(metadata: Mapping[str, Any] | None) -> list[float] | None:
-    """The [lamp, camera] solid angles [sr] of a dataset's ``metadata["aperture_sr"]`` (a
-    list, or its JSON text as a CSV header line gives it back), or None."""
-    aperture = metadata.get("aperture_sr") if metadata else None
-    if isinstance(aperture, str):  # read back from a CSV header line "# aperture_sr: [..]"
-        try:
-            aperture = json.loads(aperture)
-        except json.JSONDecodeError:
-            raise ValueError(f"dataset metadata aperture_sr = {aperture!r}: expected [lamp, camera] "
-                             "solid angles in sr, e.g. [0.003, 0.0009]") from None
-    return list(aperture) if aperture else None
 
 
 class QuadraticChiSquare:

@@ -18,7 +18,6 @@ import datetime as _dt
 import io
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -36,7 +35,8 @@ from .least_squares import LeastSquaresResult, _with_unit
 from .mcmc import LogPosterior, McmcResult
 from .priors import Prior, prior_from_dict
 from .rig_errors import RIG_ERROR_NAMES, RigPrediction
-from .problem import FitProblem, combine_prediction, evaluated_model, jitter_mode, predict_quantity
+from .evaluation import combine_prediction, evaluated_model
+from .problem import FitProblem, jitter_mode, predict_quantity
 from .selection import information_criteria
 
 __all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE", "SUMMARY_FILE", "INFERENCE_DATA_FILE", "RESULT_FORMAT",

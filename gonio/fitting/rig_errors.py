@@ -76,10 +76,13 @@ from drivers.rig_geometry import ALIGNMENT_ERRORS, misaligned_angles
 from gonio import models
 from gonio.models import Model, Param
 
+from .dataset import Dataset
+from .evaluation import COMPILED_MODELS, apertures_of, combine_prediction, evaluated_model
 from .priors import Normal
 
-__all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "SAMPLE_TILT_NAMES", "rig_alignment", "sample_alignment", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG", "STRAY_LIGHT",
-           "RIG_ERROR_NAMES", "COMPILED_MODELS", "parse_alignment", "alignment_prior",
+__all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "SAMPLE_TILT_NAMES", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG",
+           "STRAY_LIGHT", "RIG_ERROR_NAMES", "COMPILED_MODELS", "rig_alignment", "sample_alignment",
+           "parse_alignment", "alignment_prior",
            "reference_calibration", "incidence_weights", "RigPrediction", "is_identity"]
 
 #: Range of every alignment parameter [deg]: beyond it the rig is not misaligned but mis-built.
@@ -108,8 +111,6 @@ STRAY_LIGHT = Param("stray_light", "-", 0.0, (0.0, 0.05),
                     "stray radiance over the image as a fraction of E_0 / pi (a white Lambertian at normal incidence)")
 #: Every rig-error parameter.
 RIG_ERROR_NAMES = ALIGNMENT_NAMES + (STRAY_LIGHT.name,)
-#: Models whose misaligned aperture average has a compiled path (gonio.fitting.compiled_rig).
-COMPILED_MODELS = ("oren-nayar", "lambert", "oren-nayar-tabulated")
 
 
 def parse_alignment(names: str | Iterable[str] | None) -> tuple[str, ...]:
@@ -313,8 +314,6 @@ class RigPrediction:
 
     def __init__(self, model: Model, quantity: str, geometry, options: Mapping[str, Any],
                  metadata: Mapping[str, Any], compiled: bool = False) -> None:
-        from .problem import apertures_of, combine_prediction, evaluated_model  # problem imports this module
-        from .dataset import Dataset
 
         self.model = model
         self.quantity = quantity

@@ -24,7 +24,7 @@ MODEL_MODULES = (
     "minnaert",
     "phong",
     "kvd",
-    "oren_nayar.functional",
+    "oren_nayar.registered",
     "oren_nayar.exact",
     "tabulated.oren_nayar",
     "torrance_sparrow",

@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike
 from ._core import Model, Option, Param, register
 from ._trig import cos_from_half_tangent
 from .chandrasekhar import DEFAULT_ORDER, _check_omega, h_function
-from .oren_nayar.functional import OREN_NAYAR, SIGMA, c1
+from .oren_nayar.functional import SIGMA, _prepare_oren_nayar, c1
 from .fresnel import (
     exit_transmittance,
     fresnel_polynomial,
@@ -457,10 +457,15 @@ def _prepare(ti, pi_, tr, pr, scale: str = "albedo", fresnel: str = "exact") -> 
 
 
 def _compiled_wolff():
-    """The compiled plain call of ``wolff`` (numba loads here, on first use)."""
+    """The compiled plain call of ``wolff`` (numba loads here, on first use): eq 7 from
+    :mod:`gonio.models.wolff_compiled` times :func:`scale_factor`."""
     from .wolff_compiled import wolff_plain
 
-    return wolff_plain
+    def plain(theta_i, phi_i, theta_r, phi_r, params, options) -> np.ndarray:
+        return wolff_plain(theta_i, phi_i, theta_r, phi_r, float(scale_factor(params, options["scale"])),
+                           params["n"], options["fresnel"])
+
+    return plain
 
 
 WOLFF = register(
@@ -495,7 +500,7 @@ def _prepare_combined(ti, pi_, tr, pr, fresnel: str = "exact") -> Callable[..., 
     """Fixed-geometry evaluator of ``wolff-oren-nayar`` (angles [rad])."""
     cos_i, cos_r = cos_from_half_tangent(ti), cos_from_half_tangent(tr)
     transmission = _transmission_at(np.asarray(ti, float), np.asarray(tr, float), cos_i, cos_r, fresnel)
-    oren_nayar = OREN_NAYAR.prepare(ti, pi_, tr, pr)
+    oren_nayar = _prepare_oren_nayar(ti, pi_, tr, pr)
 
     def evaluate(rho: float, sigma: float, n: float) -> np.ndarray:
         product = transmission(n)

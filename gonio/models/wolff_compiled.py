@@ -84,15 +84,14 @@ def _combine_polynomial(theta_i, phi_i, theta_r, phi_r, tangent, scale, epsilon,
         out[k] = scale * (entry * leave)
 
 
-def wolff_plain(theta_i, phi_i, theta_r, phi_r, params, options) -> np.ndarray:
-    """``wolff`` at flat geometries [deg] for scalar parameters, compiled [1/sr]."""
-    from .wolff import scale_factor
-
-    scale = float(scale_factor(params, options["scale"]))
-    index = np.asarray(params["n"], float)
+def wolff_plain(theta_i, phi_i, theta_r, phi_r, scale: float, n: float, fresnel: str) -> np.ndarray:
+    """``wolff`` at flat geometries [deg], compiled [1/sr]: eq 7 times ``scale`` (the
+    factor in front of it, :func:`gonio.models.wolff.scale_factor`, which the caller
+    computes) for the refractive index ``n`` and the Fresnel form ``fresnel``."""
+    index = np.asarray(n, float)
     angles = (theta_i, phi_i, theta_r, phi_r)
-    if options["fresnel"] == "polynomial":
+    if fresnel == "polynomial":
         return evaluate_in_chunks(half_angles, _combine_polynomial, 2, angles,
-                                  (scale, float(polynomial_epsilon(index))))
+                                  (float(scale), float(polynomial_epsilon(index))))
     return evaluate_in_chunks(half_angles, _combine_exact, 2, angles,
-                              (scale, float(index), float(index**2), float(1.0 / index)))
+                              (float(scale), float(index), float(index**2), float(1.0 / index)))

@@ -13,7 +13,7 @@ Two uses:
 
 * ``gonio fit ... --report`` opens a pool (:func:`report_pool`) once its input is checked
   and before it fits. With the ``forkserver`` start method the fork server is started at
-  once with :data:`PRELOAD` (matplotlib, :mod:`gonio.report.fit_report`, the scipy parts
+  once with :data:`PRELOAD` (matplotlib, :mod:`gonio.report.rendering`, the scipy parts
   the figures use) and one BLAS thread (:data:`BLAS_THREAD_VARIABLES`): it imports them
   on another core while the command reads, fits and samples. Each figure is given to the
   workers as soon as what it shows is known (:class:`ReportDrawing`): the measurement
@@ -94,7 +94,7 @@ START_METHOD = "forkserver" if "forkserver" in multiprocessing.get_all_start_met
 #: Modules a worker needs to draw a report, imported by the fork server before it forks
 #: workers (by each worker with ``spawn``): the report with matplotlib; scipy.linalg (the
 #: result's whitening) and scipy.ndimage (the corner plot).
-PRELOAD: tuple[str, ...] = ("scipy.linalg", "scipy.ndimage", "gonio.report.fit_report")
+PRELOAD: tuple[str, ...] = ("scipy.linalg", "scipy.ndimage", "gonio.report.rendering")
 
 #: Longest wait [s] for the workers' figures once they are asked for. A report takes
 #: about 1 s of CPU (0.75 to 1.35 s for 10,000 points, benchmarks/bench_report.py) and
@@ -240,15 +240,15 @@ def _ready() -> None:
 
 
 def _render(result: FitResult, filenames: tuple[str, ...]) -> dict[str, bytes]:
-    """The job: the PNG bytes of ``filenames`` (gonio.report.fit_report.render_figures)."""
-    from .fit_report import render_figures
+    """The job: the PNG bytes of ``filenames`` (gonio.report.rendering.render_figures)."""
+    from .rendering import render_figures
 
     return render_figures(result, filenames)
 
 
 def _render_measurements(dataset: Dataset, filenames: tuple[str, ...]) -> dict[str, bytes]:
-    """The job for figures of the measurements alone (gonio.report.fit_report.render_dataset_figures)."""
-    from .fit_report import render_dataset_figures
+    """The job for figures of the measurements alone (gonio.report.rendering.render_dataset_figures)."""
+    from .rendering import render_dataset_figures
 
     return render_dataset_figures(dataset, filenames)
 
@@ -547,7 +547,7 @@ def _render_here(result: FitResult, filenames: tuple[str, ...]) -> dict[str, byt
     """``filenames`` drawn in this process (matplotlib is imported only when there are any)."""
     if not filenames:
         return {}
-    from .fit_report import render_figures
+    from .rendering import render_figures
 
     return render_figures(result, filenames)
 
@@ -601,7 +601,7 @@ def write_report_shared(source: str | Path | FitResult, out: str | Path | None =
         The HTML file.
     """
     with report_pool(processes - 1, method) as pool:
-        from .fit_report import load_source
+        from .rendering import load_source
 
         result, folder = load_source(source, out)
         pngs = draw_figures_shared(result, pool, draw_here=True)

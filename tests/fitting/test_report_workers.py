@@ -24,7 +24,7 @@ import pytest
 from gonio.cli import main
 from gonio.fitting import fit
 from gonio.fitting.results import FitResult
-from gonio.report import fit_report, workers
+from gonio.report import rendering, workers
 from gonio.report.fit_html import DATASET_FIGURES, FIGURE_NAMES, FIGURES, REPORT_FILES, write_html, write_report_files
 from gonio.report.fit_report import write_report
 from gonio.report.workers import (ReportDrawing, ReportPool, ReportWorkerWarning, draw_figures_shared,
@@ -183,11 +183,11 @@ def test_command_workers_write_the_same_files_keep_the_result_and_end(saved_fit,
 
 def test_the_measurements_figure_drawn_from_the_dataset_is_the_fits(saved_fit, in_process):
     result = FitResult.load(saved_fit)
-    pngs = fit_report.render_dataset_figures(result.dataset)
+    pngs = rendering.render_dataset_figures(result.dataset)
     assert list(pngs) == list(DATASET_FIGURES) == ["fit-geometry.png"]
     assert pngs["fit-geometry.png"] == in_process["fit-geometry.png"]
     with pytest.raises(ValueError, match=r"cannot be drawn from the measurements alone: \['fit-corner\.png'\]"):
-        fit_report.render_dataset_figures(result.dataset, ("fit-corner.png",))
+        rendering.render_dataset_figures(result.dataset, ("fit-corner.png",))
 
 
 def test_figures_given_while_fitting_and_after_make_the_same_report(saved_fit, in_process, tmp_path, strict):
@@ -273,7 +273,7 @@ def test_an_error_in_a_figure_is_raised_with_the_workers_traceback_not_drawn_aga
     def drawn_here(*args, **kwargs):
         raise AssertionError("the figures were drawn again in the calling process")
 
-    monkeypatch.setattr(fit_report, "render_figures", drawn_here)  # this process only: workers keep theirs
+    monkeypatch.setattr(rendering, "render_figures", drawn_here)  # this process only: workers keep theirs
     with pytest.raises(AttributeError, match="'str' object has no attribute") as raised:
         with report_pool(2) as pool:
             finish_report(pool, broken, tmp_path)
@@ -380,16 +380,16 @@ def test_a_reused_pool_never_returns_an_earlier_reports_figures(saved_fit, in_pr
     # fit; the next report on the same pool gets its own figures.
     other = fit(synthetic_dataset("lambert", dict(rho=0.5), 0.005), "lambert", n_walkers=8, tau_multiple=10.0,
                 rhat_limit=1.05, seed=0)
-    original = fit_report.render_figures
+    original = rendering.render_figures
 
     def fail(*args, **kwargs):
         raise RuntimeError("this process's share failed")
 
     with report_pool(1) as pool:
-        monkeypatch.setattr(fit_report, "render_figures", fail)
+        monkeypatch.setattr(rendering, "render_figures", fail)
         with pytest.raises(RuntimeError, match="share failed"):
             draw_figures_shared(other, pool, draw_here=True)
-        monkeypatch.setattr(fit_report, "render_figures", original)
+        monkeypatch.setattr(rendering, "render_figures", original)
         pngs = draw_figures_shared(FitResult.load(saved_fit), pool, draw_here=True)
     assert pngs == {name: in_process[name] for name in FIGURE_NAMES}
 

@@ -173,7 +173,7 @@ def test_truth_table_of_a_surface_sample_names_it():
 def test_check_sample_spec_builds_nothing(cache):
     check_sample_spec(GROOVES)
     assert not cache.exists()
-    with pytest.raises(CLIError, match="unknown kind"):
+    with pytest.raises(ValueError, match="unknown kind"):
         check_sample_spec("surface:kind=x")
 
 

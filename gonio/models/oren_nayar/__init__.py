@@ -12,8 +12,12 @@ exact
     ``oren-nayar-numerical`` (eq 31-32 as the paper evaluated it) and
     ``oren-nayar-exact`` (the V-cavity model integrated over facet normals, the reference).
 functional
-    ``oren-nayar`` (functional approximation, eq 33-35) and ``oren-nayar-qualitative``
-    (eq 36).
+    the formulas of ``oren-nayar`` (functional approximation, eq 33-35) and
+    ``oren-nayar-qualitative`` (eq 36).
+compiled
+    their compiled plain calls (numba).
+registered
+    the two registered models, joining both.
 
 References
 ----------

@@ -1,6 +1,8 @@
 """Closed-form Oren-Nayar models: the functional approximation and the qualitative model.
 
-Two registered models:
+The formulas of two models, which :mod:`gonio.models.oren_nayar.registered` registers
+(with their compiled plain calls, :mod:`gonio.models.oren_nayar.compiled`, which takes its
+constants and coefficients from here):
 
 ``oren-nayar``
     The functional approximation of the Gaussian-slope V-cavity model with two-bounce
@@ -37,7 +39,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._core import LinearForm, Model, Option, Param, register, with_linear_form
+from .._core import LinearForm, Option, Param, with_linear_form
 from .._trig import cos_from_half_tangent, sin_from_half_tangent
 
 __all__ = [
@@ -51,10 +53,10 @@ __all__ = [
     "interreflection_coefficient",
     "oren_nayar_brdf",
     "oren_nayar_qualitative_brdf",
+    "RHO",
     "SIGMA",
     "IR_WEIGHT",
-    "OREN_NAYAR",
-    "OREN_NAYAR_QUALITATIVE",
+    "VARIANT",
 ]
 
 # ---------------------------------------------------------------- constants of eq 33-36
@@ -564,46 +566,3 @@ def oren_nayar_qualitative_brdf(
     0.3671
     """
     return _prepare_qualitative(theta_i, phi_i, theta_r, phi_r, variant)(rho, sigma)
-
-
-def _compiled_oren_nayar():
-    """The compiled plain call of ``oren-nayar`` (numba loads here, on first use)."""
-    from .compiled import oren_nayar_plain
-
-    return oren_nayar_plain
-
-
-def _compiled_qualitative():
-    """The compiled plain call of ``oren-nayar-qualitative`` (numba loads here)."""
-    from .compiled import qualitative_plain
-
-    return qualitative_plain
-
-
-OREN_NAYAR = register(
-    Model(
-        name="oren-nayar",
-        params=(RHO, SIGMA, IR_WEIGHT),
-        reference="Oren & Nayar 1995, section 4.3, eq 33-35 (functional approximation with interreflection)",
-        description="rough diffuse surface: Oren-Nayar functional approximation with interreflection",
-        prepare=_prepare_oren_nayar,
-        energy_conserving=False,
-        broadcasts_params=True,
-        compiled=_compiled_oren_nayar,
-    )
-)
-
-OREN_NAYAR_QUALITATIVE = register(
-    Model(
-        name="oren-nayar-qualitative",
-        params=(RHO, SIGMA),
-        reference="Oren & Nayar 1995, section 4.4, eq 36 and footnote 11 (qualitative model)",
-        description="rough diffuse surface: simplified Oren-Nayar model (A + B sin(alpha) tan(beta))",
-        prepare=_prepare_qualitative,
-        options=(VARIANT,),
-        energy_conserving=False,
-        linear_in=("rho",),
-        broadcasts_params=True,
-        compiled=_compiled_qualitative,
-    )
-)
