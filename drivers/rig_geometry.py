@@ -35,6 +35,7 @@ __all__ = [
     "separation_of_axes",
     "misaligned_angles",
     "ALIGNMENT_ERRORS",
+    "too_close",
 ]
 
 AXIS_VIEW, AXIS_THETA_I, AXIS_PHI_I = 1, 2, 3
@@ -105,20 +106,31 @@ def axis_targets(theta_i: float, phi_i: float, view: float) -> dict[int, float]:
     return {AXIS_VIEW: float(view), AXIS_THETA_I: float(theta_i), AXIS_PHI_I: float(phi_i)}
 
 
+def too_close(separation, min_separation: float):
+    """Whether camera and lamp ``separation`` [deg] apart (scalar or array) are refused.
+
+    Closer than ``min_separation`` plus :data:`SEPARATION_MARGIN` (0.01 deg): a geometry
+    exactly at the minimum is refused, since the controller's own floating-point check may
+    go either way there. The one rule of the driver's checks (:func:`check_targets`), its
+    move plans (:func:`plan_moves`) and a protocol's plan (``gonio.protocols``), so that
+    the plan refuses what the rig refuses.
+
+    >>> bool(too_close(5.0, 5.0)), bool(too_close(5.02, 5.0))
+    (True, False)
+    """
+    return np.asarray(separation, dtype=float) < min_separation + SEPARATION_MARGIN
+
+
 def check_targets(
     targets: Mapping[int, float],
     limits: Mapping[int, tuple[float, float]],
     min_separation: float,
-    margin: float | None = None,
 ) -> str | None:
     """Reason why axis targets are not allowed, or ``None``.
 
     Checks every target is finite and within its travel limits and the lamp/camera
-    separation at the target is at least ``min_separation + margin`` [deg]. The small
-    margin (default :data:`SEPARATION_MARGIN`, 0.01 deg) keeps geometries exactly at the
-    minimum out: there the controller's own floating-point check may go either way.
+    separation at the target is not :func:`too_close` to ``min_separation`` [deg].
     """
-    margin = SEPARATION_MARGIN if margin is None else margin
     for axis in AXES:
         value = targets[axis]
         low, high = limits[axis]
@@ -130,7 +142,7 @@ def check_targets(
                 f"[{low:g}, {high:g}] deg"
             )
     sep = float(separation_of_axes(targets))
-    if sep < min_separation + margin:
+    if too_close(sep, min_separation):
         return (
             f"camera and lamp would be {sep:.3g} deg apart at theta_i={targets[AXIS_THETA_I]:g}, "
             f"phi_i={targets[AXIS_PHI_I]:g}, view={targets[AXIS_VIEW]:g}; the minimum "
@@ -162,7 +174,7 @@ def _order_ok(start: Mapping[int, float], order: Sequence[int], end: Mapping[int
     targets = dict(start)
     for axis in order[:-1]:
         targets[axis] = end[axis]
-        if float(separation_of_axes(targets)) < min_separation + SEPARATION_MARGIN:
+        if too_close(separation_of_axes(targets), min_separation):
             return False
     return True
 
@@ -207,7 +219,7 @@ def plan_moves(
                 continue
             waypoint = dict(start)
             waypoint[axis] = float(value)
-            if float(separation_of_axes(waypoint)) < min_separation + SEPARATION_MARGIN:
+            if too_close(separation_of_axes(waypoint), min_separation):
                 continue
             first = _one_stage(start, waypoint, min_separation)
             second = _one_stage(waypoint, end, min_separation)

@@ -42,6 +42,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
+from drivers.rig_geometry import too_close
+
 from .geometry import angle_between, azimuth_difference
 
 __all__ = [
@@ -68,8 +70,6 @@ __all__ = [
 ]
 
 FORMAT_VERSION = 1
-#: Rounding allowance when comparing the camera/lamp separation with its minimum [deg].
-SEPARATION_TOLERANCE = 1e-6
 
 #: Most measurement points a protocol may plan (blocks x theta_i x view x repeats, refused
 #: points included), checked arithmetically before the plan is expanded.
@@ -1078,15 +1078,14 @@ def refusal_reasons(theta_i: float, phi_i: float, views: Sequence[float], rig: R
         return [_camera_refusal(view, rig) or lamp for view in views]
     view_array = np.asarray(views, dtype=float)
     separations = angle_between(theta_i, phi_i, np.abs(view_array), np.where(view_array >= 0, 0.0, 180.0))
-    # Exactly the minimum is allowed; 1e-6 deg absorbs the rounding of the angle
-    # computation (a 5 deg step lands on 4.9999999999 deg otherwise).
-    too_close = separations < rig.min_separation - SEPARATION_TOLERANCE
+    # the rig's own rule (drivers.rig_geometry.too_close): exactly the minimum is refused
+    close_pairs = too_close(separations, rig.min_separation)
     reasons: list[str | None] = []
-    for view, separation, close in zip(views, separations.tolist(), too_close.tolist()):
+    for view, separation, close in zip(views, separations.tolist(), close_pairs.tolist()):
         reason = _camera_refusal(view, rig)
         if reason is None and close:
-            reason = (f"camera and lamp only {separation:.2f} deg apart "
-                      f"(minimum separation {rig.min_separation:g} deg)")
+            reason = (f"camera and lamp only {separation:.2f} deg apart (the rig keeps them more than its "
+                      f"minimum separation, {rig.min_separation:g} deg, apart)")
         reasons.append(reason)
     return reasons
 

@@ -33,11 +33,32 @@ def test_every_shipped_protocol_loads_and_plans():
 
 def test_fig16_plan_counts_and_refusals():
     """Fig 16: theta_i = 30, 45, 60 deg, views -80..80 step 5 (33 each); the rig refuses
-    exactly the three retro-reflection views (camera on the lamp) at 5 deg separation."""
+    the retro-reflection views (camera on the lamp) and those exactly at the 5 deg minimum
+    separation, where the controller's own check may go either way."""
     plan = P.plan(P.load(ROOT / "protocols" / "oren-nayar-fig16-plaster.toml"))
     assert len(plan.points) + len(plan.refused) == 3 * 33
-    assert sorted((r.point.theta_i, r.point.view) for r in plan.refused) == [(30, 30), (45, 45), (60, 60)]
+    assert sorted((r.point.theta_i, r.point.view) for r in plan.refused) == [
+        (30, 25), (30, 30), (30, 35), (45, 40), (45, 45), (45, 50), (60, 55), (60, 60), (60, 65)]
     assert all("apart" in r.reason for r in plan.refused)
+
+
+def test_the_plan_refuses_what_the_rig_refuses():
+    """One rule (drivers.rig_geometry.too_close): every geometry of the shipped protocols is
+    planned exactly when the driver's own check accepts it."""
+    from drivers.rig_geometry import axis_targets, check_targets
+
+    for path in SHIPPED:
+        protocol = P.load(path)
+        plan = P.plan(protocol)
+        rig = protocol.rig
+        limits = {1: rig.camera_range, 2: rig.lamp_theta_range, 3: rig.lamp_phi_range}
+        for point in plan.points:
+            assert check_targets(axis_targets(point.theta_i, point.phi_i, point.view), limits,
+                                 rig.min_separation) is None, (path.name, point)
+        for refusal in plan.refused:
+            point = refusal.point
+            assert check_targets(axis_targets(point.theta_i, point.phi_i, point.view), limits,
+                                 rig.min_separation) is not None, (path.name, point)
 
 
 def test_fig19_is_off_plane_with_the_papers_azimuths():
@@ -131,7 +152,7 @@ def test_move_time_trapezoid_and_triangle():
 def test_gonio_plan_cli_prints_summary_and_errors_cleanly(tmp_path, capsys):
     assert main(["plan", str(ROOT / "protocols" / "oren-nayar-fig16-plaster.toml")]) == 0
     out = capsys.readouterr().out
-    assert "points to measure: 96" in out and "points refused: 3" in out and "h:mm:ss" in out
+    assert "points to measure: 90" in out and "points refused: 9" in out and "h:mm:ss" in out
     bad = tmp_path / "bad.toml"
     bad.write_text(MINIMAL.replace("theta_i = 45", "theta_i = 120"))
     assert main(["plan", str(bad)]) == 2
@@ -171,12 +192,13 @@ def test_checks_table_is_parsed_and_counted_as_documented():
     assert protocol.checks == P.Checks(every=5, geometry=(45.0, 0.0, -20.0), frames=7)
     plan = P.plan(protocol)
     n = len(plan.points)
-    assert n == 17 and not plan.refused  # 10 deg steps miss the lamp at 45 deg
-    assert plan.checks == 2 + (n - 1) // 5 == 5
+    # 10 deg steps miss the lamp at 45 deg; 40 and 50 are exactly at the 5 deg minimum: refused
+    assert n == 15 and sorted(r.point.view for r in plan.refused) == [40.0, 50.0]
+    assert plan.checks == 2 + (n - 1) // 5 == 4
     assert plan.check_geometry == (45.0, 0.0, -20.0)
-    assert "lamp-stability checks: 5 (every 5 points, 7 frames each" in plan.summary()
+    assert "lamp-stability checks: 4 (every 5 points, 7 frames each" in plan.summary()
     with_reference = P.plan(P.loads(_with_table(text + WITH_REFERENCE.split(MINIMAL)[1], "[checks]\nevery = 5")))
-    assert with_reference.checks == 6
+    assert with_reference.checks == 5
 
 
 def test_checks_default_geometry_is_the_first_point_the_plan_measures():
