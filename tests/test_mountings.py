@@ -161,6 +161,20 @@ def test_texture_alone_is_the_texture_term_common_to_every_value(tmp_path):
     assert reduced.budget["monitor_ratio"].max() == 0.0 or reduced.consistency["monitor_ratio_relative"] < 2e-4
 
 
+def test_slope_texture_alone_is_the_texture_term_growing_with_the_slope(tmp_path):
+    """Only the sample's mesoscale slope: each pixel sees its facets' radiance, which the
+    image's spatial statistics state as the texture term, to first order proportional to
+    the slope (0.3 deg, the lab's, against 1 deg); nothing else is found."""
+    found = {}
+    for slope in (0.3, 1.0):
+        reduced = reduction.reduce_recording(_run(tmp_path / f"rec{slope}", _text(), f"ideal:texture_slope={slope}"))
+        relative = reduced.budget["texture"] / np.abs(reduced.radiance)
+        assert np.allclose(relative, relative[0]) and relative[0] > 0
+        assert reduced.consistency["monitor_ratio_relative"] < 2e-4
+        found[slope] = relative[0]
+    assert 2.5 < found[1.0] / found[0.3] < 4.5  # 1 / 0.3 = 3.3
+
+
 def test_mount_tilt_alone_is_the_mounting_term_with_its_correlation(tmp_path):
     """Only the seating's tilt (0.2 deg, four times the lab's), six mountings: the values
     change between mountings as a tilt changes them (up on one side of the normal, down on
