@@ -145,9 +145,13 @@ def _row_text(names: tuple[str, ...], row: Mapping[str, Any]) -> str:
     unknown = set(row) - set(names)
     if unknown:
         raise RecordingError(f"unknown recording columns {sorted(unknown)}; expected some of {list(names)}")
+    cells = ["" if row.get(n) is None else _format(row.get(n), n in _TEXT) for n in names]
     buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(["" if row.get(n) is None else _format(row.get(n), n in _TEXT) for n in names])
+    # The csv module quotes a field holding the line terminator ("\n") but not a lone "\r",
+    # which a reader of a file opened with newline="" takes for a row's end: such a row is
+    # written with every field quoted.
+    quoting = csv.QUOTE_ALL if any("\r" in cell for cell in cells) else csv.QUOTE_MINIMAL
+    csv.writer(buffer, lineterminator="\n", quoting=quoting).writerow(cells)
     return buffer.getvalue()
 
 
@@ -340,8 +344,10 @@ def read_metadata(folder: str | Path) -> dict:
 
 
 def _read_text(path: Path) -> str:
+    """The file's text as written (no newline translation: a "\r" inside a field stays)."""
     try:
-        return path.read_text(encoding="utf-8")
+        with open(path, encoding="utf-8", newline="") as handle:
+            return handle.read()
     except FileNotFoundError:
         raise RecordingError(f"{path.parent}: not a recording ({path.name} missing)") from None
     except UnicodeDecodeError as error:
@@ -383,11 +389,14 @@ def _parse_cell(path: Path, number: int, name: str, value: str | None) -> Any:
 
 def _read_csv(path: Path, names: tuple[str, ...], as_arrays: bool):
     text = _read_text(path)
-    lines = text.splitlines(keepends=True)
-    if lines and not lines[-1].endswith("\n"):
-        lines = lines[:-1]  # a row still being written is not a measurement yet
-    header = _check_header(path, names, first_line=lines[0] if lines else "")
-    reader = csv.DictReader(lines)
+    # What follows the last "\n" (the writer's line terminator) is a row still being written:
+    # not a measurement yet. The rest is read as the csv module reads a file opened with
+    # newline="": a name or message holding "\r", "\n" or another character at which
+    # str.splitlines would split ("\v", "\f", "\x1c"-"\x1e", "\x85", U+2028, U+2029) stays
+    # inside its field.
+    whole = text[: text.rfind("\n") + 1]
+    header = _check_header(path, names, first_line=whole[: whole.find("\n") + 1])
+    reader = csv.DictReader(io.StringIO(whole, newline=""))
     rows = []
     for number, raw in enumerate(reader, start=2):
         if None in raw:
