@@ -10,7 +10,7 @@ import sys
 import pytest
 
 import gonio
-from gonio.cli import main
+from gonio.cli import CLIError, main
 from gonio.cli.models import format_model_table, parse_model_spec
 
 
@@ -187,3 +187,22 @@ def test_tables_clear_keeps_a_foreign_file_with_a_table_name_and_removes_legacy_
     assert store.clear_cache() == [tmp_path / "oren-nayar.npz"]
     assert main(["tables", "clear"]) == 0
     assert "no table built by gonio" in capsys.readouterr().out
+
+
+def test_tcp_ports_outside_the_port_range_are_refused_by_name():
+    from gonio.cli.emulator import _port_spec
+
+    assert _port_spec("65533") == {"stage": 65533, "camera": 65534, "lamp": 65535}
+    with pytest.raises(CLIError, match="--tcp-ports 65534: TCP ports are 1 to 65535"):
+        _port_spec("65534")
+    with pytest.raises(CLIError, match="TCP ports are 1 to 65535"):
+        _port_spec("stage=0,camera=5001,lamp=5002")
+
+
+def test_an_empty_sample_is_refused_not_read_as_none(tmp_path, capsys):
+    protocol = tmp_path / "p.toml"
+    protocol.write_text('[protocol]\nname = "p"\n[sample]\nlabel = "s"\n[[block]]\ntheta_i = 30\nphi_i = 0\n'
+                        'view = [0]\n')
+    assert main(["run", str(protocol), "--out", str(tmp_path / "rec"), "--sample", " "]) == 2
+    assert "--sample ' ': expected a sample spec" in capsys.readouterr().err
+    assert not (tmp_path / "rec" / "points.csv").exists()

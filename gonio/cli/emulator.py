@@ -18,13 +18,18 @@ def _port_spec(text: str) -> dict[str, int]:
     text = text.strip()
     if text.isdigit():
         base = int(text)
-        return {device: base + k for k, device in enumerate(DEVICES)}
-    ports: dict[str, int] = {}
-    for item in filter(None, (part.strip() for part in text.split(","))):
-        device, eq, value = item.partition("=")
-        if not eq or device not in DEVICES or not value.strip().isdigit():
-            raise CLIError(f"--tcp-ports: expected BASE or device=PORT,... with devices {DEVICES}, got {item!r}")
-        ports[device] = int(value)
+        ports = {device: base + k for k, device in enumerate(DEVICES)}
+    else:
+        ports = {}
+        for item in filter(None, (part.strip() for part in text.split(","))):
+            device, eq, value = item.partition("=")
+            if not eq or device not in DEVICES or not value.strip().isdigit():
+                raise CLIError(f"--tcp-ports: expected BASE or device=PORT,... with devices {DEVICES}, got {item!r}")
+            ports[device] = int(value)
+    outside = {device: port for device, port in ports.items() if not 1 <= port <= 65535}
+    if outside:
+        raise CLIError(f"--tcp-ports {text}: TCP ports are 1 to 65535 (a base port takes {len(DEVICES)} in a row: "
+                       f"at most {65536 - len(DEVICES)}); got {outside}")
     return ports
 
 

@@ -11,7 +11,7 @@ import gonio
 
 from . import CLIError
 from .realism import DEFAULT_REALISM, IDEAL_RIG_NOTE, REALISM_HELP, REALISM_SYNTAX, parse_realism, realism_metadata
-from .samples import parse_sample_spec
+from .samples import SPEC_SYNTAX, parse_sample_spec
 from .paths import check_output_folder
 from .progress import ProgressLine
 
@@ -146,7 +146,10 @@ def check_ports(ports: dict[str, str | None]) -> None:
 
 def emulated_sample(cli_sample: str | None, protocol: protocols.Protocol) -> str:
     """The sample the emulated rig mounts: ``--sample``, else the protocol's ``[sample]
-    emulated``, else :data:`DEFAULT_SAMPLE`."""
+    emulated``, else :data:`DEFAULT_SAMPLE`. An empty ``--sample`` is refused, not read as
+    "not given"."""
+    if cli_sample is not None and not cli_sample.strip():
+        raise CLIError(f"--sample {cli_sample!r}: expected a sample spec ({SPEC_SYNTAX}), e.g. {DEFAULT_SAMPLE}")
     return cli_sample or protocol.emulated or DEFAULT_SAMPLE
 
 

@@ -57,6 +57,9 @@ __all__ = ["DEFAULT_WALKERS", "SERIAL_WALKERS", "default_walkers", "VectorisedSt
 #: cost more per step) with a bulk ESS of about 2,500 (benchmarks/bench_moves.py,
 #: docs/fitting.md "Performance").
 DEFAULT_WALKERS = 32
+#: Most memory a chain may take at ``max_steps`` [bytes]: walkers x steps x (parameters
+#: + 1) x 8 bytes (the defaults: 32 walkers, 20,000 steps, 11 parameters: 61 MB).
+CHAIN_MEMORY_LIMIT = 2 * 2**30
 #: Default ensemble size where the model is evaluated one walker at a time (a step costs
 #: in proportion to the walkers, so more of them only lengthen the run).
 SERIAL_WALKERS = 32
@@ -393,6 +396,14 @@ def sample_posterior(
         raise ValueError(f"n_walkers = {n_walkers} must be at least 2 x {ndim} free parameters")
     if max_steps < check_every:
         raise ValueError(f"max_steps = {max_steps} must be at least check_every = {check_every}")
+    if not (math.isfinite(rhat_limit) and rhat_limit > 1.0):
+        raise ValueError(f"rhat_limit = {rhat_limit!r}: expected a finite number above 1 (R-hat approaches 1 from "
+                         f"above as the chains agree; {RHAT_LIMIT} is the default)")
+    chain_bytes = 8.0 * n_walkers * max_steps * (ndim + 1)  # positions and log-probabilities
+    if chain_bytes > CHAIN_MEMORY_LIMIT:
+        raise ValueError(f"n_walkers = {n_walkers} with max_steps = {max_steps} and {ndim} free parameters would keep "
+                         f"a chain of up to {chain_bytes / 2**30:.3g} GiB in memory (limit "
+                         f"{CHAIN_MEMORY_LIMIT / 2**30:g} GiB); use fewer walkers (default {DEFAULT_WALKERS}) or steps")
     priors = resolve_priors(problem, start.values, priors)
     posterior = LogPosterior(problem, priors)
     rng = np.random.default_rng(seed)

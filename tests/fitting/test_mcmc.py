@@ -285,3 +285,19 @@ def test_gaussian_move_gives_every_walker_its_own_displacement():
     assert np.all(factors == 0.0)
     assert len(np.unique(proposal[:, 0])) == 4000
     np.testing.assert_allclose(np.cov(proposal.T), 2.38**2 / 2 * covariance, rtol=0.1)
+
+
+@pytest.mark.parametrize("limit", [float("inf"), float("nan"), 0.0, 1.0])
+def test_an_rhat_limit_that_cannot_mean_convergence_is_refused(limit):
+    """inf would call any chain converged, and nan, 0 or 1 none: each is refused by name."""
+    data = synthetic_dataset("lambert", {"rho": 0.5}, 0.005)
+    problem = FitProblem("lambert", data)
+    with pytest.raises(ValueError, match="rhat_limit"):
+        sample_posterior(problem, fit_least_squares(problem), rhat_limit=limit)
+
+
+def test_an_ensemble_too_large_for_memory_is_refused_before_it_grows():
+    data = synthetic_dataset("lambert", {"rho": 0.5}, 0.005)
+    problem = FitProblem("lambert", data)
+    with pytest.raises(ValueError, match="n_walkers = 1000000000 .* GiB"):
+        sample_posterior(problem, fit_least_squares(problem), n_walkers=1_000_000_000)
