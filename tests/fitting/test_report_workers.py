@@ -291,7 +291,12 @@ def test_a_worker_that_dies_is_reported_ended_with_the_others_and_its_figures_dr
         started = _new_children(children)
         path = finish_report(pool, dying, tmp_path)
         assert len(started) == 2 and not any(process.is_alive() for process in started)  # the other one too
-    assert "gonio: warning: a report worker died" in capsys.readouterr().err
+    # The worker dies as the first share arrives: while this process waits for it ("a report
+    # worker died"), or, if it dies before the second share is submitted, at that submission
+    # (the pool is broken: "cannot take the figures"). Both are the same event, reported.
+    err = capsys.readouterr().err
+    assert ("gonio: warning: a report worker died" in err
+            or "gonio: warning: report workers cannot take the figures (BrokenProcessPool" in err), err
     assert path == tmp_path / "report.html"
     assert _contents(tmp_path) == in_process
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(REPORT_FILES)  # no stray or temporary file
