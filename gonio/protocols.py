@@ -42,9 +42,9 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
-from drivers.rig_geometry import too_close
+from drivers.rig_geometry import angular_separation, camera_direction, too_close
 
-from .geometry import angle_between, azimuth_difference
+from .geometry import azimuth_difference
 
 __all__ = [
     "ProtocolError",
@@ -1038,8 +1038,9 @@ def _duration(seconds: float) -> str:
 
 
 def camera_lamp_separation(theta_i: float, phi_i: float, view: float) -> float:
-    """Angle between the camera and the lamp directions [deg] for rig coordinates."""
-    return float(angle_between(theta_i, phi_i, abs(view), 0.0 if view >= 0 else 180.0))
+    """Angle between the camera and the lamp directions [deg] for rig coordinates (the
+    rig's own geometry, :func:`drivers.rig_geometry.angular_separation`)."""
+    return float(angular_separation(theta_i, phi_i, *camera_direction(view)))
 
 
 def refusal_reason(theta_i: float, phi_i: float, view: float, rig: RigLimits) -> str | None:
@@ -1077,8 +1078,8 @@ def refusal_reasons(theta_i: float, phi_i: float, views: Sequence[float], rig: R
     if lamp is not None:
         return [_camera_refusal(view, rig) or lamp for view in views]
     view_array = np.asarray(views, dtype=float)
-    separations = angle_between(theta_i, phi_i, np.abs(view_array), np.where(view_array >= 0, 0.0, 180.0))
-    # the rig's own rule (drivers.rig_geometry.too_close): exactly the minimum is refused
+    # the rig's own geometry and rule (drivers.rig_geometry): exactly the minimum is refused
+    separations = angular_separation(theta_i, phi_i, *camera_direction(view_array))
     close_pairs = too_close(separations, rig.min_separation)
     reasons: list[str | None] = []
     for view, separation, close in zip(views, separations.tolist(), close_pairs.tolist()):
