@@ -65,7 +65,7 @@ from typing import Any
 
 import numpy as np
 from scipy import stats
-from scipy.special import logsumexp, ndtr, ndtri
+from scipy.special import logsumexp, ndtr
 
 import gonio
 from gonio.fitting import (
@@ -423,27 +423,9 @@ def gaussian_mass_inside(ls: Any, free: Sequence[str], priors: Mapping[str, Prio
 
 # ---------------------------------------------------------------------------- nested sampling
 def unit_to_prior(prior: Prior) -> Callable[[float], float]:
-    """The inverse CDF of ``prior``: maps u in [0, 1] to a draw from it.
-
-    Uniform(a, b): a + u (b - a).  LogUniform(a, b): a (b/a)^u.  Normal(m, s) truncated to
-    [a, b]: m + s Phi^-1(Phi(alpha) + u (Phi(beta) - Phi(alpha))), alpha = (a - m)/s,
-    beta = (b - m)/s, computed on the mirrored (survival) side when the truncation lies
-    above the mean, so that no precision is lost in the upper tail.
-    """
-    if isinstance(prior, Uniform):
-        return lambda u: prior.lower + u * (prior.upper - prior.lower)
-    if isinstance(prior, LogUniform):
-        log_lower, log_ratio = math.log(prior.lower), math.log(prior.upper / prior.lower)
-        return lambda u: math.exp(log_lower + u * log_ratio)
-    if isinstance(prior, Normal):
-        alpha = (prior.lower - prior.mean) / prior.sd
-        beta = (prior.upper - prior.mean) / prior.sd
-        if alpha > 0.0:  # both limits above the mean: invert the survival function
-            sa, sb = ndtr(-alpha), ndtr(-beta)
-            return lambda u: prior.mean - prior.sd * float(ndtri(sa - u * (sa - sb)))
-        ca, cb = ndtr(alpha), ndtr(beta)
-        return lambda u: prior.mean + prior.sd * float(ndtri(ca + u * (cb - ca)))
-    raise TypeError(f"no unit-cube transform for the prior {prior!r}")
+    """The inverse CDF of ``prior`` (:meth:`gonio.fitting.priors.Prior.quantile`): maps u in
+    [0, 1] to a draw from it."""
+    return lambda u: float(prior.quantile(u))
 
 
 def prior_transform(priors: Sequence[Prior]) -> Callable[[np.ndarray], np.ndarray]:

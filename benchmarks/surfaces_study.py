@@ -25,6 +25,7 @@ page from the JSON without rendering.
 """
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -39,6 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import OUT, ROOT, machine, write_json  # noqa: E402
 
 import gonio  # noqa: E402
+from gonio.fitting.discrepancy import OFFSETS_FILE, offsets_from_study  # noqa: E402
 from gonio.surfaces import HeightField, PittedPlane, VGrooveField, render, render_albedo  # noqa: E402
 from gonio.surfaces.shapes import rms_slope_angle  # noqa: E402
 
@@ -384,8 +386,6 @@ def markdown(payload: dict) -> str:
 
 def main() -> None:
     if "--charts" in sys.argv[1:]:
-        import json
-
         payload = json.loads((OUT / "surfaces.json").read_text())
         charts(payload["fig10"], payload["comparison"])
         (ROOT / "docs" / "surfaces-study.md").write_text(markdown(payload))
@@ -401,6 +401,7 @@ def main() -> None:
     payload["fig10"] = curves
     payload["seconds"], payload["cpu_seconds"] = time.perf_counter() - start, time.process_time() - cpu
     write_json("surfaces", payload)
+    OFFSETS_FILE.write_text(json.dumps(offsets_from_study(payload), indent=1) + "\n")  # the fits' statements
     charts(curves, payload["comparison"])
     (ROOT / "docs" / "surfaces-study.md").write_text(markdown(payload))
     print(f"done in {payload['seconds'] / 60:.1f} min ({payload['cpu_seconds'] / 60:.1f} min CPU)")

@@ -41,12 +41,14 @@ systematic misfit.  ``--noise relative:0.05`` replaces the estimate by a fixed r
 uncertainty.  By default every fit also has ``jitter`` (extra noise in quadrature,
 :mod:`gonio.fitting.problem`) so that posterior intervals widen when the model misfits,
 and the model comparison uses the same likelihood (one likelihood for fitting and
-selection, :mod:`gonio.fitting.selection`); a fitted jitter larger than the estimated
-noise marks the model inadequate.
+selection, :mod:`gonio.fitting.selection`). The verdict (:mod:`gonio.fitting.adequacy`)
+tells structure the model cannot follow (lack of fit against a flexible description:
+inadequate) from a scatter larger than the estimate (noise understated).
 
 Exit status of ``gonio curet fit``: 0 when every chain converged and the chosen model (or,
 without a comparison, at least one candidate) is adequate; 3 when a chain did not
-converge; 4 when no model is adequate; 2 for bad input.
+converge; 5 when the best verdict is "noise understated"; 4 when no model is adequate; 2
+for bad input.
 
 Geometry selection: every value is kept by default (negative values are legitimate
 noisy measurements of a dark sample; dropping them would bias the fit upwards).
@@ -443,7 +445,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Fit each model to one CUReT sample: least squares, then emcee (with a jitter term unless "
             "--no-jitter), a folder with result.json and report.html per model, and comparison.txt/.json "
             "(chi-square and its p-value, AIC, BIC, Laplace evidence under the fits' likelihood). Exit status 0 "
-            "all good, 3 a chain did not converge, 4 no adequate model, 2 bad input. Models are NAME[:param=value,...] "
+            "all good, 3 a chain did not converge, 4 no adequate model, 5 noise understated, 2 bad input. Models are NAME[:param=value,...] "
             "with the values held fixed, e.g. oren-nayar:ir_weight=1."
         ),
     )
@@ -633,7 +635,11 @@ def _run_fit(args: argparse.Namespace) -> int:
     if comparison is not None:
         likelihood = "the noise model and a fitted jitter" if args.jitter else "the noise model, no jitter"
         lines += ["", f"Model comparison (posterior modes under {likelihood}, as the fits):", comparison.summary()]
-        (out / COMPARISON_JSON).write_text(json.dumps(comparison_record(comparison), indent=1, allow_nan=False))
+        chosen = next(row for row in summary_rows if row[0] == comparison.chosen)
+        spread_lines, spread = noise_model_lines(dataset, chosen[2], args.jitter)
+        lines += spread_lines
+        record = {**comparison_record(comparison), "noise_models": {"model": comparison.chosen, **spread.to_dict()}}
+        (out / COMPARISON_JSON).write_text(json.dumps(record, indent=1, allow_nan=False))
     else:
         if replacing and (out / COMPARISON_JSON).is_file():
             (out / COMPARISON_JSON).unlink()  # the earlier run's comparison, not this one's
@@ -645,6 +651,30 @@ def _run_fit(args: argparse.Namespace) -> int:
     print(text)
     print(f"results: {out}")
     return fit_exit_code([result for _, _, result, _ in summary_rows], comparison)
+
+
+def noise_model_lines(dataset, result, jitter: bool):
+    """The chosen fit's dependence on the shape of the estimated noise (lines of
+    comparison.txt) and the :class:`gonio.fitting.noise_models.NoiseModelSpread`.
+
+    Each 95 % interval is widened by the noise-model component (half the range of the
+    least-squares values over the shapes), added in quadrature to each side's half-width.
+    """
+    from gonio.fitting.noise_models import noise_model_spread
+
+    spread = noise_model_spread(dataset, result.model, result.fixed, jitter=jitter)
+    lines = ["", f"Noise-model dependence of {result.model} (least squares with the estimated noise shaped relative, "
+                 "shot-like and absolute, each at its median; docs/curet.md):", *spread.lines()]
+    post = result.posterior
+    for name, half_range in spread.half_range.items():
+        if not post or name not in post.get("median", {}):
+            continue
+        median, low, high = post["median"][name], post["p2_5"][name], post["p97_5"][name]
+        wide_low = median - math.hypot(median - low, half_range)
+        wide_high = median + math.hypot(high - median, half_range)
+        lines.append(f"    {name}: 95 % interval [{low:.5g}, {high:.5g}]; with the noise-model component "
+                     f"[{wide_low:.5g}, {wide_high:.5g}]")
+    return lines, spread
 
 
 def _loo_lines(summary_rows) -> list[str]:
@@ -669,9 +699,12 @@ def fit_exit_code(results: Sequence[Any], comparison) -> int:
     comparison : ModelComparison or None
         The comparison, when one was made.
     """
-    from gonio.fitting.results import EXIT_INADEQUATE, EXIT_NOT_CONVERGED
+    from gonio.fitting.adequacy import VERDICTS
+    from gonio.fitting.results import EXIT_NOT_CONVERGED, verdict_exit_code
 
     if any(result.converged is False for result in results):
         return EXIT_NOT_CONVERGED
-    adequate = comparison.chosen_adequate if comparison is not None else any(r.adequate is not False for r in results)
-    return 0 if adequate else EXIT_INADEQUATE
+    if comparison is not None:
+        return verdict_exit_code(comparison.chosen_verdict)
+    verdicts = [r.adequacy.verdict if r.adequacy is not None else "adequate" for r in results]
+    return verdict_exit_code(min(verdicts, key=VERDICTS.index))

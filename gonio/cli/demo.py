@@ -20,7 +20,7 @@
    bias in units of the interval.
 
 The exit status is that of the fit (docs/fitting.md, "Exit codes"): 0 converged and
-adequate, 3 not converged, 4 model inadequate, 2 bad input.
+adequate, 3 not converged, 4 model inadequate, 5 noise understated, 2 bad input.
 """
 from __future__ import annotations
 
@@ -190,7 +190,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "demo",
         help="measure the paper's wall plaster on the emulated rig, choose and fit a model with MCMC, write the report",
         description=__doc__.split("\n\n")[0] + " Takes about a minute on two cores. Exit status: 0 converged and "
-                    "adequate, 3 chain not converged, 4 model inadequate, 2 bad input (docs/fitting.md).",
+                    "adequate, 3 chain not converged, 4 model inadequate, 5 noise understated, 2 bad input "
+                    "(docs/fitting.md).",
     )
     parser.add_argument("--out", default="gonio-demo", help="output folder (default gonio-demo)")
     parser.add_argument("--sample", default=DEFAULT_SAMPLE, metavar="MODEL[:k=v,...]|surface:kind=...|curet:NUMBER|NAME",
@@ -292,9 +293,10 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True, realism: str = DEFAULT_
     """Compare the :data:`CANDIDATES` and fit the chosen model with MCMC, as the demo does.
 
     The dataset is relative radiance with the reference-standard prior on its scale, the
-    models are averaged over the rig's apertures. No extra-noise term: the lamp monitor
-    removes the lamp's flicker and drift and the reduction's budget states every remaining
-    noise, so the least-squares reduced chi-square of an adequate model is near 1
+    models are averaged over the rig's apertures. No extra-noise term unless the verdict asks
+    for one (``jitter="auto"``, :mod:`gonio.fitting.adequacy`): the lamp monitor removes the
+    lamp's flicker and drift and the reduction's budget states every remaining noise, so
+    the least-squares reduced chi-square of an adequate model is near 1
     (docs/acquisition.md); the comparison and the fit share this likelihood. On a rig with
     systematic errors (:func:`rig_errors_modelled`) the dataset is calibrated per
     incidence and every fit has the rig's errors as parameters (:data:`RIG_ERRORS`).
@@ -314,7 +316,7 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True, realism: str = DEFAULT_
                 f"(averaged over the rig's apertures {dataset.metadata.get('aperture_sr')} sr"
                 + (f"; the rig's errors as parameters: alignment ({len(ALIGNMENT_NAMES)}), stray light; calibrated per incidence)"
                    if modelled else ")"))
-    comparison = compare_models(dataset, CANDIDATES, priors=priors, **errors)
+    comparison = compare_models(dataset, CANDIDATES, priors=priors, jitter="auto", **errors)
     _say(quiet, comparison.summary())
     chosen = comparison.row(comparison.chosen)
     _say(quiet, f"fitting {comparison.chosen} with MCMC")
@@ -327,7 +329,7 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True, realism: str = DEFAULT_
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)  # reported in the result, loudly
         result = fit(dataset, chosen["model"], fixed=chosen["fixed"], priors=priors, seed=seed, progress=progress,
-                     **errors)
+                     jitter=comparison.jitter or "auto", **errors)
     return result, comparison
 
 
@@ -356,8 +358,8 @@ def _run(args: argparse.Namespace) -> int:
     print()
     print(f"sample {described}; chosen and fitted {comparison.chosen}")
     print(table)
-    print(f"least-squares reduced chi-square {result.least_squares.redchi:.3f} "
-          f"({result.dataset.n} values, no extra-noise term)")
+    noise = "no extra-noise term" if result.jitter is None else f"with the extra-noise term {result.jitter}"
+    print(f"least-squares reduced chi-square {result.least_squares.redchi:.3f} ({result.dataset.n} values, {noise})")
     print()
     print(f"recordings: {(out / 'recordings').resolve()}")
     print(f"report:     {report.resolve()}")

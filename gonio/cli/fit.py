@@ -26,7 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "(result.json, chain.npz, posterior.nc, summary.txt) is written to a folder next to the data; "
             "'gonio report FOLDER' turns it into an HTML report. Every fit is tested for goodness of fit. "
             "Exit status: 0 converged and adequate, 2 bad input, 3 chain not converged, "
-            "4 model inadequate (docs/fitting.md, 'Exit codes')."
+            "4 model inadequate, 5 noise understated (docs/fitting.md, 'Exit codes')."
         ),
     )
     parser.add_argument("data", help="CSV file (theta_i,phi_i,theta_r,phi_r,value,sigma) or a recording folder of "
@@ -42,10 +42,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--option", action="append", default=[], metavar="NAME=VALUE", help="model option")
     parser.add_argument("--mcmc", action=argparse.BooleanOptionalAction, default=True,
                         help="sample the posterior with emcee after least squares (default: yes)")
-    parser.add_argument("--jitter", nargs="?", const="absolute", choices=["absolute", "relative"],
-                        help="fit an extra noise term added in quadrature to the uncertainties: 'absolute' "
-                             "(the default when given alone; parameter jitter, in data units) or 'relative' "
-                             "(rel_jitter, a fraction of the prediction)")
+    parser.add_argument("--jitter", nargs="?", const="absolute", default="auto",
+                        choices=["auto", "none", "absolute", "relative"],
+                        help="an extra noise term added in quadrature to the uncertainties: 'auto' (the default: "
+                             "a relative one only when the verdict is 'noise understated', the model following "
+                             "data that scatter more than stated), 'none', 'absolute' (the default when given "
+                             "alone; parameter jitter, in data units) or 'relative' (rel_jitter, a fraction of "
+                             "the prediction)")
     parser.add_argument("--alignment", action="append", default=[], metavar="NAMES",
                         help="fit the rig's alignment as nuisance parameters: 'all' or comma-separated names from "
                              "view_offset, theta_i_offset, phi_i_offset (axis zero offsets), tilt_x, tilt_y (sample "
@@ -256,7 +259,7 @@ def _run(args: argparse.Namespace) -> int:
     from gonio import models
     from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
     from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
-    from gonio.fitting.results import EXIT_INADEQUATE
+    from gonio.fitting.results import verdict_exit_code
 
     data_path = Path(args.data)
     dataset, priors = _load(data_path, args.quantity, args.calibration, args.linearity_correction)
@@ -267,10 +270,10 @@ def _run(args: argparse.Namespace) -> int:
         rig = {k: v for k, v in fixed.items() if k in RIG_ERROR_NAMES}  # the rig's errors: every candidate's
         candidates = [(name, {**{k: v for k, v in fixed.items() if k in models.get(name).param_names}, **rig})
                       for name in args.model]
-        comparison = compare_models(dataset, candidates, priors=priors, jitter=args.jitter or False,
+        comparison = compare_models(dataset, candidates, priors=priors, jitter=_jitter(args.jitter),
                                     alignment=alignment, stray_light=args.stray_light)
         print(comparison.summary())
-        return 0 if comparison.chosen_adequate else EXIT_INADEQUATE
+        return verdict_exit_code(comparison.row(comparison.chosen)["verdict"])
     name = args.model[0]
     model = models.get(name)
     for key, text in _pairs(args.prior, "--prior").items():
@@ -292,7 +295,7 @@ def _run(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
             result = fit(
-                dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=args.jitter or False,
+                dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=_jitter(args.jitter),
                 options=options, n_walkers=args.walkers, max_steps=args.max_steps, rhat_limit=args.rhat_limit,
                 seed=args.seed, progress=_Progress(args.quiet), alignment=alignment, stray_light=args.stray_light,
             )
@@ -311,11 +314,16 @@ def _run(args: argparse.Namespace) -> int:
         print("gonio: WARNING: the MCMC chain did NOT converge (step limit reached); "
               "posterior numbers are unreliable. Increase --max-steps or simplify the model.", file=sys.stderr)
     for flag in result.flags:
-        if not flag.startswith(("CHAIN NOT CONVERGED", "MODEL INADEQUATE")):  # said above and below
+        if not flag.startswith(("CHAIN NOT CONVERGED", "MODEL INADEQUATE", "NOISE UNDERSTATED")):  # said below
             print(f"gonio: warning: {flag}", file=sys.stderr)
     if result.adequate is False:
         print(f"gonio: {result.adequacy.headline()}", file=sys.stderr)
     return result.exit_code()
+
+
+def _jitter(option: str) -> str | bool:
+    """The ``jitter`` argument of :func:`gonio.fitting.fit` for a ``--jitter`` choice."""
+    return False if option == "none" else option
 
 
 def _report_drawing(pool, dataset: Dataset):

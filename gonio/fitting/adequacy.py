@@ -1,6 +1,6 @@
 """Can the model explain the data? Goodness-of-fit tests and the verdict every fit reports.
 
-Three numbers, all under the fit's own likelihood (the stated uncertainties and their
+Three numbers test the fit against its own likelihood (the stated uncertainties and their
 covariance, plus the fitted extra noise when there is one):
 
 - the **chi-square p-value** of the least-squares optimum: ``P(chi2_dof >= chi2)`` with
@@ -13,17 +13,35 @@ covariance, plus the fitted extra noise when there is one):
 - the **extra noise relative to the stated uncertainties**: the fitted ``jitter`` over the
   median stated uncertainty, or ``rel_jitter`` over the median relative one.
 
-The model is **inadequate** when either p-value is below :data:`ALPHA` or when the extra
-noise exceeds the stated uncertainties (ratio > 1: the model needs more noise than was
-measured to explain the data). ``ALPHA = 1e-3`` flags a fit of an adequate model by chance
-about once in five hundred (two tests); the customary 0.05 would flag one adequate fit in
-ten, while model errors large enough to matter drive p far below 1e-3. The verdict opens
-the summary, the report and the JSON, and sets the exit status of ``gonio fit``.
+They fail both when the model is wrong and when the noise budget misses a source (a real
+sample's texture), so a fourth test decides between the two without using the size of the
+stated noise: the **lack-of-fit F test** against a flexible description of the same data
+(:mod:`gonio.fitting.lack_of_fit`). The verdict has three answers (:data:`VERDICTS`):
+
+``"adequate"``
+    every test passes: p-values at least :data:`ALPHA`, extra noise at most the stated;
+``"noise understated"``
+    the model explains the data (no lack of fit) but the scatter exceeds the stated
+    uncertainties, by the factor the test measures: the fit must carry an extra-noise
+    term (``gonio fit`` adds a relative one, ``jitter="auto"``) and its intervals are
+    those of the data's real scatter;
+``"inadequate"``
+    the residuals hold structure the model cannot follow (lack-of-fit p below
+    :data:`ALPHA`), or the budget's tests fail where the dataset is too small for a
+    lack-of-fit test (the two causes cannot be told apart; the headline says so).
+
+``ALPHA = 1e-3`` flags a fit of an adequate model by chance about once in five hundred
+(two tests); the customary 0.05 would flag one adequate fit in ten, while model errors
+large enough to matter drive p far below 1e-3. The verdict opens the summary, the report
+and the JSON, and sets the exit status of ``gonio fit`` (0, 5 noise understated, 4
+inadequate).
 
 References
 ----------
 A. Gelman, X.-L. Meng, H. Stern, "Posterior predictive assessment of model fitness via
 realized discrepancies", Statistica Sinica 6, 733 (1996), section 2.
+N. R. Draper, H. Smith, "Applied Regression Analysis", 3rd ed., Wiley 1998, section 2.1
+(lack of fit against pure error).
 """
 from __future__ import annotations
 
@@ -33,10 +51,15 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["ALPHA", "Adequacy", "assess", "chi2_pvalue", "posterior_predictive_pvalue", "extra_noise_ratio"]
+from .lack_of_fit import LackOfFit, lack_of_fit
 
-#: p-value below which a fit's model is called inadequate.
+__all__ = ["ALPHA", "VERDICTS", "Adequacy", "assess", "chi2_pvalue", "posterior_predictive_pvalue",
+           "extra_noise_ratio"]
+
+#: p-value below which a test fails.
 ALPHA = 1e-3
+#: The three answers of a verdict (module docstring).
+VERDICTS = ("adequate", "noise understated", "inadequate")
 
 
 def chi2_pvalue(chi2: float, dof: int) -> float:
@@ -92,62 +115,110 @@ def extra_noise_ratio(problem, values: Mapping[str, float]) -> float:
 
 @dataclass(frozen=True)
 class Adequacy:
-    """The goodness-of-fit verdict of a fit (module docstring)."""
+    """The goodness-of-fit verdict of a fit (module docstring).
+
+    Attributes
+    ----------
+    chi2_p, ppc_p : float
+        The chi-square and posterior predictive p-values (NaN when not computed).
+    extra_noise_ratio : float
+        The fitted extra noise over the stated uncertainties (NaN without the term).
+    alpha : float
+        The p-value limit.
+    reasons : tuple of str
+        The budget's tests that failed, in words.
+    lack_of_fit : LackOfFit or None
+        The budget-independent test (None where the dataset is too small for it).
+    """
 
     chi2_p: float
     ppc_p: float
     extra_noise_ratio: float
     alpha: float = ALPHA
     reasons: tuple[str, ...] = field(default_factory=tuple)
+    lack_of_fit: LackOfFit | None = None
+
+    @property
+    def verdict(self) -> str:
+        """One of :data:`VERDICTS`."""
+        if self.lack_of_fit is not None and self.lack_of_fit.p < self.alpha:
+            return "inadequate"
+        if not self.reasons:
+            return "adequate"
+        return "inadequate" if self.lack_of_fit is None else "noise understated"
 
     @property
     def adequate(self) -> bool:
-        """True unless a test failed."""
-        return not self.reasons
+        """True when every test passed."""
+        return self.verdict == "adequate"
+
+    @property
+    def noise_factor(self) -> float:
+        """The data's scatter over the stated uncertainties, from the lack-of-fit split (NaN without it)."""
+        return self.lack_of_fit.noise_factor if self.lack_of_fit is not None else math.nan
 
     def headline(self) -> str:
-        """One line: ``MODEL INADEQUATE: ...`` or ``model adequate: ...``."""
+        """One line: ``MODEL INADEQUATE: ...``, ``NOISE UNDERSTATED: ...`` or ``model adequate (...)``."""
         numbers = f"chi-square p = {_p(self.chi2_p)}, posterior predictive p = {_p(self.ppc_p)}"
         if math.isfinite(self.extra_noise_ratio):
             numbers += f", extra noise = {self.extra_noise_ratio:.3g} x the stated uncertainties"
-        if self.adequate:
+        lof = self.lack_of_fit
+        if lof is not None:
+            numbers += f", lack of fit p = {_p(lof.p)} (series order {lof.order})"
+        verdict = self.verdict
+        if verdict == "adequate":
             return f"model adequate ({numbers})"
-        return "MODEL INADEQUATE: " + "; ".join(self.reasons) + f" ({numbers})"
+        if verdict == "noise understated":
+            return (f"NOISE UNDERSTATED: the model follows the data (no lack of fit) but they scatter "
+                    f"{lof.noise_factor:.3g} times the stated uncertainties; " + "; ".join(self.reasons)
+                    + f" ({numbers})")
+        if lof is not None and lof.p < self.alpha:
+            reasons = [f"the residuals hold structure the model cannot follow (lack-of-fit p = {_p(lof.p)} < "
+                       f"{self.alpha:g} against a flexible description of order {lof.order})", *self.reasons]
+        else:
+            reasons = [*self.reasons, "too few values for a lack-of-fit test, so a wrong model cannot be told from "
+                       "an understated noise"]
+        return "MODEL INADEQUATE: " + "; ".join(reasons) + f" ({numbers})"
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
         out["reasons"] = list(self.reasons)
         out["adequate"] = self.adequate
+        out["verdict"] = self.verdict
+        out["lack_of_fit"] = self.lack_of_fit.to_dict() if self.lack_of_fit is not None else None
         return out
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "Adequacy":
         nan = lambda v: math.nan if v is None else float(v)  # noqa: E731
+        lof = LackOfFit.from_dict(data["lack_of_fit"]) if data.get("lack_of_fit") else None
         return cls(nan(data["chi2_p"]), nan(data["ppc_p"]), nan(data["extra_noise_ratio"]),
-                   float(data.get("alpha", ALPHA)), tuple(data.get("reasons", ())))
+                   float(data.get("alpha", ALPHA)), tuple(data.get("reasons", ())), lof)
 
 
 def _p(value: float) -> str:
     return "n/a" if not math.isfinite(value) else (f"{value:.2g}" if value >= 1e-4 else f"{value:.1e}")
 
 
-def assess(problem, least_squares, samples: np.ndarray | None = None, alpha: float = ALPHA) -> Adequacy:
-    """The verdict of a fit: both p-values and the extra-noise ratio against their limits."""
+def assess(problem, least_squares, samples: np.ndarray | None = None, alpha: float = ALPHA,
+           max_draws: int = 1000) -> Adequacy:
+    """The verdict of a fit: both p-values and the extra-noise ratio against their limits, and
+    the lack-of-fit test that tells a wrong model from an understated noise. ``max_draws``
+    posterior samples enter the posterior predictive p-value (fewer for a slow model)."""
     vector = np.array([least_squares.values[n] for n in problem.free])
     chi2_p = chi2_pvalue(float(problem.chi_square_batch(vector)[0]), least_squares.dof)
-    ppc_p = posterior_predictive_pvalue(problem, samples) if samples is not None else math.nan
+    ppc_p = posterior_predictive_pvalue(problem, samples, max_draws) if samples is not None else math.nan
     values = samples_median(problem, samples) if samples is not None else least_squares.values
     ratio = extra_noise_ratio(problem, values)
     reasons = []
     if math.isfinite(chi2_p) and chi2_p < alpha:
-        reasons.append(f"the least-squares chi-square has p = {_p(chi2_p)} < {alpha:g}: the model does not explain "
-                       "the data within their uncertainties")
+        reasons.append(f"the least-squares chi-square has p = {_p(chi2_p)} < {alpha:g}: the residuals exceed "
+                       "the uncertainties")
     if math.isfinite(ppc_p) and ppc_p < alpha:
         reasons.append(f"posterior predictive p = {_p(ppc_p)} < {alpha:g}")
     if math.isfinite(ratio) and ratio > 1.0:
-        reasons.append(f"the fitted extra noise is {ratio:.3g} times the stated uncertainties: the misfit is "
-                       "larger than the measurement noise")
-    return Adequacy(chi2_p, ppc_p, ratio, alpha, tuple(reasons))
+        reasons.append(f"the fitted extra noise is {ratio:.3g} times the stated uncertainties")
+    return Adequacy(chi2_p, ppc_p, ratio, alpha, tuple(reasons), lack_of_fit(problem, vector))
 
 
 def samples_median(problem, samples: np.ndarray) -> dict[str, float]:

@@ -43,6 +43,11 @@ class Prior:
         """``size`` independent draws."""
         raise NotImplementedError
 
+    def quantile(self, u: np.ndarray) -> np.ndarray:  # pragma: no cover
+        """The inverse of the prior's cumulative distribution at ``u`` in [0, 1] (elementwise):
+        maps the unit interval onto the prior (the evidence's sampler works there)."""
+        raise NotImplementedError
+
     def to_dict(self) -> dict[str, Any]:  # pragma: no cover
         """JSON form: ``{"kind": ..., parameters}``."""
         raise NotImplementedError
@@ -85,6 +90,9 @@ class Uniform(Prior):
     def sample(self, rng: np.random.Generator, size: int) -> np.ndarray:
         return rng.uniform(self.lower, self.upper, size)
 
+    def quantile(self, u: np.ndarray) -> np.ndarray:
+        return self.lower + np.asarray(u, float) * (self.upper - self.lower)
+
     def to_dict(self) -> dict[str, Any]:
         return {"kind": "uniform", "lower": self.lower, "upper": self.upper}
 
@@ -118,6 +126,9 @@ class LogUniform(Prior):
 
     def sample(self, rng: np.random.Generator, size: int) -> np.ndarray:
         return np.exp(rng.uniform(math.log(self.lower), math.log(self.upper), size))
+
+    def quantile(self, u: np.ndarray) -> np.ndarray:
+        return self.lower * np.exp(np.asarray(u, float) * math.log(self.upper / self.lower))
 
     def width(self) -> float:
         return math.sqrt(self.lower * self.upper)
@@ -169,6 +180,21 @@ class Normal(Prior):
             out[bad] = rng.normal(self.mean, self.sd, int(bad.sum()))
             bad = (out < self.lower) | (out > self.upper)
         return out
+
+    def quantile(self, u: np.ndarray) -> np.ndarray:
+        """Inverse CDF of the truncated normal, on the mirrored side when the truncation lies
+        above the mean (no precision lost in the upper tail)."""
+        from scipy.special import ndtr, ndtri
+
+        u = np.asarray(u, float)
+        alpha, beta = (self.lower - self.mean) / self.sd, (self.upper - self.mean) / self.sd
+        if alpha > 0.0:
+            low, high = ndtr(-alpha), ndtr(-beta)
+            x = self.mean - self.sd * ndtri(low - u * (low - high))
+        else:
+            low, high = ndtr(alpha), ndtr(beta)
+            x = self.mean + self.sd * ndtri(low + u * (high - low))
+        return np.clip(x, self.lower, self.upper)  # a limit many sd away: Phi underflows to 0 there
 
     def width(self) -> float:
         return min(self.sd, self.upper - self.lower)

@@ -18,6 +18,7 @@ import datetime as _dt
 import io
 import json
 import math
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -29,6 +30,7 @@ from gonio import models
 from gonio.files import write_atomic
 
 from .adequacy import Adequacy, assess
+from .discrepancy import discrepancy_statement
 from .diagnostics import RHAT_LIMIT
 from .dataset import Dataset
 from .least_squares import LeastSquaresResult, _with_unit
@@ -40,7 +42,8 @@ from .problem import FitProblem, jitter_mode, predict_quantity
 from .selection import information_criteria
 
 __all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE", "SUMMARY_FILE", "INFERENCE_DATA_FILE", "RESULT_FORMAT",
-           "is_fit_result", "EXIT_BAD_INPUT", "EXIT_NOT_CONVERGED", "EXIT_INADEQUATE"]
+           "is_fit_result", "EXIT_BAD_INPUT", "EXIT_NOT_CONVERGED", "EXIT_INADEQUATE",
+           "EXIT_NOISE_UNDERSTATED", "verdict_exit_code"]
 
 RESULT_FILE = "result.json"
 CHAIN_FILE = "chain.npz"
@@ -55,6 +58,15 @@ INFERENCE_DATA_FILE = "posterior.nc"
 EXIT_BAD_INPUT = 2
 EXIT_NOT_CONVERGED = 3
 EXIT_INADEQUATE = 4
+EXIT_NOISE_UNDERSTATED = 5
+#: Posterior draws of the predictive check under a slow (exact) model.
+SLOW_MODEL_DRAWS = 50
+
+
+def verdict_exit_code(verdict: str | None) -> int:
+    """The exit status of a goodness-of-fit verdict (docs/fitting.md, "Exit codes"): 0 adequate
+    (or no verdict), 5 noise understated, 4 inadequate."""
+    return {"inadequate": EXIT_INADEQUATE, "noise understated": EXIT_NOISE_UNDERSTATED}.get(verdict or "", 0)
 #: The ``format`` field of every result.json gonio writes.
 RESULT_FORMAT = "gonio-fit-result"
 
@@ -163,8 +175,14 @@ class FitResult:
         least_squares: LeastSquaresResult,
         mcmc: McmcResult | None = None,
         priors: Mapping[str, Prior] | None = None,
+        judge: FitProblem | None = None,
     ) -> "FitResult":
-        """Assemble a result and compute the posterior summaries and flags."""
+        """Assemble a result and compute the posterior summaries and flags.
+
+        ``judge``: the problem whose likelihood the goodness of fit is assessed under (the
+        exact model of a polished tabulated fit, :mod:`gonio.fitting.polish`; its posterior
+        predictive p-value on :data:`SLOW_MODEL_DRAWS` draws); default ``problem``.
+        """
         result = cls(
             model=problem.base_model.name,
             dataset=problem.dataset,
@@ -184,10 +202,18 @@ class FitResult:
         if mcmc is not None:
             result.posterior = _summarise(problem, least_squares, mcmc, result.priors)
             result.flags += mcmc.warnings + _posterior_flags(problem, result.posterior)
-        result.adequacy = assess(problem, least_squares, mcmc.samples() if mcmc is not None else None)
+        samples = mcmc.samples() if mcmc is not None else None
+        result.adequacy = (assess(problem, least_squares, samples) if judge is None
+                           else assess(judge, least_squares, samples, max_draws=SLOW_MODEL_DRAWS))
         if not result.adequacy.adequate:
             result.flags.insert(0, result.adequacy.headline())
         return result
+
+    @property
+    def discrepancy(self) -> str:
+        """What the model leaves out of a real surface, and how far its parameters were
+        measured to fall from a rendered surface's (:mod:`gonio.fitting.discrepancy`)."""
+        return discrepancy_statement(self.model)
 
     @property
     def adequate(self) -> bool | None:
@@ -198,9 +224,7 @@ class FitResult:
         """The command line's exit status for this fit (docs/fitting.md, "Exit codes")."""
         if self.converged is False:
             return EXIT_NOT_CONVERGED
-        if self.adequate is False:
-            return EXIT_INADEQUATE
-        return 0
+        return verdict_exit_code(self.adequacy.verdict if self.adequacy is not None else None)
 
     # ------------------------------------------------------------------ access
     @property
@@ -358,6 +382,7 @@ class FitResult:
             "posterior": self.posterior,
             "flags": self.flags,
             "adequacy": self.adequacy.to_dict() if self.adequacy is not None else None,
+            "discrepancy": self.discrepancy,
             "dataset": self.dataset.to_dict(),
         }
         if self.mcmc is not None:
@@ -648,8 +673,13 @@ def _adequacy_lines(result: FitResult) -> list[str]:
              f"    post. predictive p = {_fmt(a.ppc_p, 3)}"]
     if math.isfinite(a.extra_noise_ratio):
         lines.append(f"    extra noise / stated uncertainty = {_fmt(a.extra_noise_ratio, 3)}")
-    lines.append(f"    verdict            = {'adequate' if a.adequate else 'MODEL INADEQUATE'} (limit p >= {a.alpha:g}, "
-                 "extra noise <= stated)")
+    if a.lack_of_fit is not None:
+        lof = a.lack_of_fit
+        lines.append(f"    lack-of-fit p      = {_fmt(lof.p, 3)} (F = {_fmt(lof.statistic, 3)} on {lof.dof[0]}, "
+                     f"{lof.dof[1]} dof against a series of order {lof.order}; scatter / stated = "
+                     f"{_fmt(lof.noise_factor, 3)})")
+    lines.append(f"    verdict            = {a.verdict.upper() if a.verdict != 'adequate' else a.verdict} (limit p >= "
+                 f"{a.alpha:g}, extra noise <= stated)")
     return lines
 
 
@@ -675,6 +705,8 @@ def _summary_text(result: FitResult) -> str:
     if result.adequacy is not None:
         lines += [result.adequacy.headline(), ""]
     lines += ["[[Model]]", f"    {result.model}: {model.description}", f"    reference: {model.reference}"]
+    lines += textwrap.wrap(f"discrepancy: {result.discrepancy}", width=100, initial_indent="    ",
+                           subsequent_indent="      ")
     if result.options:
         lines.append("    options: " + ", ".join(f"{k}={v}" for k, v in result.options.items()))
     lines += [

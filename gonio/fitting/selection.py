@@ -16,11 +16,17 @@ Two families of criteria, both computed from the weighted least-squares optimum:
   bound (:mod:`gonio.fitting.evidence`); docs/evidence.md measures the result against nested
   sampling and quadrature.
 
-:func:`compare_models` fits each candidate, tests its goodness of fit
+:func:`compare_models` fits each candidate (a tabulated one whose table's error matters at
+these data's precision by its exact model from the table's optimum,
+:mod:`gonio.fitting.polish`), tests its goodness of fit
 (:func:`gonio.fitting.adequacy.assess` at the optimum) and chooses by this rule:
 
 1. only candidates that pass the goodness-of-fit test are *adequate*; a model that fails
-   it is never chosen while another passes;
+   it is never chosen while another passes. With ``jitter="auto"`` (``gonio fit``'s
+   default), when no candidate is adequate but some follow the data within an understated
+   noise (verdict "noise understated", :mod:`gonio.fitting.adequacy`), every candidate is
+   fitted again with a relative extra-noise term and those are the pool: the comparison
+   still chooses a model, under the noise the data show;
 2. among the adequate ones, those whose evidence is within ``threshold`` (natural-log
    units; default 1, "not worth more than a bare mention" on the scale of Kass & Raftery
    1995, 2 ln B < 2) of the best adequate evidence compete, and the one with the fewest
@@ -28,8 +34,12 @@ Two families of criteria, both computed from the weighted least-squares optimum:
 3. if no candidate is adequate, the best by evidence is reported with the statement that
    none explains the data.
 
-Where an evidence is undefined (a Hessian not positive definite) the rule uses Delta BIC / 2,
-which approximates -Delta ln Z for large n, and says so.
+Every candidate is judged by its evidence. Where Laplace's approximation is undefined for
+a candidate (a Hessian not positive definite, a mode least squares did not reach), that
+candidate's evidence is computed by sequential Monte Carlo from its priors to its posterior
+(:func:`gonio.fitting.evidence.tempered_evidence`) and the table says so ("lnZ by").
+Only where that fails too does the rule use Delta BIC / 2, which approximates -Delta ln Z
+for large n, naming the candidate.
 
 References
 ----------
@@ -39,13 +49,14 @@ R. E. Kass, A. E. Raftery, "Bayes factors", J. Am. Stat. Assoc. 90, 773 (1995), 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from .dataset import Dataset
-from .evidence import laplace_evidence, laplace_log_evidence, scale_degenerate_factor
+from .evidence import laplace_evidence, tempered_evidence, laplace_log_evidence, scale_degenerate_factor
+from .problem import jitter_mode
 
 __all__ = ["information_criteria", "laplace_log_evidence", "ModelComparison", "compare_models", "candidate_label",
            "compare_loo", "loo_summary"]
@@ -73,9 +84,12 @@ class ModelComparison:
     ----------
     rows : list of dict
         Per candidate: ``label``, ``model``, ``fixed``, ``k``, ``chi2``, ``redchi``,
-        ``chi2_p`` (goodness-of-fit p-value), ``adequate``, ``adequacy`` (the verdict's
-        headline), ``aic``, ``aicc``, ``bic``, ``delta_bic``, ``log_evidence`` (corrected;
-        ``log_evidence_laplace``, ``evidence_truncation`` and ``evidence_shape`` its terms,
+        ``chi2_p`` (goodness-of-fit p-value), ``lack_of_fit_p``, ``verdict`` (one of
+        :data:`gonio.fitting.adequacy.VERDICTS`), ``adequate``, ``adequacy`` (the verdict's
+        headline), ``aic``, ``aicc``, ``bic``, ``delta_bic``, ``log_evidence`` with
+        ``evidence_method`` ("laplace", "sequential monte carlo" or "undefined") and
+        ``evidence_error`` (the Laplace terms ``log_evidence_laplace``,
+        ``evidence_truncation`` and ``evidence_shape``,
         :class:`gonio.fitting.evidence.LaplaceEvidence`), ``delta_log_evidence``,
         ``values``, ``warnings``, ``undetermined`` (a parameter only
         its product with ``scale`` determines, see :func:`scale_degenerate_factor`).
@@ -83,6 +97,8 @@ class ModelComparison:
         The selected model.
     reason : str
         Why.
+    jitter : str or None
+        The extra-noise term every candidate was compared with.
     """
 
     rows: list[dict[str, Any]]
@@ -90,6 +106,7 @@ class ModelComparison:
     reason: str
     threshold: float = 1.0
     fits: dict[str, Any] = field(default_factory=dict, repr=False)
+    jitter: str | None = None
 
     @property
     def chosen_adequate(self) -> bool:
@@ -103,34 +120,50 @@ class ModelComparison:
                 return row
         raise KeyError(f"no candidate {label!r}; candidates are {[r['label'] for r in self.rows]}")
 
+    @property
+    def chosen_verdict(self) -> str:
+        """The goodness-of-fit verdict of the chosen model (:data:`gonio.fitting.adequacy.VERDICTS`)."""
+        return self.row(self.chosen)["verdict"]
+
     def summary(self) -> str:
         """A plain-text table, best first."""
-        header = (f"{'model':<34} {'k':>2} {'chi2':>10} {'redchi':>8} {'p(chi2)':>8} {'fit':>10} {'BIC':>10} "
-                  f"{'dBIC':>8} {'lnZ':>10} {'dlnZ':>7}")
+        header = (f"{'model':<34} {'k':>2} {'redchi':>8} {'p(chi2)':>8} {'p(lof)':>8} {'verdict':>17} {'BIC':>10} "
+                  f"{'dBIC':>8} {'lnZ':>10} {'dlnZ':>7} {'lnZ by':>8}")
         lines = [header, "-" * len(header)]
         for row in self.rows:
             mark = " <- chosen" if row["label"] == self.chosen else ""
+            verdict = row["verdict"] if row["verdict"] == "adequate" else row["verdict"].upper()
             lines.append(
-                f"{row['label']:<34} {row['k']:>2} {row['chi2']:>10.4g} {row['redchi']:>8.3g} "
-                f"{_format_p(row['chi2_p']):>8} {'adequate' if row['adequate'] else 'INADEQUATE':>10} "
-                f"{row['bic']:>10.4g} {row['delta_bic']:>8.3g} {row['log_evidence']:>10.4g} "
-                f"{row['delta_log_evidence']:>7.3g}{mark}"
+                f"{row['label']:<34} {row['k']:>2} {row['redchi']:>8.3g} {_format_p(row['chi2_p']):>8} "
+                f"{_format_p(row['lack_of_fit_p']):>8} {verdict:>17} {row['bic']:>10.4g} {row['delta_bic']:>8.3g} "
+                f"{row['log_evidence']:>10.4g} {row['delta_log_evidence']:>7.3g} "
+                f"{_evidence_method_text(row):>8}{mark}"
             )
         for row in self.rows:
             for name in row.get("undetermined", ()):
                 lines.append(f"note: {row['label']}: {name} is undetermined, only {name} x scale is (relative radiance "
                              f"without a calibration prior); its evidence integrates over the product")
+        lines.append("lnZ by: Laplace = corrected Laplace approximation; SMC+-error = sequential Monte Carlo, where "
+                     "Laplace has no Gaussian to expand")
         lines.append(f"chosen: {self.chosen} ({self.reason})")
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
         """The comparison as JSON-ready data (the fits left out)."""
-        keep = ("label", "model", "fixed", "k", "chi2", "redchi", "chi2_p", "adequate", "adequacy", "aic", "aicc",
-                "bic", "delta_bic", "log_evidence", "log_evidence_laplace", "evidence_truncation", "evidence_shape",
-                "delta_log_evidence", "values", "undetermined")
+        keep = ("label", "model", "fixed", "k", "chi2", "redchi", "chi2_p", "lack_of_fit_p", "verdict", "adequate",
+                "adequacy", "aic", "aicc", "bic", "delta_bic", "log_evidence", "evidence_method", "evidence_error",
+                "log_evidence_laplace", "evidence_truncation", "evidence_shape", "delta_log_evidence", "values",
+                "undetermined")
         rows = [{k: row[k] for k in keep} for row in self.rows]
-        return {"chosen": self.chosen, "chosen_adequate": self.chosen_adequate, "reason": self.reason,
-                "threshold": self.threshold, "rows": rows}
+        return {"chosen": self.chosen, "chosen_adequate": self.chosen_adequate, "chosen_verdict": self.chosen_verdict,
+                "reason": self.reason, "threshold": self.threshold, "jitter": self.jitter, "rows": rows}
+
+
+def _evidence_method_text(row: Mapping[str, Any]) -> str:
+    """``Laplace``, ``SMC+-0.2`` (with the sampled estimate's error) or ``n/a``."""
+    if row["evidence_method"] == "sequential monte carlo":
+        return f"SMC+-{row['evidence_error']:.2g}"
+    return "Laplace" if row["evidence_method"] == "laplace" else "n/a"
 
 
 def _format_p(p: float) -> str:
@@ -176,8 +209,10 @@ def compare_models(
         candidates that have that free parameter. They enter the least-squares fits (a
         Gaussian prior makes them posterior modes) and the Laplace evidence, as in
         :func:`gonio.fitting.fit`.
-    jitter : bool or {"absolute", "relative"}
-        The extra-noise term of every candidate, as in :func:`gonio.fitting.fit`.
+    jitter : bool or {"absolute", "relative", "auto"}
+        The extra-noise term of every candidate, as in :func:`gonio.fitting.fit`; "auto"
+        adds a relative one to every candidate when no candidate is adequate and some
+        follow the data within an understated noise (module docstring).
     alignment : str or sequence of str, optional
         The alignment parameters of every candidate, with their default priors, as in
         :func:`gonio.fitting.fit`.
@@ -197,53 +232,96 @@ def compare_models(
     >>> comparison.chosen
     'lambert'
     """
+    if not candidates:
+        raise ValueError("compare_models needs at least one candidate model")
+    pairs = [(c, {}) if isinstance(c, str) else (c[0], dict(c[1])) for c in candidates]
+    noise = None if jitter == "auto" else jitter
+    rows, fits = _fit_candidates(dataset, pairs, n_starts, priors, noise, alignment, stray_light)
+    note = ""
+    if jitter == "auto" and not any(r["adequate"] for r in rows) and any(
+            r["verdict"] == "noise understated" for r in rows):
+        noise = "relative"
+        rows, fits = _fit_candidates(dataset, pairs, n_starts, priors, noise, alignment, stray_light)
+        note = ("; compared with a relative extra-noise term, since the data scatter more than stated about "
+                "candidates that follow them")
+    use_evidence = _annotate_deltas(rows)
+    chosen, reason = _choose(rows, threshold, use_evidence, accept_understated=bool(noise))
+    rows.sort(key=lambda r: -r["log_evidence"] if use_evidence else r["bic"])
+    return ModelComparison(rows=rows, chosen=chosen["label"], reason=reason + note, threshold=threshold, fits=fits,
+                           jitter=jitter_mode(noise))
+
+
+def _fit_candidates(dataset, pairs, n_starts, priors, jitter, alignment, stray_light):
+    """The comparison's row and least-squares fit of every candidate, by label."""
+    rows, fits = [], {}
+    for name, fixed in pairs:
+        row, ls = _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, stray_light)
+        rows.append(row)
+        fits[row["label"]] = ls
+    return rows, fits
+
+
+def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, stray_light):
+    """Fit one candidate by least squares; its row of the comparison and the fit."""
     from .adequacy import assess
     from .least_squares import fit_least_squares
     from .mcmc import resolve_priors
+    from .polish import polish
     from .problem import FitProblem
 
-    if not candidates:
-        raise ValueError("compare_models needs at least one candidate model")
-    rows = []
-    fits = {}
-    for candidate in candidates:
-        name, fixed = (candidate, {}) if isinstance(candidate, str) else (candidate[0], dict(candidate[1]))
-        problem = FitProblem(name, dataset, fixed, jitter=jitter, alignment=alignment, stray_light=stray_light)
-        given = {k: v for k, v in problem.priors_with_defaults(priors).items() if k in problem.free}
-        ls = fit_least_squares(problem, n_starts=n_starts, priors=given)
-        candidate_priors = resolve_priors(problem, ls.values, given)
-        label = candidate_label(name, fixed)
-        info = information_criteria(ls.log_likelihood, len(problem.free), problem.n_informative)
-        verdict = assess(problem, ls)
-        rows.append(
-            {
-                "label": label,
-                "model": name,
-                "fixed": fixed,
-                "k": len(problem.free),
-                "chi2": ls.chi2,
-                "redchi": ls.redchi,
-                "chi2_p": verdict.chi2_p,
-                "adequate": verdict.adequate,
-                "adequacy": verdict.headline(),
-                "undetermined": _undetermined(problem, ls),
-                **info,
-                **_evidence_terms(laplace_evidence(problem, ls, candidate_priors)),
-                "values": ls.values,
-                "warnings": ls.warnings,
-            }
-        )
-        fits[label] = ls
-    use_evidence = _annotate_deltas(rows)
-    chosen, reason = _choose(rows, threshold, use_evidence)
-    rows.sort(key=lambda r: -r["log_evidence"] if use_evidence else r["bic"])
-    return ModelComparison(rows=rows, chosen=chosen["label"], reason=reason, threshold=threshold, fits=fits)
+    def problem_of(model: str) -> FitProblem:
+        return FitProblem(model, dataset, fixed, jitter=jitter, alignment=alignment, stray_light=stray_light)
+
+    problem = problem_of(name)
+    given = {k: v for k, v in problem.priors_with_defaults(priors).items() if k in problem.free}
+    ls = fit_least_squares(problem, n_starts=n_starts, priors=given)
+    polished = polish(problem, ls, given, problem_of)
+    if polished is not None:  # the table's error matters: judge the candidate by its exact model
+        problem, ls = polished.problem, replace(polished.least_squares,
+                                                warnings=[*polished.least_squares.warnings, polished.flag()])
+    candidate_priors = resolve_priors(problem, ls.values, given)
+    verdict = assess(problem, ls)
+    row = {
+        "label": candidate_label(name, fixed),
+        "model": name,
+        "fixed": fixed,
+        "k": len(problem.free),
+        "chi2": ls.chi2,
+        "redchi": ls.redchi,
+        "chi2_p": verdict.chi2_p,
+        "lack_of_fit_p": verdict.lack_of_fit.p if verdict.lack_of_fit is not None else math.nan,
+        "verdict": verdict.verdict,
+        "adequate": verdict.adequate,
+        "adequacy": verdict.headline(),
+        "undetermined": _undetermined(problem, ls),
+        **information_criteria(ls.log_likelihood, len(problem.free), problem.n_informative),
+        **_evidence_terms(problem, ls, candidate_priors),
+        "values": ls.values,
+        "warnings": ls.warnings,
+    }
+    return row, ls
 
 
-def _evidence_terms(evidence) -> dict[str, Any]:
-    """``log_evidence`` (corrected) and its terms, for a row of the comparison."""
-    return {"log_evidence": evidence.log_evidence, "log_evidence_laplace": evidence.raw,
-            "evidence_truncation": evidence.truncation, "evidence_shape": dict(evidence.shape)}
+def _evidence_terms(problem, least_squares, priors) -> dict[str, Any]:
+    """``log_evidence`` and how it was computed, for a row of the comparison.
+
+    Laplace's corrected approximation where it is defined (its terms as
+    ``log_evidence_laplace``, ``evidence_truncation``, ``evidence_shape``); where it is not
+    (no Gaussian around the mode), sequential Monte Carlo of the same integrand
+    (:func:`gonio.fitting.evidence.tempered_evidence`), so that every candidate is judged
+    by the same quantity. ``evidence_method`` says which, ``evidence_error`` the
+    estimate's standard error (0 for Laplace, a deterministic approximation).
+    """
+    laplace = laplace_evidence(problem, least_squares, priors)
+    terms = {"log_evidence": laplace.log_evidence, "log_evidence_laplace": laplace.raw,
+             "evidence_truncation": laplace.truncation, "evidence_shape": dict(laplace.shape),
+             "evidence_method": "laplace", "evidence_error": 0.0}
+    if math.isfinite(laplace.log_evidence):
+        return terms
+    sampled = tempered_evidence(problem, priors)
+    method = "sequential monte carlo" if math.isfinite(sampled.log_evidence) else "undefined"
+    return {**terms, "log_evidence": sampled.log_evidence, "evidence_method": method,
+            "evidence_error": sampled.error}
 
 
 def _undetermined(problem, least_squares) -> list[str]:
@@ -265,11 +343,14 @@ def _annotate_deltas(rows: list[dict[str, Any]]) -> bool:
     return use_evidence
 
 
-def _choose(rows: list[dict[str, Any]], threshold: float, use_evidence: bool) -> tuple[dict[str, Any], str]:
+def _choose(rows: list[dict[str, Any]], threshold: float, use_evidence: bool,
+            accept_understated: bool = False) -> tuple[dict[str, Any], str]:
     """The chosen row and the reason, by the rule of the module docstring."""
     support = (lambda r: r["log_evidence"]) if use_evidence else (lambda r: -0.5 * r["bic"])
-    criterion = "Laplace evidence" if use_evidence else "BIC (an evidence was undefined)"
-    pool = [r for r in rows if r["adequate"]]
+    undefined = [r["label"] for r in rows if not math.isfinite(r["log_evidence"])]
+    criterion = "evidence" if use_evidence else f"BIC (no evidence could be computed for {', '.join(undefined)})"
+    passing = ("adequate", "noise understated") if accept_understated else ("adequate",)
+    pool = [r for r in rows if r["verdict"] in passing]
     if not pool:
         best = max(rows, key=support)
         return best, (f"NO candidate passes the goodness-of-fit test; the best by {criterion} is shown, "

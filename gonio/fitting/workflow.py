@@ -6,13 +6,18 @@ from typing import Any, Callable, Mapping, Sequence
 from gonio.models import Model
 
 from .dataset import Dataset
+from .adequacy import assess
 from .least_squares import fit_least_squares
 from .mcmc import resolve_priors, sample_posterior
+from .polish import polish, shifted_chain
 from .priors import Prior
 from .problem import FitProblem
 from .results import FitResult
 
-__all__ = ["fit"]
+__all__ = ["fit", "AUTO"]
+
+#: ``jitter`` value that adds an extra-noise term only where the verdict asks for it.
+AUTO = "auto"
 
 
 def fit(
@@ -47,9 +52,13 @@ def fit(
         Overrides of the default priors (uniform over the physical bounds).
     mcmc : bool
         Sample the posterior with emcee after the least-squares fit.
-    jitter : bool or {"absolute", "relative"}
+    jitter : bool or {"absolute", "relative", "auto"}
         Fit an extra noise term added in quadrature to the uncertainties: ``jitter`` (True
         or "absolute") or ``rel_jitter`` ("relative", proportional to the prediction).
+        ``"auto"``: none, unless the least-squares verdict is "noise understated"
+        (:mod:`gonio.fitting.adequacy`: the model follows the data, which scatter more than
+        stated); then the fit is redone with ``rel_jitter`` before the MCMC, and a flag
+        says so.
     options : mapping, optional
         Discrete model options.
     start : mapping, optional
@@ -62,6 +71,10 @@ def fit(
         default normal priors unless ``priors`` overrides them.
     stray_light : bool
         Fit the rig's stray light (``stray_light``, :mod:`gonio.fitting.rig_errors`).
+
+    A tabulated model whose table error at the data's geometries exceeds a tenth of their
+    uncertainties is polished with its exact model (:mod:`gonio.fitting.polish`): the
+    optimum and the posterior move to the exact model's, and a flag says by how much.
 
     Returns
     -------
@@ -76,20 +89,36 @@ def fit(
     >>> round(result.best_values()["rho"], 3)
     0.5
     """
-    problem = FitProblem(model, dataset, fixed, options, jitter, alignment, stray_light)
-    priors = problem.priors_with_defaults(priors)
-    least_squares = fit_least_squares(problem, start=start, seed=seed, priors=priors)
+    def problem_of(name: str | Model, noise: str | None) -> FitProblem:
+        return FitProblem(name, dataset, fixed, options, noise, alignment, stray_light)
+
+    problem = problem_of(model, None if jitter == AUTO else jitter)
+    all_priors = problem.priors_with_defaults(priors)
+    least_squares = fit_least_squares(problem, start=start, seed=seed, priors=all_priors)
+    flags = []
+    if jitter == AUTO:
+        verdict = assess(problem, least_squares)
+        if verdict.verdict == "noise understated":
+            flags.append(f"noise understated: the data scatter {verdict.noise_factor:.3g} times the stated "
+                         "uncertainties about a model that follows them, so the fit adds a relative extra-noise "
+                         "term (rel_jitter); its intervals are those of the data's real scatter")
+            problem = problem_of(model, "relative")
+            all_priors = problem.priors_with_defaults(priors)
+            least_squares = fit_least_squares(problem, start=start, seed=seed, priors=all_priors)
+    polished = polish(problem, least_squares, all_priors, lambda name: problem_of(name, problem.jitter))
+    judge = None
+    if polished is not None:
+        flags.append(polished.flag())
+        judge = polished.problem
     if not mcmc:
-        return FitResult.build(problem, least_squares, None, resolve_priors(problem, least_squares.values, priors))
-    chain, used_priors = sample_posterior(
-        problem,
-        least_squares,
-        priors=priors,
-        n_walkers=n_walkers,
-        max_steps=max_steps,
-        tau_multiple=tau_multiple,
-        rhat_limit=rhat_limit,
-        seed=seed,
-        progress=progress,
-    )
-    return FitResult.build(problem, least_squares, chain, used_priors)
+        result = FitResult.build(problem, polished.least_squares if polished else least_squares, None,
+                                 resolve_priors(problem, least_squares.values, all_priors), judge=judge)
+    else:
+        chain, used_priors = sample_posterior(problem, least_squares, priors=all_priors, n_walkers=n_walkers,
+                                              max_steps=max_steps, tau_multiple=tau_multiple, rhat_limit=rhat_limit,
+                                              seed=seed, progress=progress)
+        if polished is not None:
+            chain, least_squares = shifted_chain(chain, problem, polished.shift), polished.least_squares
+        result = FitResult.build(problem, least_squares, chain, used_priors, judge=judge)
+    result.flags[:0] = flags
+    return result

@@ -168,8 +168,15 @@ def _adequacy_items(result: FitResult) -> list[tuple[str, Any]]:
              ("posterior predictive p-value", _number(a.ppc_p, 3))]
     if math.isfinite(a.extra_noise_ratio):
         items.append(("fitted extra noise / stated uncertainty", _number(a.extra_noise_ratio, 3)))
-    verdict = "adequate" if a.adequate else "<b style='color:#d9534f'>MODEL INADEQUATE</b>"
-    items.append(("goodness of fit", f"{verdict} (limits: p &ge; {a.alpha:g}, extra noise &le; stated)"))
+    if a.lack_of_fit is not None:
+        lof = a.lack_of_fit
+        items.append(("lack-of-fit p-value (against a flexible description, independent of the stated noise)",
+                      f"{_number(lof.p, 3)} (F = {_number(lof.statistic, 3)} on {lof.dof[0]}, {lof.dof[1]} degrees "
+                      f"of freedom, series order {lof.order})"))
+        items.append(("scatter about model and description / stated uncertainty", _number(lof.noise_factor, 3)))
+    verdict = a.verdict if a.adequate else f"<b style='color:#d9534f'>{a.verdict.upper()}</b>"
+    items.append(("goodness of fit", f"{verdict} (limits: p &ge; {a.alpha:g}, extra noise &le; stated; "
+                                     "docs/fitting.md, 'Three verdicts')"))
     return items
 
 
@@ -208,7 +215,8 @@ def _verdict(result: FitResult) -> str:
             bad = True
     if not parts:
         return ""
-    return f"<div class='{'flags' if bad else 'ok'} verdict'>" + "<br>".join(parts) + "</div>"
+    return (f"<div class='{'flags' if bad else 'ok'} verdict'>" + "<br>".join(parts) + "</div>"
+            f"<p class=meta><b>Model discrepancy.</b> {html.escape(result.discrepancy)}</p>")
 
 
 def _budget_table(result: FitResult) -> str:

@@ -278,7 +278,7 @@ def test_an_indefinite_curvature_gives_an_undefined_evidence_not_an_error():
     """A least-squares optimum whose covariance is not positive definite (a parameter
     stalled on a bound where the posterior rises away from it; seen with the Oren-Nayar +
     Torrance-Sparrow candidate on Lambertian rig data) has no Laplace approximation: the
-    evidence is NaN (the comparison then falls back to BIC), never a math domain error."""
+    evidence is NaN (the comparison then samples it, gonio.fitting.evidence.tempered_evidence), never a math domain error."""
     import dataclasses
 
     from gonio.fitting.evidence import laplace_evidence
@@ -297,7 +297,7 @@ def test_a_profile_above_the_mode_gives_an_undefined_evidence_not_an_overflow():
     squares point (a local optimum: seen with the Oren-Nayar + Torrance-Sparrow candidate
     stalled at ks = 1e-10 on rig data of the exact model, the profile 174 higher at
     ks = 3e-7), that point is not the posterior's maximum and Laplace's approximation
-    around it does not exist: the evidence is NaN (the comparison falls back to BIC),
+    around it does not exist: the evidence is NaN (the comparison samples it instead),
     never an OverflowError from exp(profile)."""
     import dataclasses
 
