@@ -42,6 +42,20 @@ def test_the_program_exits_with_the_commands_status_and_its_whole_output(tmp_pat
     assert [script.value for script in entry_points(group="console_scripts", name="gonio")] == ["gonio.cli:run"]
 
 
+def test_a_reader_that_leaves_early_is_not_an_error():
+    """``gonio models | head -1``: the reader closes the pipe before gonio has written; gonio
+    stops quietly with 141 (128 + SIGPIPE, as shell tools do), not 'gonio: error: Broken pipe'."""
+    reader, writer = os.pipe()
+    os.close(reader)  # gone before the first line is written
+    try:
+        done = subprocess.run([sys.executable, "-m", "gonio", "models"], stdout=writer, stderr=subprocess.PIPE,
+                              text=True, timeout=120)
+    finally:
+        os.close(writer)
+    assert done.returncode == 141
+    assert done.stderr == ""
+
+
 def test_models_lists_every_model_with_units_and_bounds(capsys):
     assert main(["models"]) == 0
     out = capsys.readouterr().out

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import gc
 import importlib
+import os
 import sys
 from typing import NoReturn
 
@@ -31,6 +32,8 @@ SUBCOMMANDS = ("demo", "models", "figures", "plan", "run", "reduce", "fit", "rep
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL_ERROR = 1
 EXIT_INTERRUPTED = 130
+#: Exit status when the reader of the output closed it early: 128 + SIGPIPE, as shell tools give.
+EXIT_BROKEN_PIPE = 141
 
 
 class CLIError(ValueError):
@@ -85,6 +88,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gonio: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        # the reader of the output left (``gonio plan ... | head``): no error to report; the
+        # rest of the output goes nowhere, so that the interpreter's last flush does not fail
+        # again (Python documentation, "Note on SIGPIPE")
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except Exception as error:
         if args.debug:
             raise

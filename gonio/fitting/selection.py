@@ -25,8 +25,9 @@ these data's precision by its exact model from the table's optimum,
    it is never chosen while another passes. With ``jitter="auto"`` (``gonio fit``'s
    default), when no candidate is adequate but some follow the data within an understated
    noise (verdict "noise understated", :mod:`gonio.fitting.adequacy`), every candidate is
-   fitted again with a relative extra-noise term and those are the pool: the comparison
-   still chooses a model, under the noise the data show;
+   fitted again with a relative extra-noise term: the comparison still chooses a model,
+   under the noise the data show. Whenever the candidates carry an extra-noise term (so
+   added, or given), those judged "noise understated" join the adequate ones;
 2. among the adequate ones, those whose evidence is within ``threshold`` (natural-log
    units; default 1, "not worth more than a bare mention" on the scale of Kass & Raftery
    1995, 2 ln B < 2) of the best adequate evidence compete, and the one with the fewest

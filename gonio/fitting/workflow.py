@@ -92,19 +92,7 @@ def fit(
     def problem_of(name: str | Model, noise: str | None) -> FitProblem:
         return FitProblem(name, dataset, fixed, options, noise, alignment, stray_light)
 
-    problem = problem_of(model, None if jitter == AUTO else jitter)
-    all_priors = problem.priors_with_defaults(priors)
-    least_squares = fit_least_squares(problem, start=start, seed=seed, priors=all_priors)
-    flags = []
-    if jitter == AUTO:
-        verdict = assess(problem, least_squares)
-        if verdict.verdict == "noise understated":
-            flags.append(f"noise understated: the data scatter {verdict.noise_factor:.3g} times the stated "
-                         "uncertainties about a model that follows them, so the fit adds a relative extra-noise "
-                         "term (rel_jitter); its intervals are those of the data's real scatter")
-            problem = problem_of(model, "relative")
-            all_priors = problem.priors_with_defaults(priors)
-            least_squares = fit_least_squares(problem, start=start, seed=seed, priors=all_priors)
+    problem, least_squares, all_priors, flags = _least_squares(problem_of, model, jitter, priors, start, seed)
     polished = polish(problem, least_squares, all_priors, lambda name: problem_of(name, problem.jitter))
     judge = None
     if polished is not None:
@@ -122,3 +110,22 @@ def fit(
         result = FitResult.build(problem, least_squares, chain, used_priors, judge=judge)
     result.flags[:0] = flags
     return result
+
+
+def _least_squares(problem_of, model, jitter, priors, start, seed):
+    """The least-squares fit, redone with ``rel_jitter`` when ``jitter="auto"`` and the verdict
+    is "noise understated": (problem, least squares, priors, flags)."""
+    problem = problem_of(model, None if jitter == AUTO else jitter)
+    all_priors = problem.priors_with_defaults(priors)
+    least_squares = fit_least_squares(problem, start=start, seed=seed, priors=all_priors)
+    if jitter != AUTO:
+        return problem, least_squares, all_priors, []
+    verdict = assess(problem, least_squares)
+    if verdict.verdict != "noise understated":
+        return problem, least_squares, all_priors, []
+    flag = (f"noise understated: the data scatter {verdict.noise_factor:.3g} times the stated uncertainties about a "
+            "model that follows them, so the fit adds a relative extra-noise term (rel_jitter); its intervals are "
+            "those of the data's real scatter")
+    problem = problem_of(model, "relative")
+    all_priors = problem.priors_with_defaults(priors)
+    return problem, fit_least_squares(problem, start=start, seed=seed, priors=all_priors), all_priors, [flag]
