@@ -32,7 +32,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from .files import write_atomic
+from .files import FolderBusy, FolderLock, lock_folder, unlock_folder, write_atomic
 
 __all__ = [
     "COLUMNS",
@@ -210,6 +210,23 @@ def _describe_duplicates(folder: Path, duplicates: Mapping[tuple, list[int]]) ->
             "the recording mixes runs. Keep the rows you trust in a copy of the folder and reduce that")
 
 
+def _writer_text(resume: bool) -> str:
+    """Who writes the recording now: ``gonio run (process N on HOST, since TIME)``."""
+    import datetime
+    import socket
+
+    started = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
+    return f"gonio run{' --resume' if resume else ''} (process {os.getpid()} on {socket.gethostname()}, since {started})"
+
+
+def _holder(metadata_path: Path) -> str:
+    """The writer a recording's metadata names, or "another process"."""
+    try:
+        return str(json.loads(metadata_path.read_text())["writer"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return "another process"
+
+
 @dataclass
 class RecordingWriter:
     """Append-only writer of a recording folder (crash-safe, resumable).
@@ -229,6 +246,10 @@ class RecordingWriter:
         Continue an existing recording.  It must hold the same experiment (protocol
         content, sample, rig settings, seed, lamp voltage: ``metadata["experiment"]``);
         any difference is refused with a message that names it.
+
+    One writer at a time: the writer holds the folder's lock (:func:`gonio.files.lock_folder`)
+    from its creation to :meth:`finish`, and a second writer, new or resuming, in this
+    process or another, is refused with a message naming the holder.
     """
 
     folder: Path
@@ -242,20 +263,43 @@ class RecordingWriter:
         self.metadata_path = self.folder / "metadata.json"
         if self.folder.exists() and not self.folder.is_dir():
             raise RecordingError(f"{self.folder} exists and is not a folder; give a folder for the recording")
-        if self.resume:
-            self._metadata = self._open_for_resume()
-        else:
-            self._metadata = self._create()
-        self._metadata["status"] = "running"
-        self._write_metadata()
+        self._lock = self._take_lock()
+        try:
+            self._metadata = self._open_for_resume() if self.resume else self._create()
+            self._metadata["status"] = "running"
+            self._metadata["writer"] = _writer_text(self.resume)
+            self._write_metadata()
+        except BaseException:
+            unlock_folder(self._lock)
+            raise
 
-    def _create(self) -> dict:
+    def _take_lock(self) -> FolderLock | None:
+        """The folder's lock (:func:`gonio.files.lock_folder`), as a RecordingError naming the
+        holder (from the recording's metadata) when another writer has it."""
+        if self.resume and not self.folder.is_dir():
+            raise RecordingError(f"{self.folder}: no recording to resume (no such folder)")
+        if not self.resume:
+            self._refuse_recorded_folder()  # before anything is created in it
+        try:
+            return lock_folder(self.folder)
+        except FolderBusy:
+            holder = _holder(self.metadata_path)
+            raise RecordingError(f"cannot {'resume' if self.resume else 'record into'} {self.folder}: it is being "
+                                 f"written by {holder}; wait for that run to end, or stop it, first (two writers "
+                                 "would interleave their points)") from None
+        except OSError as error:
+            raise RecordingError(f"cannot create the recording folder {self.folder}: {error.strerror or error}") from None
+
+    def _refuse_recorded_folder(self) -> None:
         present = [name for name in RECORDING_FILES if (self.folder / name).exists()]
         if present:
             raise RecordingError(
                 f"{self.folder} already holds {', '.join(present)}; use resume to continue a recording or "
                 "choose another folder (gonio never overwrites measured data)"
             )
+
+    def _create(self) -> dict:
+        self._refuse_recorded_folder()  # again, under the lock
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
         except OSError as error:
@@ -324,10 +368,14 @@ class RecordingWriter:
         self._write_metadata()
 
     def finish(self, status: str, **extra: Any) -> None:
-        """Record the run's final status ("complete", "interrupted", "failed") in metadata."""
-        self._metadata["status"] = status
-        self._metadata.update(extra)
-        self._write_metadata()
+        """Record the run's final status ("complete", "interrupted", "failed") in metadata
+        and release the folder's lock."""
+        try:
+            self._metadata["status"] = status
+            self._metadata.update(extra)
+            self._write_metadata()
+        finally:
+            unlock_folder(self._lock)
 
 
 def read_metadata(folder: str | Path) -> dict:

@@ -6,6 +6,9 @@ flushed to disk, get the permissions of the file they replace (or, for a new fil
 of ``open()`` under the current umask, ``0o666 & ~umask``), and then replace the target in
 one ``os.replace``. A failure at any step (a full disk, a vanished folder) leaves the
 previous file untouched and no temporary file behind.
+
+A folder one process writes over time (a recording) is held with :func:`lock_folder`, so
+that a second writer is refused instead of interleaving its rows.
 """
 from __future__ import annotations
 
@@ -14,7 +17,7 @@ import stat
 import tempfile
 from pathlib import Path
 
-__all__ = ["write_atomic", "default_file_mode"]
+__all__ = ["write_atomic", "default_file_mode", "lock_folder", "unlock_folder", "FolderLock", "FolderBusy"]
 
 
 def default_file_mode() -> int:
@@ -62,3 +65,71 @@ def write_atomic(path: str | Path, data: bytes | str) -> Path:
             pass
         raise
     return path
+
+
+class FolderBusy(OSError):
+    """Another process holds the folder's lock (:func:`lock_folder`)."""
+
+
+class FolderLock:
+    """An exclusive ``flock`` held on a folder (:func:`lock_folder`); released by
+    :meth:`release`, or when the object is garbage-collected or its process ends."""
+
+    def __init__(self, descriptor: int) -> None:
+        self._descriptor: int | None = descriptor
+
+    def release(self) -> None:
+        """Release the lock (once; later calls do nothing)."""
+        if self._descriptor is not None:
+            descriptor, self._descriptor = self._descriptor, None
+            os.close(descriptor)
+
+    def __del__(self) -> None:
+        self.release()
+
+
+def lock_folder(folder: str | Path) -> FolderLock | None:
+    """Hold an exclusive lock on ``folder`` while one process writes it.
+
+    The lock is an advisory ``flock`` on the folder itself (created if missing), taken
+    without waiting: a second writer is refused at once. No file is added to the folder.
+    The operating system releases the lock when the holder's descriptor is closed or the
+    holder ends in any way, ``kill -9`` and power loss included, so a stale lock never
+    blocks a later writer. It protects against every process that takes the same lock on
+    this machine (and, on NFS, on others where ``flock`` is forwarded to the server); where
+    ``fcntl`` is missing (Windows) no lock is taken and None is returned.
+
+    Parameters
+    ----------
+    folder : path
+        The folder to write.
+
+    Returns
+    -------
+    FolderLock or None
+        Keep it while writing; :meth:`FolderLock.release` releases the lock.
+
+    Raises
+    ------
+    FolderBusy
+        Another process (or another writer of this one) holds the lock.
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows
+        return None
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    descriptor = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(descriptor)
+        raise FolderBusy(f"{folder} is being written by another writer") from None
+    return FolderLock(descriptor)
+
+
+def unlock_folder(lock: FolderLock | None) -> None:
+    """Release a lock :func:`lock_folder` took (None: nothing to release)."""
+    if lock is not None:
+        lock.release()

@@ -38,8 +38,27 @@ def test_new_recording_writes_header_metadata_and_rows(tmp_path):
 def test_existing_recording_is_never_overwritten(tmp_path):
     w = data.RecordingWriter(tmp_path, {})
     w.append_point(_row(0, 5.0))
+    w.finish("complete")
     with pytest.raises(data.RecordingError, match="never overwrites"):
         data.RecordingWriter(tmp_path, {})
+    assert len(data.read_points(tmp_path)["index"]) == 1
+
+
+def test_one_writer_at_a_time(tmp_path):
+    """While a run writes a folder, a second run or resume of it is refused, naming the
+    holder; the lock goes with the writer (finished, or its process gone)."""
+    import os
+
+    w = data.RecordingWriter(tmp_path, {})
+    w.append_point(_row(0, 5.0))
+    with pytest.raises(data.RecordingError, match=f"written by gonio run \\(process {os.getpid()} "):
+        data.RecordingWriter(tmp_path, {}, resume=True)
+    w.finish("interrupted")
+    resumed = data.RecordingWriter(tmp_path, {}, resume=True)
+    with pytest.raises(data.RecordingError, match="written by gonio run --resume"):
+        data.RecordingWriter(tmp_path, {}, resume=True)
+    del resumed  # its process gone: the operating system releases the lock
+    data.RecordingWriter(tmp_path, {}, resume=True).finish("complete")
     assert len(data.read_points(tmp_path)["index"]) == 1
 
 
@@ -51,6 +70,7 @@ def test_resume_salvages_a_torn_last_line_and_reports_done_keys(tmp_path):
     with open(tmp_path / "points.csv", "a") as handle:  # a crash in the middle of a write
         handle.write("3,b,0,30.0,0.0,10.0,10")
     assert len(data.read_points(tmp_path)["index"]) == 3  # the torn row is not a point
+    del w  # the crashed process is gone, and its lock on the folder with it
     resumed = data.RecordingWriter(tmp_path, {"run": 2}, resume=True)
     assert (tmp_path / "points.partial").read_text().startswith("3,b,0,30.0")
     keys = resumed.done_keys()
@@ -138,6 +158,7 @@ def test_a_deleted_darks_file_is_recreated_with_its_header_on_resume(tmp_path):
     w = data.RecordingWriter(tmp_path, {})
     w.append_point(_row(0, 5.0))
     (tmp_path / "darks.csv").unlink()
+    del w  # its process gone, and its lock with it
     resumed = data.RecordingWriter(tmp_path, {}, resume=True)
     resumed.append_dark({"after_index": 0, "exposure": 0.02, "gain": 1.0, "roi_mean": 100.0, "roi_std": 1.0,
                          "roi_pixels": 9})
@@ -213,3 +234,25 @@ def test_a_block_named_across_a_line_separator_is_measured_and_reduced(tmp_path)
     points = data.read_points(folder, as_arrays=False)
     assert {p["block"] for p in points} == {name} and all(p["status"] == "ok" for p in points)
     assert len(reduction.reduce_recording(folder).radiance) == 3
+
+
+def test_a_writer_in_another_process_holds_the_folder_until_it_dies(tmp_path):
+    """Two processes on one recording (two 'gonio run --resume' of one folder recorded
+    points twice): the second is refused while the first lives, and a kill -9 of the first
+    frees the folder for a resume."""
+    import signal
+    import subprocess
+    import sys
+
+    data.RecordingWriter(tmp_path, {}).finish("interrupted")
+    holder = subprocess.Popen([sys.executable, "-c", (
+        "import sys, time; from gonio import data; w = data.RecordingWriter(sys.argv[1], {}, resume=True); "
+        "print('holding', flush=True); time.sleep(60)"), str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        with pytest.raises(data.RecordingError, match=f"gonio run --resume \\(process {holder.pid} "):
+            data.RecordingWriter(tmp_path, {}, resume=True)
+    finally:
+        holder.send_signal(signal.SIGKILL)
+        holder.wait(timeout=30)
+    data.RecordingWriter(tmp_path, {}, resume=True).finish("complete")
