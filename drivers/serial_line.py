@@ -60,6 +60,11 @@ def _send_without_delay(port) -> None:
             _log.debug("cannot set TCP_NODELAY: %s", exc)
 
 
+#: Why a network port's connection ends under a controller, most often.
+_CLOSED_BY_PEER = ("the connection was closed by the peer (an instrument on a network port serves one controller "
+                   "at a time: is another program connected to it?)")
+
+
 class SerialLine:
     """A serial line carrying terminated ASCII commands and replies.
 
@@ -83,7 +88,11 @@ class SerialLine:
     encoding : str
         Text encoding of commands and replies.
     **port_options
-        Passed on to :func:`serial.serial_for_url` (e.g. ``rtscts``).
+        Passed on to :func:`serial.serial_for_url` (e.g. ``rtscts``). ``exclusive``
+        defaults to True: a local serial port (a device or the emulator's pseudo-terminal)
+        is locked while it is open, and a second program that opens it is refused (one
+        controller per instrument); pyserial ignores it for network ports, where the
+        emulator itself serves one client at a time.
 
     Raises
     ------
@@ -136,6 +145,7 @@ class SerialLine:
         )
         self.exchanges = 0
         try:
+            port_options.setdefault("exclusive", True)
             self._port = serial.serial_for_url(
                 url,
                 baudrate=baudrate,
@@ -147,7 +157,8 @@ class SerialLine:
                 **port_options,
             )
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise TransportError(f"cannot open {self.name}: {exc}") from exc
+            held = " (another program holds the port: one controller per instrument)" if "lock" in str(exc) else ""
+            raise TransportError(f"cannot open {self.name}: {exc}{held}") from exc
         _send_without_delay(self._port)
         #: The TCP socket of a ``socket://`` port (read directly, see :meth:`_receive`), else None.
         self._socket = _tcp_socket(self._port)
@@ -268,8 +279,10 @@ class SerialLine:
             chunk = self._socket.recv(65536)
         except (BlockingIOError, InterruptedError):
             return b""
+        except ConnectionResetError:
+            chunk = b""
         if not chunk:
-            raise serial.SerialException("the connection was closed by the peer")
+            raise serial.SerialException(_CLOSED_BY_PEER)
         return chunk
 
     def read_line(self, timeout: float | None = None, command: str = "") -> str:

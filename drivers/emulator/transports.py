@@ -371,12 +371,23 @@ def _quick_ack(conn: socket.socket) -> None:
             pass
 
 
+#: How long a new TCP client waits for the previous one to close before it is refused [s]
+#: (a client that has just closed is seen within one 0.05 s poll of its connection).
+HANDOVER_WAIT = 0.5
+
+
 class TcpTransport(_Worker):
     """The instrument on a TCP socket bound to 127.0.0.1 (``socket://127.0.0.1:PORT``).
 
     Replies are sent at once (``TCP_NODELAY``) and received segments are acknowledged at
     once (:func:`_quick_ack`), so that a client that sets neither option (pyserial's
     ``socket://`` handler) sees no Nagle/delayed-ACK stall either.
+
+    One client at a time, as a serial line has one controller and a terminal server in
+    exclusive mode allows one connection per port: a connection made while another is
+    open (after :data:`HANDOVER_WAIT` for the first to close, when it is just leaving) is
+    closed at once, so that two programs never drive one instrument in turn, each acting
+    on a state the other changed (two ``gonio run`` on one emulator recorded wrong rows).
 
     Parameters
     ----------
@@ -397,6 +408,8 @@ class TcpTransport(_Worker):
         self._server.listen(4)
         self._server.settimeout(0.05)
         self.host, self.port = self._server.getsockname()[:2]
+        self._free = threading.Event()
+        self._free.set()
         self._spawn(self._accept, name=f"gonio-tcp-{channel.name}")
 
     @property
@@ -411,9 +424,19 @@ class TcpTransport(_Worker):
                 continue
             except OSError:
                 return
+            if not self._free.wait(HANDOVER_WAIT):
+                conn.close()  # another client holds the instrument
+                continue
+            self._free.clear()
             self._spawn(self._serve, conn, name=f"gonio-tcp-{self.channel.name}-client")
 
     def _serve(self, conn: socket.socket) -> None:
+        try:
+            self._serve_client(conn)
+        finally:
+            self._free.set()
+
+    def _serve_client(self, conn: socket.socket) -> None:
         splitter = LineSplitter()
         conn.settimeout(0.05)
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

@@ -65,3 +65,33 @@ def test_a_closed_connection_is_a_transport_error(tcp_rig):
         for _ in range(3):
             line.query("VE?", retries=0, timeout=0.5)
     line.close()
+
+
+def test_one_controller_per_instrument(tcp_rig):
+    """Two programs driving one instrument in turn corrupt each other's measurements (two
+    'gonio run' on one emulator recorded wrong rows): a second TCP client is cut off, a
+    second opener of the pseudo-terminal refused, and the instrument is free again once
+    the first controller has closed."""
+    _, addresses = tcp_rig
+    url = addresses["camera"]["tcp"]
+    with SerialLine(url, baudrate=115200, timeout=1.0, retries=0) as first:
+        assert first.query("EXP?") == "0.01"
+        second = SerialLine(url, baudrate=115200, timeout=1.0, retries=0)
+        with pytest.raises(TransportError, match="serves one controller at a time"):
+            second.query("EXP?")
+        second.close()
+        assert first.query("EXP?") == "0.01"  # the first controller is undisturbed
+    with SerialLine(url, baudrate=115200, timeout=1.0) as next_one:
+        assert next_one.query("EXP?") == "0.01"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="pseudo-terminals and flock as on Linux")
+def test_a_pseudo_terminal_has_one_controller():
+    with EmulatedRig(lambert, seed=4, name="pty-exclusive") as rig:
+        path = rig.start(pty=True)["camera"]["pty"]
+        with SerialLine(path, baudrate=115200, timeout=1.0) as first:
+            with pytest.raises(TransportError, match="another program holds the port"):
+                SerialLine(path, baudrate=115200, timeout=1.0)
+            assert first.query("EXP?") == "0.01"
+        with SerialLine(path, baudrate=115200, timeout=1.0) as again:
+            assert again.query("EXP?") == "0.01"
