@@ -19,6 +19,7 @@ import io
 import json
 import math
 import textwrap
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -163,6 +164,7 @@ class FitResult:
     flags: list[str] = field(default_factory=list)
     created: str = ""
     gonio_version: str = ""
+    result_id: str = ""
     adequacy: Adequacy | None = None
     alignment: tuple[str, ...] = ()
     stray_light: bool = False
@@ -197,6 +199,7 @@ class FitResult:
             stray_light=problem.stray_light,
             created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             gonio_version=gonio.__version__,
+            result_id=uuid.uuid4().hex,
         )
         result.flags = list(least_squares.warnings)
         if mcmc is not None:
@@ -357,6 +360,7 @@ class FitResult:
             "format_version": 1,
             "gonio_version": self.gonio_version,
             "created": self.created,
+            "result_id": self.result_id,
             "model": self.model,
             "model_reference": problem.model.reference,
             "quantity": self.dataset.quantity,
@@ -416,12 +420,16 @@ class FitResult:
         return (RESULT_FILE, SUMMARY_FILE) + ((CHAIN_FILE, INFERENCE_DATA_FILE) if self.mcmc is not None else ())
 
     def save(self, directory: str | Path) -> Path:
-        """Write ``result.json``, ``chain.npz`` (with MCMC) and ``summary.txt`` into a folder.
+        """Write ``chain.npz`` and ``posterior.nc`` (with MCMC), ``summary.txt`` and, last,
+        ``result.json`` into a folder.
 
         Each file is written to a temporary file in the same folder and renamed over the
         target (:func:`gonio.files.write_atomic`, with the permissions a normally created
         file gets), so an interrupted or failed write (a full disk) leaves the earlier file,
-        never a truncated one, and no temporary file.
+        never a truncated one, and no temporary file. Every file carries the result's
+        ``result_id``, and ``result.json``, which says what the others are, is written last:
+        a save interrupted between files leaves files of two saves, which :meth:`load`
+        refuses, naming them, instead of reading the mix as one result.
 
         Parameters
         ----------
@@ -435,16 +443,18 @@ class FitResult:
         """
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
-        path = directory / RESULT_FILE
-        write_atomic(path, json.dumps(self.to_dict(), indent=1, allow_nan=False))
+        if not self.result_id:
+            self.result_id = uuid.uuid4().hex
         if self.mcmc is not None:
             buffer = io.BytesIO()
             # uncompressed: zlib gains ~25 % on a chain's random doubles at ten times the
             # time (2 s for a 256-walker Fig 16 chain)
-            np.savez(buffer, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob)
+            np.savez(buffer, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob, result_id=np.array(self.result_id))
             write_atomic(directory / CHAIN_FILE, buffer.getvalue())
             self._write_inference_data(directory / INFERENCE_DATA_FILE)
         write_atomic(directory / SUMMARY_FILE, self.summary() + "\n")
+        path = directory / RESULT_FILE
+        write_atomic(path, json.dumps(self.to_dict(), indent=1, allow_nan=False))
         return path
 
     def inference_data(self):
@@ -470,7 +480,8 @@ class FitResult:
         pointwise = problem.pointwise_log_likelihood_batch(chain.reshape(-1, len(self.free))).reshape(
             chain.shape[:2] + (self.dataset.n,))
         return (chain, m.log_prob[m.burn_in :: thin], self.free, pointwise, self.dataset.value,
-                {"model": self.model, "quantity": self.dataset.quantity, "gonio_version": self.gonio_version})
+                {"model": self.model, "quantity": self.dataset.quantity, "gonio_version": self.gonio_version,
+                 "result_id": self.result_id})
 
     def _write_inference_data(self, path: Path) -> None:
         # written with h5netcdf, read back by arviz.from_netcdf equal to inference_data()
@@ -506,6 +517,8 @@ class FitResult:
             chain_path = path.parent / data["mcmc"]["chain_file"]
             with np.load(chain_path) as arrays:
                 chain, log_prob = arrays["chain"], arrays["log_prob"]
+                _check_same_save(path, data.get("result_id"), chain_path,
+                                 str(arrays["result_id"]) if "result_id" in arrays else None)
             m = data["mcmc"]
             mcmc = McmcResult(
                 free=tuple(data["free"]),
@@ -553,6 +566,7 @@ class FitResult:
             posterior=posterior,
             flags=list(data["flags"]),
             created=data.get("created", ""),
+            result_id=str(data.get("result_id", "")),
             gonio_version=data.get("gonio_version", ""),
             adequacy=Adequacy.from_dict(data["adequacy"]) if data.get("adequacy") else None,
         )
@@ -658,6 +672,15 @@ def _posterior_flags(problem: FitProblem, posterior: Mapping[str, Any]) -> list[
 
 
 # ---------------------------------------------------------------------- summary text
+def _check_same_save(result_path: Path, result_id: str | None, other: Path, other_id: str | None) -> None:
+    """Refuse a file of another save beside ``result.json`` (a save interrupted between files,
+    :meth:`FitResult.save`); files written before results carried an id pass."""
+    if result_id and other_id and other_id != result_id:
+        raise ValueError(f"{other} belongs to another save than {result_path} (result ids {other_id[:12]} and "
+                         f"{result_id[:12]}): the folder mixes two fits, probably from a save that was interrupted; "
+                         "fit again into this folder (--overwrite) or another")
+
+
 def _fmt(x: Any, digits: int = 5) -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "n/a"
@@ -721,6 +744,7 @@ def _summary_text(result: FitResult) -> str:
         + ")" + (" + emcee" if result.mcmc else ""),
         f"    # function evals   = {ls.nfev}",
         f"    # data points      = {data.n}",
+        f"    result id          = {result.result_id or '(none)'} (every file of this fit carries it)",
         f"    # variables        = {len(result.free)}",
         f"    chi-square         = {_fmt(ls.chi2)}",
         f"    reduced chi-square = {_fmt(ls.redchi)}",

@@ -312,7 +312,7 @@ def write_html(result: FitResult, out: Path, pngs: Mapping[str, bytes]) -> Path:
 <p class=meta>Model <b>{html.escape(model.name)}</b>: {html.escape(model.description)}.
 Reference: {html.escape(model.reference)}.<br>
 Data: {data.n} measurements of {html.escape(data.quantity)} [{html.escape(data.unit)}] at {len(data.incidences()[0])} incidences.
-Fixed parameters: {html.escape(fixed)}. Created {html.escape(result.created)} with gonio {html.escape(result.gonio_version)}.</p>
+Fixed parameters: {html.escape(fixed)}. Created {html.escape(result.created)} with gonio {html.escape(result.gonio_version)}; result id {html.escape(result.result_id or "(none)")}.</p>
 {flags}
 <h2>What was measured</h2>{figures['What was measured']}
 <h2>Uncertainty budget of the data</h2>{_budget_table(result)}

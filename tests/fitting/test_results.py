@@ -107,3 +107,27 @@ def test_predictive_band_equals_the_draws_predicted_one_by_one(quantity):
     assert band.shape == (5, 2, 3)
     # the same formula evaluated once for all draws: rounding only
     np.testing.assert_allclose(band, reference, rtol=1e-12, atol=0)
+
+
+def test_a_folder_mixing_two_saves_is_refused(tmp_path):
+    """An interrupted 'gonio fit --overwrite' used to leave the new result.json beside the
+    old chain, and 'gonio report' rendered the mix: every file carries the save's id,
+    result.json comes last, and load refuses files of another save, naming them."""
+    import shutil
+
+    import numpy as np
+
+    from gonio.fitting import Dataset, FitResult, fit
+
+    tr = np.arange(-70.0, 71.0, 10.0)
+    data = Dataset(30, 0, np.abs(tr), np.where(tr < 0, 180.0, 0.0), 0.3 + 0.001 * np.sin(tr), 0.002)
+    first = fit(data, "lambert", n_walkers=8, max_steps=2000, rhat_limit=1.1, seed=1)
+    second = fit(data, "lambert", n_walkers=8, max_steps=2000, rhat_limit=1.1, seed=2)
+    assert first.result_id and first.result_id != second.result_id
+    first.save(tmp_path / "a")
+    second.save(tmp_path / "b")
+    assert FitResult.load(tmp_path / "a").result_id == first.result_id
+    assert first.result_id in (tmp_path / "a" / "summary.txt").read_text()
+    shutil.copy(tmp_path / "b" / "chain.npz", tmp_path / "a" / "chain.npz")  # the save cut off after its chain
+    with pytest.raises(ValueError, match="belongs to another save"):
+        FitResult.load(tmp_path / "a")
