@@ -742,7 +742,9 @@ def run_protocol(
         Called with a :class:`Progress` after every point.
     max_consecutive_errors : int
         Stop the run after this many failed points in a row (a broken instrument), marking
-        the recording "failed"; it can be resumed once the cause is fixed.
+        the recording "failed"; it can be resumed once the cause is fixed. A run that
+        reaches the end with some failed points is "incomplete" (a resume measures them
+        again); "complete" means every planned point was measured or refused.
 
     Returns
     -------
@@ -815,5 +817,7 @@ def run_protocol(
             raise AcquisitionError(f"run stopped: cannot write the recording: {error.strerror or error}"
                                    + "".join(f"; {m}" for m in result.messages[1:])) from error
         raise AcquisitionError(f"run stopped: {type(error).__name__}: {error}") from error
-    run.finish("complete")
+    # every planned point measured or refused; failed points make the recording incomplete
+    # (a resume measures them again), not complete
+    run.finish("complete" if result.errors == 0 else "incomplete")
     return result

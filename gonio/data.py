@@ -368,7 +368,7 @@ class RecordingWriter:
         self._write_metadata()
 
     def finish(self, status: str, **extra: Any) -> None:
-        """Record the run's final status ("complete", "interrupted", "failed") in metadata
+        """Record the run's final status ("complete", "incomplete", "interrupted", "failed") in metadata
         and release the folder's lock."""
         try:
             self._metadata["status"] = status

@@ -141,6 +141,10 @@ def test_a_move_that_cannot_be_confirmed_is_an_error_row_with_the_reason(tmp_pat
     assert result.errors == 1 and len(errors) == 1
     assert "PositionError" in errors[0]["message"] and "HARDWARE LIMIT" in errors[0]["message"]
     assert _off_target(data.read_points(tmp_path / "rec")) == []
+    # a run with a failed point is not "complete": the recorded status and the result say
+    # incomplete (a resume measures the point again), and so does gonio run's exit status
+    assert result.status == "incomplete" and data.read_metadata(tmp_path / "rec")["status"] == "incomplete"
+    assert result.summary().startswith("incomplete: ")
 
 
 # ----------------------------------------------------------------------------- resume

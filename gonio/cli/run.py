@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import sys
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator
@@ -153,6 +154,10 @@ def emulated_sample(cli_sample: str | None, protocol: protocols.Protocol) -> str
     return cli_sample or protocol.emulated or DEFAULT_SAMPLE
 
 
+#: Exit status of a run that ended with failed points (docs/acquisition.md).
+EXIT_INCOMPLETE = 3
+
+
 def _run(args: argparse.Namespace) -> int:
     from gonio import acquisition, protocols
 
@@ -199,4 +204,8 @@ def _run(args: argparse.Namespace) -> int:
     except acquisition.AcquisitionError as error:
         raise CLIError(f"{error} (everything measured so far is in {args.out}; resume with --resume)") from error
     print(result.summary())
+    if result.status == "incomplete":
+        print(f"gonio run: {result.errors} point(s) failed (their messages are in {args.out}/points.csv); "
+              f"measure them again with: gonio run {args.protocol} --out {args.out} --resume", file=sys.stderr)
+        return EXIT_INCOMPLETE
     return 0
