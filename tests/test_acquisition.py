@@ -171,7 +171,11 @@ def test_killed_run_resumes_with_every_point_exactly_once(tmp_path):
 
 
 @pytest.mark.slow
-def test_ctrl_c_marks_the_recording_interrupted_and_says_how_to_resume(tmp_path):
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM", "SIGHUP"])
+def test_a_stopped_run_marks_the_recording_interrupted_and_says_how_to_resume(tmp_path, stop):
+    """Ctrl-C, a kill (SIGTERM) and a closed terminal (SIGHUP) all leave the recording
+    'interrupted' with the resume command printed; SIGTERM and SIGHUP used to leave it
+    'running' (issue 24: a status that says what did not happen)."""
     protocol_file = tmp_path / "long.toml"
     protocol_file.write_text(INTERRUPTED)
     out = tmp_path / "rec"
@@ -181,7 +185,7 @@ def test_ctrl_c_marks_the_recording_interrupted_and_says_how_to_resume(tmp_path)
     deadline = time.monotonic() + 60
     while _count_rows(out / "points.csv") < 10 and process.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)
-    process.send_signal(signal.SIGINT)
+    process.send_signal(getattr(signal, stop))
     stdout, _ = process.communicate(timeout=60)
     assert process.returncode == 130
     assert "--resume" in stdout

@@ -158,6 +158,30 @@ def emulated_sample(cli_sample: str | None, protocol: protocols.Protocol) -> str
 EXIT_INCOMPLETE = 3
 
 
+@contextmanager
+def _stop_signals_interrupt() -> Iterator[None]:
+    """SIGTERM and SIGHUP (a ``kill``, a closed terminal or session) end a run as Ctrl-C does:
+    the recording is marked "interrupted" and the resume command printed, where the
+    default action killed the process with the recording still "running". Outside the
+    main thread (no signal handlers there) nothing changes."""
+    import signal
+    import threading
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    wanted = [getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name)]
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {number: signal.signal(number, interrupt) for number in wanted}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
 def _run(args: argparse.Namespace) -> int:
     from gonio import acquisition, protocols
 
@@ -167,36 +191,8 @@ def _run(args: argparse.Namespace) -> int:
     ports = (args.stage, args.camera, args.lamp)
     reflectance = protocol.reference.reflectance if protocol.reference else None
     try:
-        if all(ports):
-            from drivers.rig import Rig
-
-            def prompt(which: str, mounting: acquisition.SampleMounting | None = None) -> None:
-                what = f"the reference standard ({protocol.reference.label})" if which == "reference" else "the sample"
-                how = f" ({mounting.instruction()})" if mounting is not None else ""
-                spin = ", switch the holder's spinner on" if mounting is not None and mounting.spin else ""
-                input(f"Mount {what} on the sample holder{how}{spin}, then press Enter: ")
-
-            with Rig.open(*ports) as rig:
-                result = acquisition.run_protocol(
-                    protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
-                    warm_up=not args.no_warm_up, change_sample=prompt,
-                    metadata={"rig": {"kind": "hardware", "stage": args.stage, "camera": args.camera, "lamp": args.lamp}},
-                    progress=_progress_printer(args.quiet),
-                )
-        else:
-            options = {"monitor": False} if args.no_monitor else {}
-            sample = emulated_sample(args.sample, protocol)
-            with emulated_rig(sample, args.seed, realism=args.realism, remount_time=protocol.rig.remount_time,
-                              **options) as (rig, emulator, change_sample, metadata):
-                if emulator.systematics.is_ideal:
-                    print(IDEAL_RIG_NOTE)
-                result = acquisition.run_protocol(
-                    protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
-                    warm_up=not args.no_warm_up,
-                    change_sample=lambda which, **how: change_sample(which, reflectance, **how),
-                    clock=emulator.control.now, metadata=metadata,
-                    progress=_progress_printer(args.quiet),
-                )
+        with _stop_signals_interrupt():
+            result = _measure(args, protocol, ports, reflectance)
     except KeyboardInterrupt:
         print(f"\ngonio run: interrupted; everything measured is in {args.out}. "
               f"Continue with: gonio run {args.protocol} --out {args.out} --resume")
@@ -209,3 +205,40 @@ def _run(args: argparse.Namespace) -> int:
               f"measure them again with: gonio run {args.protocol} --out {args.out} --resume", file=sys.stderr)
         return EXIT_INCOMPLETE
     return 0
+
+
+def _measure(args: argparse.Namespace, protocol, ports, reflectance):
+    """Run the protocol on the rig at ``ports``, or on the emulated rig; the RunResult."""
+    from gonio import acquisition
+
+    if all(ports):
+        from drivers.rig import Rig
+
+        def prompt(which: str, mounting: acquisition.SampleMounting | None = None) -> None:
+            what = f"the reference standard ({protocol.reference.label})" if which == "reference" else "the sample"
+            how = f" ({mounting.instruction()})" if mounting is not None else ""
+            spin = ", switch the holder's spinner on" if mounting is not None and mounting.spin else ""
+            input(f"Mount {what} on the sample holder{how}{spin}, then press Enter: ")
+
+        with Rig.open(*ports) as rig:
+            result = acquisition.run_protocol(
+                protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
+                warm_up=not args.no_warm_up, change_sample=prompt,
+                metadata={"rig": {"kind": "hardware", "stage": args.stage, "camera": args.camera, "lamp": args.lamp}},
+                progress=_progress_printer(args.quiet),
+            )
+    else:
+        options = {"monitor": False} if args.no_monitor else {}
+        sample = emulated_sample(args.sample, protocol)
+        with emulated_rig(sample, args.seed, realism=args.realism, remount_time=protocol.rig.remount_time,
+                          **options) as (rig, emulator, change_sample, metadata):
+            if emulator.systematics.is_ideal:
+                print(IDEAL_RIG_NOTE)
+            result = acquisition.run_protocol(
+                protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
+                warm_up=not args.no_warm_up,
+                change_sample=lambda which, **how: change_sample(which, reflectance, **how),
+                clock=emulator.control.now, metadata=metadata,
+                progress=_progress_printer(args.quiet),
+            )
+    return result
