@@ -35,6 +35,7 @@ import numpy as np
 from .files import FolderBusy, FolderLock, lock_folder, unlock_folder, write_atomic
 
 __all__ = [
+    "check_measured_rows",
     "COLUMNS",
     "DARK_COLUMNS",
     "RecordingError",
@@ -392,8 +393,14 @@ def read_metadata(folder: str | Path) -> dict:
 
 
 def _read_text(path: Path) -> str:
-    """The file's text as written (no newline translation: a "\r" inside a field stays)."""
+    """The file's text as written (no newline translation: a "\r" inside a field stays).
+
+    Only a regular file is opened: a FIFO or a device named like a recording file would
+    block or stream forever."""
     try:
+        if path.exists() and not path.is_file():
+            raise RecordingError(f"{path}: not a regular file (a pipe, device or folder); a recording's files are "
+                                 "plain files")
         with open(path, encoding="utf-8", newline="") as handle:
             return handle.read()
     except FileNotFoundError:
@@ -465,6 +472,53 @@ def _read_csv(path: Path, names: tuple[str, ...], as_arrays: bool):
 def read_points(folder: str | Path, as_arrays: bool = True):
     """Rows of points.csv: a dict of column arrays (default) or a list of row dicts."""
     return _read_csv(Path(folder) / "points.csv", _NAMES, as_arrays)
+
+
+#: What every measured ("ok") row must hold for the reduction: column -> (test, expected).
+_MEASURED_RULES = {
+    "exposure": (lambda v: np.isfinite(v) & (v > 0), "a finite exposure > 0 s"),
+    "gain": (lambda v: np.isfinite(v) & (v > 0), "a finite gain > 0"),
+    "roi_pixels": (lambda v: v > 0, "a pixel count > 0"),
+    "frames": (lambda v: v > 0, "a frame count > 0"),
+    "roi_mean": (np.isfinite, "a finite mean"),
+    "roi_std": (lambda v: np.isfinite(v) & (v >= 0), "a finite standard deviation >= 0"),
+    "signal_rate": (np.isfinite, "a finite signal rate"),
+    "signal_rate_sigma": (lambda v: np.isfinite(v) & (v >= 0), "a finite uncertainty >= 0"),
+    "theta_i": (np.isfinite, "a finite angle"),
+    "view": (np.isfinite, "a finite angle"),
+    "stage_camera": (np.isfinite, "a finite read-back angle"),
+}
+
+
+def check_measured_rows(folder: str | Path, points: Mapping[str, np.ndarray]) -> None:
+    """Refuse a recording whose measured rows hold values no measurement gives.
+
+    Every row with status "ok" must satisfy :data:`_MEASURED_RULES` (finite values, positive
+    exposure, gain, pixel and frame counts), and the lamp monitor must be read for every
+    measured row or for none (an empty column: no monitor). A file edited or damaged by
+    hand otherwise reduced to NaN values or a changed result with no word of it.
+
+    Raises
+    ------
+    RecordingError
+        Naming the file, the line, the column, its value and what was expected.
+    """
+    path = Path(folder) / "points.csv"
+    ok = np.flatnonzero(points["status"] == "ok")
+    for name, (test, expected) in _MEASURED_RULES.items():
+        values = np.asarray(points[name][ok], float)
+        bad = ~np.asarray(test(values), bool)
+        if bad.any():
+            row = int(ok[np.argmax(bad)])
+            raise RecordingError(f"{path}, line {row + 2}, column '{name}': {points[name][row]!r} where a measured "
+                                 f"point holds {expected}; the file was damaged or edited (restore it from a copy, "
+                                 "or mark the row 'error' and resume to measure the point again)")
+    monitor = np.asarray(points["monitor"][ok], float)
+    read = np.isfinite(monitor) & (monitor > 0)
+    if read.any() and not read.all():
+        row = int(ok[np.argmax(~read)])
+        raise RecordingError(f"{path}, line {row + 2}, column 'monitor': {points['monitor'][row]!r} where the other "
+                             "measured points have a lamp monitor reading > 0 V; the file was damaged or edited")
 
 
 def read_darks(folder: str | Path, as_arrays: bool = True):

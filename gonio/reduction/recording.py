@@ -8,7 +8,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..data import RecordingError, _describe_duplicates, duplicated_rows, read_metadata, read_points
+from ..data import (RecordingError, _describe_duplicates, check_measured_rows, duplicated_rows, read_metadata,
+                    read_points)
 from ..protocols import loads
 from .combining import combine, combine_groups, mounting_scatter
 from .geometry import planned_groups, readback_geometry, readback_or_plan
@@ -166,6 +167,10 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
     folder = Path(folder)
     meta = read_metadata(folder)
     points = read_points(folder)
+    if points["index"].size == 0:
+        raise RecordingError(f"{folder}: the recording holds no points yet (points.csv has its header only: the run "
+                             f"stopped before its first point; resume it with gonio run ... --out {folder} --resume)")
+    check_measured_rows(folder, points)
     duplicates = duplicated_rows(read_points(folder, as_arrays=False))
     if duplicates:
 
