@@ -31,6 +31,7 @@ import difflib
 import math
 import stat
 import sys
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
@@ -411,12 +412,22 @@ class _Fields:
                 )
 
     def string(self, data: Mapping, key: str, where: str, default: str | None = None) -> str:
-        """A non-empty string (required unless ``default`` is given)."""
+        """A non-empty one-line string (required unless ``default`` is given)."""
         value = data.get(key, default)
         if value is None:
             raise self.fail(_join(where, key), "a string (required)", show_got=False)
         if not isinstance(value, str) or not value.strip():
             raise self.fail(_join(where, key), "a non-empty string", value)
+        return self.one_line(value, _join(where, key))
+
+    def one_line(self, value: str, field_name: str) -> str:
+        """``value``, refused if it holds a control character or a line or paragraph
+        separator: names and labels end up in the recording's files and reports, one
+        line each."""
+        bad = next((c for c in value if unicodedata.category(c) in ("Cc", "Zl", "Zp") and c != "\t"), None)
+        if bad is not None:
+            raise self.fail(field_name, f"text on one line, without control characters (found U+{ord(bad):04X} "
+                                        f"{unicodedata.name(bad, 'control character')})", value)
         return value
 
     def number(
@@ -779,7 +790,7 @@ def _block_name(f: _Fields, raw: Mapping, where: str, default: str | None) -> st
     label = raw.get("name", default)
     if label is not None and not isinstance(label, str):
         raise f.fail(f"{where}.name", "a string", label)
-    return label
+    return label if label is None else f.one_line(label, f"{where}.name")
 
 
 def _repeats(f: _Fields, raw: Mapping, where: str) -> int:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import numpy as np
 import pytest
@@ -221,19 +222,22 @@ def test_text_with_a_line_separator_round_trips(tmp_path, separator):
         assert [row["block"] for row in csv.DictReader(handle)] == [name, "b"]
 
 
-def test_a_block_named_across_a_line_separator_is_measured_and_reduced(tmp_path):
-    """End to end: a protocol whose block name holds U+2028 and "\\r" is recorded, read
-    back with its name, and reduced."""
-    from gonio import reduction
-    from tests.emulated_recording import record
+@pytest.mark.parametrize("name", ["in\u2028plane", "plane\rsweep", "a\x1eb", "bell\x07"])
+def test_a_protocol_name_across_a_line_separator_is_refused_at_load(name):
+    """Names end up in the recording and the reports, one line each: a block name, sample
+    or reference label holding a control character or a line separator is refused when the
+    protocol is loaded, naming the field and the character (the recording's own format
+    keeps such text in one cell, above, for recordings made before)."""
+    from gonio import protocols
 
-    name = "in\u2028plane\rsweep"
-    text = ('[protocol]\nname = "separators"\n[sample]\nlabel = "plaster"\n[[block]]\n'
-            f'name = {json.dumps(name)}\ntheta_i = 30\nphi_i = 0\nview = [-20, 0, 20]\n')
-    folder = record(tmp_path / "rec", text, "lambert:rho=0.5", 0)
-    points = data.read_points(folder, as_arrays=False)
-    assert {p["block"] for p in points} == {name} and all(p["status"] == "ok" for p in points)
-    assert len(reduction.reduce_recording(folder).radiance) == 3
+    for field, table in (("block[0].name", "[[block]]\nname = {}\ntheta_i = 30\nphi_i = 0\nview = [0]\n"),
+                         ("sample.label", None)):
+        if table is None:
+            text = f'[protocol]\nname = "p"\n[sample]\nlabel = {json.dumps(name)}\n[[block]]\ntheta_i = 30\nphi_i = 0\nview = [0]\n'
+        else:
+            text = '[protocol]\nname = "p"\n[sample]\nlabel = "s"\n' + table.format(json.dumps(name))
+        with pytest.raises(protocols.ProtocolError, match=f"field '{re.escape(field)}': expected text on one line"):
+            protocols.loads(text, source="names.toml")
 
 
 def test_a_writer_in_another_process_holds_the_folder_until_it_dies(tmp_path):
