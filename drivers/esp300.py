@@ -132,6 +132,7 @@ class ESP300:
             timeout=timeout,
             retries=retries,
             name=f"stage ({url})",
+            resync=("VE?", lambda reply: reply.startswith("ESP300")),  # the version query marks the line's step
         )
         return cls(line, **kwargs)
 

@@ -73,6 +73,7 @@ class ScpiInstrument:
             timeout=timeout,
             retries=retries,
             name=f"{cls.DEVICE} ({url})",
+            resync=("*IDN?", lambda reply: reply.count(",") == 3),  # IEEE 488.2 10.14: four fields
         )
         return cls(line, **kwargs)
 

@@ -60,6 +60,11 @@ def _send_without_delay(port) -> None:
             _log.debug("cannot set TCP_NODELAY: %s", exc)
 
 
+#: The marker query of a resynchronisation waits this many line timeouts, at least
+#: RESYNC_TIMEOUT_MIN [s]: its reply queues behind the late one.
+RESYNC_TIMEOUT_FACTOR = 3.0
+RESYNC_TIMEOUT_MIN = 1.0
+
 #: Why a network port's connection ends under a controller, most often.
 _CLOSED_BY_PEER = ("the connection was closed by the peer (an instrument on a network port serves one controller "
                    "at a time: is another program connected to it?)")
@@ -87,6 +92,14 @@ class SerialLine:
         Name used in messages (default: the URL).
     encoding : str
         Text encoding of commands and replies.
+    resync : (str, callable), optional
+        A marker query without side effects and a test its reply passes (the ESP300's
+        ``VE?``, SCPI's ``*IDN?``). After a timeout or a reply that did not parse, the
+        line is out of step: a reply may still be on its way and would be read as the
+        answer to the next command. Before the next command the marker is sent and every
+        line up to its reply is discarded (the instrument answers in order), so that one
+        late reply costs one exchange, not the run. Without it, only what has already
+        arrived is discarded.
     **port_options
         Passed on to :func:`serial.serial_for_url` (e.g. ``rtscts``). ``exclusive``
         defaults to True: a local serial port (a device or the emulator's pseudo-terminal)
@@ -121,6 +134,7 @@ class SerialLine:
         retries: int = 1,
         name: str | None = None,
         encoding: str = "ascii",
+        resync: tuple[str, Callable[[str], bool]] | None = None,
         **port_options,
     ) -> None:
         if not timeout > 0:
@@ -128,6 +142,7 @@ class SerialLine:
         if int(retries) < 0:
             raise ValueError(f"retries={retries!r} is invalid; it must be >= 0")
         self.url = url
+        self.resync = resync
         self.name = name or url
         self.timeout = float(timeout)
         self.retries = int(retries)
@@ -212,6 +227,28 @@ class SerialLine:
             self._out_of_step = False
             return dropped
 
+    def _resynchronise(self) -> None:
+        """Send the marker query and discard every line before its reply (``resync``).
+
+        The marker's reply may queue behind the late one, so it is given
+        :data:`RESYNC_TIMEOUT_FACTOR` times the line's timeout, at least
+        :data:`RESYNC_TIMEOUT_MIN`.
+
+        Raises
+        ------
+        ResponseTimeout
+            The marker's reply did not come in that time: the line stays out of step.
+        """
+        marker, is_reply = self.resync
+        self._port.write(marker.encode(self.encoding) + self.write_termination)
+        self.transcript.append((time.monotonic(), ">", marker.encode(self.encoding)))
+        deadline = time.monotonic() + max(RESYNC_TIMEOUT_FACTOR * self.timeout, RESYNC_TIMEOUT_MIN)
+        while True:
+            line = self.read_line(timeout=max(deadline - time.monotonic(), 1e-3), command=marker)
+            if is_reply(line):
+                return
+            _log.debug("%s: resynchronising, discarded the late line %r", self.name, line)
+
     def mark_out_of_step(self) -> None:
         """Declare the line out of step (e.g. a reply did not parse): whatever is still
         arriving is discarded before the next command is sent."""
@@ -234,6 +271,8 @@ class SerialLine:
             self._check_open()
             if self._out_of_step:
                 self.discard_input()
+                if self.resync is not None:
+                    self._resynchronise()
             try:
                 self._port.write(data)
             except serial.SerialTimeoutException as exc:

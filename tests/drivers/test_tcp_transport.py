@@ -95,3 +95,22 @@ def test_a_pseudo_terminal_has_one_controller():
             assert first.query("EXP?") == "0.01"
         with SerialLine(path, baudrate=115200, timeout=1.0) as again:
             assert again.query("EXP?") == "0.01"
+
+
+def test_a_late_reply_costs_one_exchange_not_the_run(tcp_rig):
+    """A reply that comes after its query timed out used to be read as the answer to the
+    next query (4 of 5 runs stopped on one): the drivers resynchronise with a marker query
+    (the ESP300's VE?, SCPI's *IDN?) and every command gets its own reply."""
+    from drivers.esp300 import ESP300
+    from drivers.errors import ResponseTimeout
+
+    rig, addresses = tcp_rig
+    stage = ESP300.open(addresses["stage"]["tcp"], timeout=0.2, retries=0)
+    try:
+        rig.control.stall("stage", 0.5)
+        with pytest.raises(ResponseTimeout):
+            stage.line.query("1TP?")  # its reply comes 0.3 s too late
+        assert stage.line.query("TE?", timeout=2.0) == "0"  # not the late position
+        assert stage.line.query("1TP?", timeout=2.0) == stage.line.query("1TP?")
+    finally:
+        stage.close()
