@@ -194,16 +194,45 @@ def share_figures(count: int, filenames: Sequence[str] = FIGURE_NAMES) -> list[t
 
 
 # ------------------------------------------------------------------------- in the worker
-def _prepare_worker() -> None:
+def _prepare_worker(caller: int | None = None) -> None:
     """A worker's start: leave Ctrl-C to the command (it reaches the whole process group),
-    import what drawing needs (nothing left to do when forked from the fork server) and
-    keep BLAS to one thread (each worker has a core; OpenBLAS's idle threads spin)."""
+    end with the command (:func:`_end_with`), import what drawing needs (nothing left to do
+    when forked from the fork server) and keep BLAS to one thread (each worker has a core;
+    OpenBLAS's idle threads spin)."""
     from threadpoolctl import threadpool_limits
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if caller is not None:
+        _end_with(caller)
     for module in PRELOAD:
         __import__(module)
     threadpool_limits(limits=1, user_api="blas")
+
+
+#: How often a worker checks that the command that started it still runs [s].
+CALLER_CHECK_INTERVAL = 0.5
+
+
+def _end_with(caller: int) -> None:
+    """End this worker when the process ``caller`` is gone.
+
+    A worker's parent is the fork server, not the command: when the command is killed
+    with ``kill -9`` nothing tells the workers, which lived on holding the command's pipes
+    (three workers, 175 MB, for 19 minutes and more). A daemon thread checks every
+    :data:`CALLER_CHECK_INTERVAL` that the caller exists (signal 0) and ends the worker
+    at once when it does not.
+    """
+    def watch() -> None:
+        while True:
+            time.sleep(CALLER_CHECK_INTERVAL)
+            try:
+                os.kill(caller, 0)
+            except ProcessLookupError:
+                os._exit(0)
+            except PermissionError:  # it exists, under another user: not ours to judge
+                pass
+
+    threading.Thread(target=watch, name="gonio-report-caller-watch", daemon=True).start()
 
 
 #: Environment variables that set the number of threads of the BLAS libraries numpy and
@@ -279,7 +308,8 @@ class ReportPool:
             context.set_forkserver_preload(list(PRELOAD))
             with _single_thread_blas_environment():
                 multiprocessing.forkserver.ensure_running()  # starts importing; returns at once
-        pool = cls(ProcessPoolExecutor(workers, mp_context=context, initializer=_prepare_worker), workers)
+        pool = cls(ProcessPoolExecutor(workers, mp_context=context, initializer=_prepare_worker,
+                                       initargs=(os.getpid(),)), workers)
         for _ in range(workers):  # a worker starts on its first job: have them start as soon as they can
             pool.submit_soon(_ready)
         return pool

@@ -450,3 +450,35 @@ def test_fit_report_by_workers_equals_the_report_command(small_csv, tmp_path, mo
     main(["fit", str(small_csv), *FIT, "--out", str(tmp_path / "fit")])
     assert main(["report", str(tmp_path / "fit"), "--out", str(tmp_path / "again")]) == 0
     assert _contents(tmp_path / "fit") == _contents(tmp_path / "again")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(workers.START_METHOD != "forkserver", reason="the orphaning case is the fork server's")
+def test_workers_end_when_the_command_is_killed():
+    """kill -9 of 'gonio fit --report' used to orphan its workers (their parent is the fork
+    server), holding the caller's pipes for 19 minutes and more: they now end within a
+    second or two of the command."""
+    script = ("import os, sys\n"
+              "from gonio.report import workers\n"
+              "pool = workers.ReportPool.start(2)\n"
+              "pids = sorted({pool.executor.submit(os.getpid).result(timeout=120) for _ in range(8)})\n"
+              "print(' '.join(map(str, pids)), flush=True)\n"
+              "import time; time.sleep(120)\n")
+    command = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        pids = [int(p) for p in command.stdout.readline().split()]
+        assert pids and all(_alive(p) for p in pids)
+    finally:
+        command.send_signal(signal.SIGKILL)
+        command.wait(timeout=30)
+    deadline = time.monotonic() + 10
+    while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_alive(p) for p in pids), "report workers outlived the command"
