@@ -692,6 +692,13 @@ class _Run:
                               f"the points recorded so far are in {self.writer.points_path}")
 
 
+def _is_file_system_error(error: BaseException) -> bool:
+    """Whether ``error`` comes from the file system (a full disk, a vanished folder): an
+    ``OSError`` with an error number. An instrument's reply timeout is an ``OSError`` too
+    (``TimeoutError``), without one, and was reported as "cannot write the recording"."""
+    return isinstance(error, OSError) and not isinstance(error, TimeoutError) and error.errno is not None
+
+
 def run_protocol(
     protocol: Protocol | str | Path,
     rig,
@@ -813,10 +820,10 @@ def run_protocol(
         run.finish("failed", error=str(error))
         if isinstance(error, (AcquisitionError, RecordingError)):
             raise
-        if isinstance(error, OSError):
+        if _is_file_system_error(error):
             raise AcquisitionError(f"run stopped: cannot write the recording: {error.strerror or error}"
                                    + "".join(f"; {m}" for m in result.messages[1:])) from error
-        raise AcquisitionError(f"run stopped: {type(error).__name__}: {error}") from error
+        raise AcquisitionError(f"run stopped by an instrument fault: {type(error).__name__}: {error}") from error
     # every planned point measured or refused; failed points make the recording incomplete
     # (a resume measures them again), not complete
     run.finish("complete" if result.errors == 0 else "incomplete")

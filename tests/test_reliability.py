@@ -93,8 +93,11 @@ def test_no_point_is_recorded_ok_off_its_geometry_and_resume_completes(tmp_path,
         try:
             acquisition.run_protocol(protocol, rig, folder, metadata=meta, clock=control.now, warm_up=False,
                                      progress=_inject(lambda: SCENARIOS[scenario](control)))
-        except acquisition.AcquisitionError:
-            pass  # a dead instrument stops the run: the recording keeps what was measured
+        except acquisition.AcquisitionError as error:
+            # a dead instrument stops the run: the recording keeps what was measured, says
+            # "failed", and the message blames the instrument, not the disk
+            assert data.read_metadata(folder)["status"] == "failed", scenario
+            assert "cannot write the recording" not in str(error), str(error)
         points = data.read_points(folder)
         assert _off_target(points) == [], scenario
         control.clear_faults()
@@ -311,3 +314,29 @@ def test_a_full_disk_stops_the_run_with_one_message_and_leaves_no_temporary_file
     monkeypatch.undo()
     assert sorted(p.name for p in (tmp_path / "rec").iterdir()) == ["darks.csv", "metadata.json", "points.csv"]
     assert len(data.read_points(tmp_path / "rec")["index"]) == 1  # what was written is intact
+
+
+def test_an_instrument_timeout_is_not_reported_as_a_full_disk(tmp_path):
+    """A reply timeout is an OSError (TimeoutError) too: a run it stops said "cannot write
+    the recording". The run blames the instrument, and a file-system error (an errno)
+    still says what it is."""
+    import errno
+
+    from drivers.errors import ResponseTimeout
+
+    protocol = protocols.loads(PROTOCOL, source="faults.toml")
+    faults = {"timeout": ResponseTimeout("TP?", 0.3, port="stage"),
+              "full disk": OSError(errno.ENOSPC, "No space left on device")}
+    for kind, fault in faults.items():
+        with emulated_rig("lambert:rho=0.5", 6, name=f"classify-{kind}") as (rig, emulator, change, meta):
+            def fail(progress, fault=fault):
+                raise fault
+            with pytest.raises(acquisition.AcquisitionError) as raised:
+                acquisition.run_protocol(protocol, rig, tmp_path / kind, metadata=meta, clock=emulator.control.now,
+                                         warm_up=False, progress=fail)
+        message = str(raised.value)
+        if kind == "timeout":
+            assert "instrument fault: ResponseTimeout" in message and "cannot write" not in message
+        else:
+            assert "cannot write the recording: No space left on device" in message
+        assert data.read_metadata(tmp_path / kind)["status"] == "failed"
