@@ -108,6 +108,8 @@ class RunResult:
     wall_seconds: float = 0.0
     instrument_seconds: float = 0.0
     messages: list[str] = field(default_factory=list)
+    #: False when the final status could not be written to metadata.json (a full disk).
+    status_recorded: bool = True
 
     def summary(self) -> str:
         flagged = f", {self.flagged} flagged (saturated or low signal)" if self.flagged else ""
@@ -688,8 +690,9 @@ class _Run:
         try:
             self.writer.finish(status, **extra)
         except OSError as failure:
-            r.messages.append(f"metadata.json could not be updated ({failure.strerror or failure}); "
-                              f"the points recorded so far are in {self.writer.points_path}")
+            r.status_recorded = False
+            r.messages.append(f"metadata.json could not be updated ({failure.strerror or failure}): it still says "
+                              f"'running'; the points recorded so far are in {self.writer.points_path}")
 
 
 def _is_file_system_error(error: BaseException) -> bool:

@@ -211,6 +211,11 @@ def _describe_duplicates(folder: Path, duplicates: Mapping[tuple, list[int]]) ->
             "the recording mixes runs. Keep the rows you trust in a copy of the folder and reduce that")
 
 
+#: A new recording's files are at most this large before its first point (the headers, the
+#: initial metadata); larger ones are never removed by a start that failed.
+_HEADER_BYTES_MAX = 1 << 20
+
+
 def _writer_text(resume: bool) -> str:
     """Who writes the recording now: ``gonio run (process N on HOST, since TIME)``."""
     import datetime
@@ -270,9 +275,25 @@ class RecordingWriter:
             self._metadata["status"] = "running"
             self._metadata["writer"] = _writer_text(self.resume)
             self._write_metadata()
-        except BaseException:
+        except BaseException as error:
+            if not self.resume:
+                self._remove_started_files()
             unlock_folder(self._lock)
+            if isinstance(error, OSError):
+                raise RecordingError(f"cannot start the recording in {self.folder}: {error.strerror or error} "
+                                     "(nothing was recorded; the files the start began are removed)") from None
             raise
+
+    def _remove_started_files(self) -> None:
+        """Remove the files a new recording that could not start wrote (a full disk in the
+        middle of its headers), so that neither a new run nor a resume finds half a
+        recording there; nothing measured is in them."""
+        for path in getattr(self, "_started", ()):  # only files this start created
+            try:
+                if path.is_file() and not path.is_symlink() and path.stat().st_size <= _HEADER_BYTES_MAX:
+                    path.unlink()
+            except OSError:
+                pass
 
     def _take_lock(self) -> FolderLock | None:
         """The folder's lock (:func:`gonio.files.lock_folder`), as a RecordingError naming the
@@ -305,6 +326,7 @@ class RecordingWriter:
             self.folder.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             raise RecordingError(f"cannot create the recording folder {self.folder}: {error.strerror or error}") from None
+        self._started = [path for path in (self.points_path, self.darks_path, self.metadata_path) if not path.exists()]
         _fsync_append(self.points_path, ",".join(_NAMES) + "\n")
         _fsync_append(self.darks_path, ",".join(_DARK_NAMES) + "\n")
         return dict(self.metadata)

@@ -260,3 +260,28 @@ def test_a_writer_in_another_process_holds_the_folder_until_it_dies(tmp_path):
         holder.send_signal(signal.SIGKILL)
         holder.wait(timeout=30)
     data.RecordingWriter(tmp_path, {}, resume=True).finish("complete")
+
+
+def test_a_recording_that_cannot_start_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
+    """A full disk while a new recording writes its headers used to leave a folder that a
+    new run refused (it 'already holds' a recording) and a resume refused too (no
+    recording): the files the start wrote are removed, and the error says so. An existing
+    recording is never touched by a refused start."""
+    import errno
+
+    real = data._write_json_atomic
+
+    def full_disk(path, payload):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(data, "_write_json_atomic", full_disk)
+    with pytest.raises(data.RecordingError, match="No space left on device.*nothing was recorded"):
+        data.RecordingWriter(tmp_path / "new", {})
+    assert list((tmp_path / "new").iterdir()) == []
+    monkeypatch.setattr(data, "_write_json_atomic", real)
+    w = data.RecordingWriter(tmp_path / "new", {})  # the folder is usable at once
+    w.append_point(_row(0, 5.0))
+    w.finish("complete")
+    with pytest.raises(data.RecordingError, match="already holds"):
+        data.RecordingWriter(tmp_path / "new", {})
+    assert len(data.read_points(tmp_path / "new")["index"]) == 1  # the refused start removed nothing

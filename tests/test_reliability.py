@@ -316,6 +316,37 @@ def test_a_full_disk_stops_the_run_with_one_message_and_leaves_no_temporary_file
     assert len(data.read_points(tmp_path / "rec")["index"]) == 1  # what was written is intact
 
 
+def test_a_full_disk_at_the_end_is_not_complete(tmp_path, monkeypatch, capsys):
+    """Every point written, then the disk fills before the final status: the run used to say
+    'complete' with exit 0 while metadata.json still said 'running'. The result says the
+    status was not recorded, and gonio run exits 3 with the command that records it."""
+    import errno
+
+    import gonio.data
+    from gonio.cli.run import EXIT_INCOMPLETE
+
+    protocol = protocols.loads(SMALL, source="resume.toml")
+    real_finish = gonio.data.RecordingWriter.finish
+
+    def full_at_finish(self, status, **extra):
+        if status == "complete":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_finish(self, status, **extra)
+    monkeypatch.setattr(gonio.data.RecordingWriter, "finish", full_at_finish)
+    with emulated_rig("lambert:rho=0.5", 0, name="full-at-end") as (rig, emulator, _, meta):
+        result = acquisition.run_protocol(protocol, rig, tmp_path / "rec", metadata=meta, clock=emulator.control.now,
+                                          warm_up=False)
+    assert result.status_recorded is False and "still says 'running'" in result.messages[-1]
+    assert data.read_metadata(tmp_path / "rec")["status"] == "running"
+    protocol_file = tmp_path / "small.toml"
+    protocol_file.write_text(SMALL)
+    from gonio.cli import main
+
+    assert main(["run", str(protocol_file), "--out", str(tmp_path / "cli"), "--quiet", "--no-warm-up"]) == \
+        EXIT_INCOMPLETE
+    assert "record the status with: gonio run" in capsys.readouterr().err
+
+
 def test_an_instrument_timeout_is_not_reported_as_a_full_disk(tmp_path):
     """A reply timeout is an OSError (TimeoutError) too: a run it stops said "cannot write
     the recording". The run blames the instrument, and a file-system error (an errno)

@@ -200,6 +200,10 @@ def _run(args: argparse.Namespace) -> int:
     except acquisition.AcquisitionError as error:
         raise CLIError(f"{error} (everything measured so far is in {args.out}; resume with --resume)") from error
     print(result.summary())
+    if not result.status_recorded:
+        print(f"gonio run: {result.messages[-1]}. Free some space, then record the status with: gonio run "
+              f"{args.protocol} --out {args.out} --resume", file=sys.stderr)
+        return EXIT_INCOMPLETE
     if result.status == "incomplete":
         print(f"gonio run: {result.errors} point(s) failed (their messages are in {args.out}/points.csv); "
               f"measure them again with: gonio run {args.protocol} --out {args.out} --resume", file=sys.stderr)
