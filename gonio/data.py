@@ -313,7 +313,9 @@ class RecordingWriter:
             raise RecordingError(f"cannot create the recording folder {self.folder}: {error.strerror or error}") from None
 
     def _refuse_recorded_folder(self) -> None:
-        present = [name for name in RECORDING_FILES if (self.folder / name).exists()]
+        # lexists: a symbolic link named like a recording file, even one pointing nowhere,
+        # is refused too (gonio would write through it, outside the folder)
+        present = [name for name in RECORDING_FILES if os.path.lexists(self.folder / name)]
         if present:
             raise RecordingError(
                 f"{self.folder} already holds {', '.join(present)}; use resume to continue a recording or "

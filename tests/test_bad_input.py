@@ -218,6 +218,7 @@ def workspace(tmp_path: Path, monkeypatch) -> Path:
     """A folder with a data file, a protocol, a plain file, a foreign folder, a link to it and
     a (stub) result folder; the working directory of the test."""
     (tmp_path / "data.csv").write_text(CSV)
+    (tmp_path / "latin1.csv").write_bytes(CSV.replace("sigma", "sigma\u00b5").encode("latin-1"))
     (tmp_path / "plan.toml").write_text(MINIMAL)
     (tmp_path / "notes.txt").write_text("a user's file\n")
     (tmp_path / "mine").mkdir()
@@ -241,6 +242,12 @@ BAD_ARGUMENTS = [
                           "/dev/ttyUSB8", "--lamp", "/dev/ttyUSB7"], ["--stage /dev/ttyUSB9", "no such serial port"]),
     ("run-port-not-serial", ["run", "plan.toml", "--out", "rec", "--stage", "/dev/null", "--camera", "/dev/null",
                              "--lamp", "/dev/null"], ["rig: TransportError", "/dev/null"]),
+    ("run-lamp-voltage-beyond-supply", ["run", "plan.toml", "--out", "rec", "--lamp-voltage", "200"],
+     ["--lamp-voltage 200", "at most 132 V"]),
+    ("run-lamp-voltage-negative", ["run", "plan.toml", "--out", "rec", "--lamp-voltage", "-5"],
+     ["--lamp-voltage -5", "> 0 V"]),
+    ("fit-csv-not-utf8", ["fit", "latin1.csv", "--model", "lambert", "--no-mcmc"],
+     ["latin1.csv", "not a UTF-8 text file"]),
     ("run-partial-ports", ["run", "plan.toml", "--out", "rec", "--stage", "/dev/ttyUSB9"],
      ["--stage, --camera and --lamp"]),
     ("run-unknown-sample", ["run", "plan.toml", "--out", "rec", "--sample", "no-such-model"],

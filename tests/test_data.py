@@ -285,3 +285,15 @@ def test_a_recording_that_cannot_start_leaves_the_folder_as_it_was(tmp_path, mon
     with pytest.raises(data.RecordingError, match="already holds"):
         data.RecordingWriter(tmp_path / "new", {})
     assert len(data.read_points(tmp_path / "new")["index"]) == 1  # the refused start removed nothing
+
+
+def test_a_dangling_link_named_like_a_recording_file_is_not_written_through(tmp_path):
+    """A symbolic link 'points.csv' pointing outside the folder, to nothing yet, passed the
+    'already holds a recording' check and gonio wrote through it, outside the folder."""
+    outside = tmp_path / "elsewhere.csv"
+    folder = tmp_path / "rec"
+    folder.mkdir()
+    (folder / "points.csv").symlink_to(outside)
+    with pytest.raises(data.RecordingError, match="already holds points.csv"):
+        data.RecordingWriter(folder, {})
+    assert not outside.exists()

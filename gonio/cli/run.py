@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import math
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -187,6 +188,7 @@ def _run(args: argparse.Namespace) -> int:
 
     check_output_folder(args.out, "recording")
     check_ports({"--stage": args.stage, "--camera": args.camera, "--lamp": args.lamp})
+    _check_lamp_voltage(args.lamp_voltage, emulated=not all((args.stage, args.camera, args.lamp)))
     protocol = protocols.load(args.protocol)
     ports = (args.stage, args.camera, args.lamp)
     reflectance = protocol.reference.reflectance if protocol.reference else None
@@ -209,6 +211,20 @@ def _run(args: argparse.Namespace) -> int:
               f"measure them again with: gonio run {args.protocol} --out {args.out} --resume", file=sys.stderr)
         return EXIT_INCOMPLETE
     return 0
+
+
+def _check_lamp_voltage(voltage: float, emulated: bool) -> None:
+    """Refuse a lamp voltage no supply takes, naming the option: at least a finite value > 0,
+    and for the emulated rig at most its supply's largest setpoint (a real supply refuses
+    what it cannot give, and the run then stops with the supply's own message)."""
+    from drivers.emulator.lamp import LampParams
+
+    largest = LampParams().max_voltage_v
+    if not (math.isfinite(voltage) and voltage > 0):
+        raise CLIError(f"--lamp-voltage {voltage:g}: expected a lamp voltage > 0 V")
+    if emulated and voltage > largest:
+        raise CLIError(f"--lamp-voltage {voltage:g}: the emulated lamp supply gives at most {largest:g} V "
+                       f"(its nominal voltage is {LampParams().nominal_voltage_v:g} V)")
 
 
 def _measure(args: argparse.Namespace, protocol, ports, reflectance):

@@ -306,7 +306,11 @@ class Dataset:
             Naming the file, the line and the column that could not be read.
         """
         path = Path(path)
-        text = path.read_text()
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as error:
+            raise ValueError(f"{path}: not a UTF-8 text file (byte {error.start}: {error.reason}); save the CSV as "
+                             "UTF-8 (or plain ASCII)") from None
         header: dict[str, str] = {}
         lines = text.splitlines()
         start = 0
