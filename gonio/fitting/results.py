@@ -106,13 +106,22 @@ def _nan(value: Any) -> float:
 
 
 def is_fit_result(folder: str | Path) -> bool:
-    """Whether ``folder`` holds a ``result.json`` written by :meth:`FitResult.save`."""
+    """Whether ``folder`` holds a fit result written by :meth:`FitResult.save`: one that
+    :meth:`FitResult.load` reads whole (its dataset, parameters and chain, of one save),
+    not a ``result.json`` that merely claims the format (``--overwrite`` replaces only
+    what gonio wrote)."""
     path = Path(folder) / RESULT_FILE
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError):
         return False
-    return isinstance(data, dict) and data.get("format") == RESULT_FORMAT
+    if not (isinstance(data, dict) and data.get("format") == RESULT_FORMAT):
+        return False
+    try:
+        FitResult.load(path)
+    except Exception:  # noqa: BLE001 - any failure to read it whole: not a result gonio wrote
+        return False
+    return True
 
 
 @dataclass

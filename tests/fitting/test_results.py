@@ -131,3 +131,25 @@ def test_a_folder_mixing_two_saves_is_refused(tmp_path):
     shutil.copy(tmp_path / "b" / "chain.npz", tmp_path / "a" / "chain.npz")  # the save cut off after its chain
     with pytest.raises(ValueError, match="belongs to another save"):
         FitResult.load(tmp_path / "a")
+
+
+def test_overwrite_replaces_only_a_result_gonio_can_read_whole(tmp_path):
+    """'--overwrite' trusted a format tag: a result.json that merely claimed to be a fit
+    result let gonio replace and delete files beside it. A folder is a fit result only if
+    FitResult.load reads it whole."""
+    from gonio.cli import main
+
+    (tmp_path / "data.csv").write_text("theta_i,phi_i,theta_r,phi_r,value,sigma\n"
+                                       + "".join(f"30,0,{t},0,0.3,0.01\n" for t in range(0, 80, 10)))
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "result.json").write_text('{"format": "gonio-fit-result"}')
+    (mine / "chain.npz").write_bytes(b"a user's file")
+    code = main(["fit", str(tmp_path / "data.csv"), "--model", "lambert", "--no-mcmc", "--quiet",
+                 "--out", str(mine), "--overwrite"])
+    assert code == 2
+    assert (mine / "chain.npz").read_bytes() == b"a user's file"
+    assert main(["fit", str(tmp_path / "data.csv"), "--model", "lambert", "--no-mcmc", "--quiet",
+                 "--out", str(tmp_path / "real")]) == 0
+    assert main(["fit", str(tmp_path / "data.csv"), "--model", "lambert", "--no-mcmc", "--quiet",
+                 "--out", str(tmp_path / "real"), "--overwrite"]) == 0
