@@ -71,7 +71,7 @@ def wilson(k: int, n: int, z: float = 1.96) -> list[float]:
     p = k / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [float(centre - half), float(centre + half)]
+    return [max(0.0, float(centre - half)), min(1.0, float(centre + half))]
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -112,7 +112,17 @@ def chart(rows: list[dict[str, Any]], path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--summary-only", action="store_true",
+                        help="recompute the summary and the chart from the seeds in docs/benchmarks/polish.json")
     args = parser.parse_args(argv)
+    if args.summary_only:
+        import json
+
+        payload = json.loads((OUT / "polish.json").read_text())
+        payload["summary"] = summarise(payload["seeds"])
+        write_json("polish", payload)
+        chart(payload["seeds"], OUT / "polish.png")
+        return 0
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as scratch:
         rows = [one_seed(seed, Path(scratch)) for seed in range(args.seeds)]
