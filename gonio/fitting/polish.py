@@ -23,10 +23,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["EXACT_REFERENCES", "POLISH_LIMIT", "Polish", "table_error", "polish", "shifted_chain"]
+__all__ = ["POLISH_LIMIT", "Polish", "exact_reference", "table_error", "polish", "shifted_chain"]
 
-#: The exact model each tabulated model interpolates.
-EXACT_REFERENCES = {"oren-nayar-tabulated": "oren-nayar-exact"}
 #: Table error (rms, in units of the data's uncertainties) above which a fit is polished.
 POLISH_LIMIT = 0.1
 
@@ -62,6 +60,14 @@ class Polish:
                 f"uncertainties (rms); the optimum and the posterior moved by {moved or 'nothing'}")
 
 
+def exact_reference(model: str) -> str | None:
+    """The exact model a tabulated model interpolates (its table's ``reference``,
+    :data:`gonio.models.tabulated.TABLES`), or None for a model read from no table."""
+    from gonio.models.tabulated import TABLES
+
+    return next((table.reference for table in TABLES.values() if table.model == model), None)
+
+
 def table_error(problem, exact_problem, values: Mapping[str, float]) -> float:
     """rms of (table - exact) / sigma at ``values`` (module docstring)."""
     difference = problem.predict(values) - exact_problem.predict(values)
@@ -90,7 +96,7 @@ def polish(problem, least_squares, priors, build_problem) -> Polish | None:
     """
     from .least_squares import fit_least_squares
 
-    exact = EXACT_REFERENCES.get(problem.base_model.name)
+    exact = exact_reference(problem.base_model.name)
     if exact is None:
         return None
     exact_problem = build_problem(exact)
