@@ -303,6 +303,14 @@ def test_gonio_reduce_prints_the_budget_and_writes_csv_and_json(tmp_path, capsys
     (foreign / "reduced.csv").write_text("mine\n")
     assert main(["reduce", str(folder), "--out", str(foreign), "--overwrite"]) == 2
     assert (foreign / "reduced.csv").read_text() == "mine\n"
+    # a budget.json that merely claims the format, or lists another table, is not trusted:
+    # --overwrite replaces only a whole reduction gonio wrote (its manifest)
+    (foreign / "budget.json").write_text(json.dumps({"format": "gonio reduction 1"}))
+    assert main(["reduce", str(folder), "--out", str(foreign), "--overwrite"]) == 2
+    assert (foreign / "reduced.csv").read_text() == "mine\n"
+    (out / "reduced.csv").write_text((out / "reduced.csv").read_text() + "edited by hand\n")
+    assert main(["reduce", str(folder), "--out", str(out), "--overwrite"]) == 2
+    assert "not one reduction" in capsys.readouterr().err
 
 
 def test_without_monitor_checks_or_repeats_the_budget_says_the_lamp_was_not_measured(tmp_path):

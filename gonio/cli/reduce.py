@@ -2,15 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import json
+import os
 from pathlib import Path
 
 from . import CLIError
 from .paths import check_output_folder
-
-#: The files ``gonio reduce`` writes.
-REDUCED_FILES = ("reduced.csv", "budget.json")
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``gonio reduce``."""
@@ -37,19 +33,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _check_earlier_output(out: Path, overwrite: bool) -> None:
-    present = [name for name in REDUCED_FILES if (out / name).exists()]
+    from gonio.reduction import REDUCED_BUDGET, REDUCED_TABLE, is_whole_reduction
+
+    present = [name for name in (REDUCED_TABLE, REDUCED_BUDGET) if os.path.lexists(out / name)]
     if not present:
         return
-    ours = False
-    try:
-        from gonio.reduction import REDUCTION_FORMAT
-
-        ours = json.loads((out / "budget.json").read_text()).get("format") == REDUCTION_FORMAT
-    except (OSError, ValueError, AttributeError):
-        pass
-    if not ours:
-        raise CLIError(f"--out {out}: holds {', '.join(present)} that 'gonio reduce' did not write; choose another "
-                       "--out (gonio never overwrites files it did not write)")
+    if not is_whole_reduction(out):
+        raise CLIError(f"--out {out}: holds {', '.join(present)} that are not one reduction 'gonio reduce' wrote "
+                       f"(its {REDUCED_BUDGET} must list the {REDUCED_TABLE} beside it); choose another --out (gonio "
+                       "never overwrites files it did not write)")
     if not overwrite:
         raise CLIError(f"--out {out}: holds an earlier reduction; add --overwrite to replace it")
 

@@ -14,7 +14,8 @@ if TYPE_CHECKING:  # gonio.fitting imports the reduction's results: imported whe
     from ..fitting import Dataset, Prior
 
 __all__ = ["Reduced", "IncidenceCalibration", "CALIBRATIONS", "COMMON_CALIBRATION", "ANGULAR_BEHAVIOUR",
-           "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT"]
+           "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT", "REDUCED_TABLE", "REDUCED_BUDGET",
+           "is_whole_reduction"]
 
 #: A fit is refused when more than this fraction of the sample points saturated.
 SATURATED_MAJORITY = 0.5
@@ -26,6 +27,27 @@ LOW_SIGNAL_SIGMAS = 3.0
 
 #: Marks a budget.json written by :meth:`Reduced.write`.
 REDUCTION_FORMAT = "gonio reduction 1"
+#: The files of a reduction folder: the table, then the budget that lists it.
+REDUCED_TABLE, REDUCED_BUDGET = "reduced.csv", "budget.json"
+
+
+def is_whole_reduction(folder: str | Path) -> bool:
+    """Whether ``folder`` holds one whole reduction :meth:`Reduced.write` wrote: a
+    ``budget.json`` of :data:`REDUCTION_FORMAT` whose manifest names the SHA-256 of the
+    ``reduced.csv`` beside it. A budget that merely claims the format, or a table from
+    another reduction (a write interrupted between the two files), is not."""
+    import hashlib
+    import json
+
+    folder = Path(folder)
+    try:
+        budget = json.loads((folder / REDUCED_BUDGET).read_text(encoding="utf-8"))
+        table = (folder / REDUCED_TABLE).read_bytes()
+    except (OSError, ValueError):
+        return False
+    return (isinstance(budget, dict) and budget.get("format") == REDUCTION_FORMAT
+            and isinstance(budget.get("files"), dict)
+            and budget["files"].get(REDUCED_TABLE) == hashlib.sha256(table).hexdigest())
 
 
 #: How a recording is calibrated by its reference standard (:meth:`Reduced.fit_inputs`):
@@ -337,9 +359,12 @@ class Reduced:
 
     def write(self, folder: str | Path) -> tuple[Path, Path]:
         """Write ``reduced.csv`` (one row per value, every budget component as ``u_<name>``)
-        and ``budget.json`` (:meth:`budget_summary`, the reference irradiance, the repeat
-        statistics) into ``folder``, atomically. Returns both paths."""
+        and then ``budget.json`` (:meth:`budget_summary`, the reference irradiance, the
+        repeat statistics, and the SHA-256 of the table it belongs to: the folder's
+        manifest, :func:`is_whole_reduction`) into ``folder``, each atomically. Returns both
+        paths."""
         import csv
+        import hashlib
         import io
         import json
 
@@ -352,12 +377,14 @@ class Reduced:
         writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
         writer.writeheader()
         writer.writerows({k: (repr(v) if isinstance(v, float) else v) for k, v in r.items()} for r in rows)
+        table = buffer.getvalue().encode("utf-8")
         summary = {"format": REDUCTION_FORMAT, "label": self.label, "metadata": dict(self.metadata),
                    "reference_irradiance": self.reference_irradiance,
                    "reference_irradiance_sigma": self.reference_irradiance_sigma,
-                   **self.budget_summary(), "repeat_statistics": list(self.repeat_statistics)}
-        csv_path = write_atomic(folder / "reduced.csv", buffer.getvalue())
-        json_path = write_atomic(folder / "budget.json", json.dumps(summary, indent=2, default=float) + "\n")
+                   **self.budget_summary(), "repeat_statistics": list(self.repeat_statistics),
+                   "files": {REDUCED_TABLE: hashlib.sha256(table).hexdigest()}}
+        csv_path = write_atomic(folder / REDUCED_TABLE, table)
+        json_path = write_atomic(folder / REDUCED_BUDGET, json.dumps(summary, indent=2, default=float) + "\n")
         return csv_path, json_path
 
     def _dataset_metadata(self, calibration: str = "common", group: np.ndarray | None = None) -> dict[str, Any]:
