@@ -681,10 +681,14 @@ class _Run:
         r = self.result
         r.status = status
         r.wall_seconds = time.perf_counter() - self.start_wall
-        r.instrument_seconds = self.clock() - self.start_instrument
+        try:
+            r.instrument_seconds = self.clock() - self.start_instrument
+        except Exception:  # noqa: BLE001 - the clock is read over a line that may be the one lost,
+            r.instrument_seconds = math.nan  # and the status must still be written
         extra: dict[str, Any] = {"finished": _now_iso(), "last_run": {
             "measured": r.measured, "refused": r.refused, "errors": r.errors, "skipped": r.skipped,
-            "flagged": r.flagged, "wall_seconds": r.wall_seconds, "instrument_seconds": r.instrument_seconds}}
+            "flagged": r.flagged, "wall_seconds": r.wall_seconds,
+            "instrument_seconds": r.instrument_seconds if math.isfinite(r.instrument_seconds) else None}}
         if error:
             extra["error"] = error
         try:

@@ -371,3 +371,28 @@ def test_an_instrument_timeout_is_not_reported_as_a_full_disk(tmp_path):
         else:
             assert "cannot write the recording: No space left on device" in message
         assert data.read_metadata(tmp_path / kind)["status"] == "failed"
+
+
+def test_a_lost_line_still_records_the_status(tmp_path):
+    """The issue's case: with the instrument line lost, finishing the run read the
+    instrument clock over that same line, raised again, and left the recording 'running'
+    with a bare 'rig: TransportError'. The clock's failure no longer stops the status."""
+    from drivers.errors import TransportError
+
+    protocol = protocols.loads(PROTOCOL, source="faults.toml")
+    with emulated_rig("lambert:rho=0.5", 7, name="lost-line") as (rig, emulator, change, meta):
+        calls = {"n": 0}
+
+        def clock():
+            calls["n"] += 1
+            if calls["n"] > 3:
+                raise TransportError("camera: read failed: socket disconnected")
+            return emulator.control.now()
+
+        def cut(progress):
+            raise TransportError("camera: read failed: socket disconnected")
+        with pytest.raises(acquisition.AcquisitionError, match="instrument fault: TransportError"):
+            acquisition.run_protocol(protocol, rig, tmp_path / "rec", metadata=meta, clock=clock, warm_up=False,
+                                     progress=cut)
+    meta_out = data.read_metadata(tmp_path / "rec")
+    assert meta_out["status"] == "failed" and meta_out["last_run"]["instrument_seconds"] is None
