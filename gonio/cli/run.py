@@ -238,7 +238,12 @@ def _measure(args: argparse.Namespace, protocol, ports, reflectance):
             what = f"the reference standard ({protocol.reference.label})" if which == "reference" else "the sample"
             how = f" ({mounting.instruction()})" if mounting is not None else ""
             spin = ", switch the holder's spinner on" if mounting is not None and mounting.spin else ""
-            input(f"Mount {what} on the sample holder{how}{spin}, then press Enter: ")
+            try:
+                input(f"Mount {what} on the sample holder{how}{spin}, then press Enter: ")
+            except EOFError:
+                raise acquisition.AcquisitionError(
+                    f"nobody can mount {what}: the prompt's standard input is closed (run gonio run in a terminal "
+                    "to answer it)") from None
 
         with Rig.open(*ports) as rig:
             result = acquisition.run_protocol(
