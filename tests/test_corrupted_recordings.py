@@ -82,3 +82,15 @@ def test_a_fifo_named_like_a_recording_file_is_not_opened(recording, tmp_path):
     os.mkfifo(copy / "points.csv")  # reading it would block forever
     with pytest.raises(data.RecordingError, match="not a regular file"):
         reduce_recording(copy)
+
+
+def test_another_recording_s_metadata_is_refused(recording, tmp_path):
+    """Another recording's metadata.json beside these points was accepted and reduced with
+    its protocol: the points must be the ones its protocol plans."""
+    other = record(tmp_path / "other", PROTOCOL.replace("view = [-40, -20, 0, 20, 40]", "view = [-30, 30]")
+                   .replace('name = "corruption"', 'name = "other"'), "oren-nayar:rho=0.9,sigma=20", seed=4)
+    copy = tmp_path / "mixed"
+    shutil.copytree(recording, copy)
+    shutil.copy(other / "metadata.json", copy / "metadata.json")
+    with pytest.raises(data.RecordingError, match="not in the plan of the protocol.*'other'"):
+        reduce_recording(copy)

@@ -132,6 +132,23 @@ class _ReferenceReadings:
                                     tuple(float(w) for w in own), self.linearity(members, own))
 
 
+def _check_points_are_planned(folder: Path, protocol, rows) -> None:
+    """Refuse a points.csv whose sample points the metadata's protocol does not plan: the
+    metadata.json of another recording (copied or swapped in) was reduced as if it were this
+    one's."""
+    from ..data import point_key, row_key
+    from ..protocols import plan
+
+    the_plan = plan(protocol)
+    planned = {point_key(*p.key) for p in the_plan.points} | {point_key(*r.point.key) for r in the_plan.refused}
+    for line, row in enumerate(rows, start=2):
+        if row["block"] not in (REFERENCE_BLOCK, CHECK_BLOCK) and row_key(row) not in planned:
+            raise RecordingError(
+                f"{folder / 'points.csv'}, line {line}: point ({row['block']!r}, theta_i {row['theta_i']:g}, view "
+                f"{row['view']:g}) is not in the plan of the protocol in {folder / 'metadata.json'} "
+                f"({protocol.name!r}): the metadata belongs to another recording, or the points do")
+
+
 def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = True) -> Reduced:
     """Reduce a recording to radiance per geometry with an uncertainty budget.
 
@@ -177,6 +194,8 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
         raise RecordingError(_describe_duplicates(folder, duplicates))
     protocol_text = meta.get("protocol", {}).get("text")
     protocol = loads(protocol_text, source=str(folder / "metadata.json")) if protocol_text else None
+    if protocol is not None:
+        _check_points_are_planned(folder, protocol, read_points(folder, as_arrays=False))
     aperture = _aperture(meta, protocol)
     rows = readings_of(meta, points, lamp, linearity)
     reference = _reference(rows, protocol, aperture)
