@@ -830,8 +830,9 @@ def run_protocol(
         if _is_file_system_error(error):
             raise AcquisitionError(f"run stopped: cannot write the recording: {error.strerror or error}"
                                    + "".join(f"; {m}" for m in result.messages[1:])) from error
-        cause = "by an instrument fault" if type(error).__module__.split(".")[0] == "drivers" else ""
-        raise AcquisitionError(f"run stopped {cause}: {type(error).__name__}: {error}".replace(" :", ":")) from error
+        by_instrument = type(error).__module__.split(".")[0] == "drivers"  # the driver layer's errors
+        raise AcquisitionError(f"run stopped{' by an instrument fault' if by_instrument else ''}: "
+                               f"{type(error).__name__}: {error}") from error
     # every planned point measured or refused; failed points make the recording incomplete
     # (a resume measures them again), not complete
     run.finish("complete" if result.errors == 0 else "incomplete")

@@ -219,12 +219,12 @@ def _check_lamp_voltage(voltage: float, emulated: bool) -> None:
     what it cannot give, and the run then stops with the supply's own message)."""
     from drivers.emulator.lamp import LampParams
 
-    largest = LampParams().max_voltage_v
     if not (math.isfinite(voltage) and voltage > 0):
         raise CLIError(f"--lamp-voltage {voltage:g}: expected a lamp voltage > 0 V")
-    if emulated and voltage > largest:
-        raise CLIError(f"--lamp-voltage {voltage:g}: the emulated lamp supply gives at most {largest:g} V "
-                       f"(its nominal voltage is {LampParams().nominal_voltage_v:g} V)")
+    supply = LampParams()
+    if emulated and voltage > supply.max_voltage_v:
+        raise CLIError(f"--lamp-voltage {voltage:g}: the emulated lamp supply gives at most {supply.max_voltage_v:g} V "
+                       f"(its nominal voltage is {supply.nominal_voltage_v:g} V)")
 
 
 def _measure(args: argparse.Namespace, protocol, ports, reflectance):

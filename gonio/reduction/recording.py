@@ -188,14 +188,14 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
         raise RecordingError(f"{folder}: the recording holds no points yet (points.csv has its header only: the run "
                              f"stopped before its first point; resume it with gonio run ... --out {folder} --resume)")
     check_measured_rows(folder, points)
-    duplicates = duplicated_rows(read_points(folder, as_arrays=False))
+    point_rows = read_points(folder, as_arrays=False)
+    duplicates = duplicated_rows(point_rows)
     if duplicates:
-
         raise RecordingError(_describe_duplicates(folder, duplicates))
     protocol_text = meta.get("protocol", {}).get("text")
     protocol = loads(protocol_text, source=str(folder / "metadata.json")) if protocol_text else None
     if protocol is not None:
-        _check_points_are_planned(folder, protocol, read_points(folder, as_arrays=False))
+        _check_points_are_planned(folder, protocol, point_rows)
     aperture = _aperture(meta, protocol)
     rows = readings_of(meta, points, lamp, linearity)
     reference = _reference(rows, protocol, aperture)
