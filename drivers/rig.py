@@ -52,6 +52,7 @@ from typing import Mapping
 
 import numpy as np
 
+from .acceptance import GeometryRule
 from .camera import Camera, Roi, RoiStats, SensorInfo
 from .errors import (
     DriverError,
@@ -77,7 +78,6 @@ from .rig_geometry import (
     AXIS_VIEW,
     axis_targets,
     camera_direction,
-    check_targets,
     plan_moves,
 )
 
@@ -455,24 +455,22 @@ class Rig:
         if not self.limits or self.info is None:
             raise DriverError("the rig is not initialized; call initialize() (Rig.open does)")
 
+    @property
+    def geometry_rule(self) -> GeometryRule:
+        """The rule deciding which geometries this rig measures (:mod:`drivers.acceptance`):
+        the controller's travel limits, the separation and the camera's reported optics."""
+        self._require_initialized()
+        return GeometryRule(self.limits[AXIS_VIEW], self.limits[AXIS_THETA_I], self.limits[AXIS_PHI_I],
+                            self.min_separation, self.info, self.roi_fraction, self.sample_size_mm,
+                            self.roi_margin_px)
+
     def check_geometry(self, theta_i: float, phi_i: float, view: float) -> str | None:
-        """Why the geometry cannot be measured (travel limits, separation), or ``None``.
+        """Why the geometry cannot be measured (travel limits, separation, no radiance window
+        on the sample), or ``None``; :meth:`GeometryRule.refusal` of :attr:`geometry_rule`.
 
         Nothing is sent to the instruments.
         """
-        self._require_initialized()
-        targets = axis_targets(theta_i, phi_i, view)
-        reason = check_targets(targets, self.limits, self.min_separation)
-        if reason:
-            return reason
-        if not math.isfinite(view):
-            return f"view={view!r} is not finite"
-        try:
-            roi_for_view(self.info, view, fraction=self.roi_fraction,
-                         sample_size_mm=self.sample_size_mm, margin_px=self.roi_margin_px)
-        except GeometryError as exc:
-            return str(exc)
-        return None
+        return self.geometry_rule.refusal(theta_i, phi_i, view)
 
     def _move_timeout(self, start: Mapping[int, float], end: Mapping[int, float]) -> float:
         """Time the slowest axis needs for its trapezoidal move, + the line timeout [s]."""

@@ -16,6 +16,7 @@ alignment parameters (docs/emulator.md, "Systematic errors").
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
@@ -36,6 +37,8 @@ __all__ = [
     "misaligned_angles",
     "ALIGNMENT_ERRORS",
     "too_close",
+    "travel_refusal",
+    "separation_refusal",
 ]
 
 AXIS_VIEW, AXIS_THETA_I, AXIS_PHI_I = 1, 2, 3
@@ -121,6 +124,30 @@ def too_close(separation, min_separation: float):
     return np.asarray(separation, dtype=float) < min_separation + SEPARATION_MARGIN
 
 
+def travel_refusal(axis: int, value: float, limits: tuple[float, float]) -> str | None:
+    """Why ``value`` [deg] is not a target of stage ``axis`` with travel ``limits``, or None.
+
+    >>> travel_refusal(1, 95.0, (-90.0, 90.0))
+    'view (camera swing)=95 deg is outside the travel limits of axis 1: [-90, 90] deg'
+    """
+    if not math.isfinite(value):
+        return f"{AXIS_NAMES[axis]}={value!r} is not a finite angle"
+    low, high = limits
+    if not low <= value <= high:
+        return f"{AXIS_NAMES[axis]}={value:g} deg is outside the travel limits of axis {axis}: [{low:g}, {high:g}] deg"
+    return None
+
+
+def separation_refusal(separation: float, min_separation: float) -> str:
+    """The reason given for camera and lamp ``separation`` [deg] apart that are too close.
+
+    >>> separation_refusal(5.0, 5.0)
+    'camera and lamp only 5.00 deg apart (the rig keeps them more than its minimum separation, 5 deg, apart)'
+    """
+    return (f"camera and lamp only {separation:.2f} deg apart (the rig keeps them more than its "
+            f"minimum separation, {min_separation:g} deg, apart)")
+
+
 def check_targets(
     targets: Mapping[int, float],
     limits: Mapping[int, tuple[float, float]],
@@ -132,22 +159,12 @@ def check_targets(
     separation at the target is not :func:`too_close` to ``min_separation`` [deg].
     """
     for axis in AXES:
-        value = targets[axis]
-        low, high = limits[axis]
-        if not np.isfinite(value):
-            return f"{AXIS_NAMES[axis]}={value!r} is not a finite angle"
-        if not low <= value <= high:
-            return (
-                f"{AXIS_NAMES[axis]}={value:g} deg is outside the travel limits of axis {axis}: "
-                f"[{low:g}, {high:g}] deg"
-            )
-    sep = float(separation_of_axes(targets))
-    if too_close(sep, min_separation):
-        return (
-            f"camera and lamp would be {sep:.3g} deg apart at theta_i={targets[AXIS_THETA_I]:g}, "
-            f"phi_i={targets[AXIS_PHI_I]:g}, view={targets[AXIS_VIEW]:g}; the minimum "
-            f"separation is {min_separation:g} deg"
-        )
+        reason = travel_refusal(axis, float(targets[axis]), limits[axis])
+        if reason:
+            return reason
+    separation = float(separation_of_axes(targets))
+    if too_close(separation, min_separation):
+        return separation_refusal(separation, min_separation)
     return None
 
 

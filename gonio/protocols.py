@@ -43,7 +43,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
-from drivers.rig_geometry import angular_separation, camera_direction, too_close
+from drivers.acceptance import GeometryRule
+from drivers.rig_geometry import angular_separation, camera_direction
 
 from .geometry import azimuth_difference
 
@@ -149,6 +150,12 @@ class RigLimits:
     lamp_solid_angle: float = 0.003
     camera_solid_angle: float = 0.0009
     remount_time: float = 60.0
+
+    @property
+    def geometry_rule(self) -> GeometryRule:
+        """The rule the rig applies to a geometry (:mod:`drivers.acceptance`) with these
+        travel limits and separation and the emulated camera's optics."""
+        return GeometryRule(self.camera_range, self.lamp_theta_range, self.lamp_phi_range, self.min_separation)
 
     @property
     def estimate_velocity(self) -> float:
@@ -1072,6 +1079,11 @@ def refusal_reason(theta_i: float, phi_i: float, view: float, rig: RigLimits) ->
 def refusal_reasons(theta_i: float, phi_i: float, views: Sequence[float], rig: RigLimits) -> list[str | None]:
     """:func:`refusal_reason` for every camera angle of one lamp direction (one array pass).
 
+    The rig's own rule (:meth:`drivers.acceptance.GeometryRule.refusals`, the rule
+    :meth:`drivers.rig.Rig.check_geometry` applies): travel limits, the camera-lamp
+    separation, and a radiance window that fits on the sample's image (the emulated
+    camera's optics).
+
     Parameters
     ----------
     theta_i, phi_i : float
@@ -1085,36 +1097,7 @@ def refusal_reasons(theta_i: float, phi_i: float, views: Sequence[float], rig: R
     list of str or None
         Per view, the reason the rig refuses it, or None.
     """
-    lamp = _lamp_refusal(theta_i, phi_i, rig)
-    if lamp is not None:
-        return [_camera_refusal(view, rig) or lamp for view in views]
-    view_array = np.asarray(views, dtype=float)
-    # the rig's own geometry and rule (drivers.rig_geometry): exactly the minimum is refused
-    separations = angular_separation(theta_i, phi_i, *camera_direction(view_array))
-    close_pairs = too_close(separations, rig.min_separation)
-    reasons: list[str | None] = []
-    for view, separation, close in zip(views, separations.tolist(), close_pairs.tolist()):
-        reason = _camera_refusal(view, rig)
-        if reason is None and close:
-            reason = (f"camera and lamp only {separation:.2f} deg apart (the rig keeps them more than its "
-                      f"minimum separation, {rig.min_separation:g} deg, apart)")
-        reasons.append(reason)
-    return reasons
-
-
-def _camera_refusal(view: float, rig: RigLimits) -> str | None:
-    lo, hi = rig.camera_range
-    return None if lo <= view <= hi else f"camera angle {view:g} deg outside travel [{lo:g}, {hi:g}] deg"
-
-
-def _lamp_refusal(theta_i: float, phi_i: float, rig: RigLimits) -> str | None:
-    lo, hi = rig.lamp_theta_range
-    if not lo <= theta_i <= hi:
-        return f"lamp theta_i {theta_i:g} deg outside travel [{lo:g}, {hi:g}] deg"
-    lo, hi = rig.lamp_phi_range
-    if not lo <= phi_i <= hi:
-        return f"lamp phi_i {phi_i:g} deg outside travel [{lo:g}, {hi:g}] deg"
-    return None
+    return rig.geometry_rule.refusals(theta_i, phi_i, views)
 
 
 def move_time(distance: float, velocity: float, acceleration: float) -> float:

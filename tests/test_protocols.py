@@ -42,23 +42,43 @@ def test_fig16_plan_counts_and_refusals():
     assert all("apart" in r.reason for r in plan.refused)
 
 
-def test_the_plan_refuses_what_the_rig_refuses():
-    """One rule (drivers.rig_geometry.too_close): every geometry of the shipped protocols is
-    planned exactly when the driver's own check accepts it."""
-    from drivers.rig_geometry import axis_targets, check_targets
+@pytest.fixture(scope="module")
+def emulated_rig():
+    """A driver connected to the default emulated rig (nothing measured, only its checks)."""
+    from drivers.emulator.rig import EmulatedRig
+    from drivers.rig import Rig
 
-    for path in SHIPPED:
-        protocol = P.load(path)
+    with EmulatedRig(lambda ti, pi, tr, pr: np.full(np.shape(ti), 0.25), seed=3, name="plan-test") as emu:
+        emu.start(pty=False)
+        with Rig.open(emu.url("stage"), emu.url("camera"), emu.url("lamp"), timeout=0.5) as rig:
+            yield rig
+
+
+#: Views to 95 deg either side, every 0.5 deg near grazing and at the lamp: travel limits,
+#: exactly 5 deg from the lamp, and 90 deg views whose radiance window falls off the sample.
+EDGE_PROTOCOL = MINIMAL.replace("theta_i = 45", "theta_i = [0, 45, 85]").replace(
+    "view = [-60, 0, 30]", "view = [-95, -90, -89.5, -89, -88.5, -88, 40, 45, 50, 80, 85, 87, 89, 90, 95]")
+
+
+def test_the_plan_refuses_exactly_what_the_rig_refuses(emulated_rig):
+    """One rule (drivers.acceptance.GeometryRule): every geometry of the shipped protocols,
+    and of one reaching past the travel limits and the sample's grazing image, is planned
+    exactly when the emulated rig's own check accepts it, with the same reason."""
+    protocols = [P.load(path) for path in SHIPPED] + [P.loads(EDGE_PROTOCOL)]
+    for protocol in protocols:
         plan = P.plan(protocol)
-        rig = protocol.rig
-        limits = {1: rig.camera_range, 2: rig.lamp_theta_range, 3: rig.lamp_phi_range}
         for point in plan.points:
-            assert check_targets(axis_targets(point.theta_i, point.phi_i, point.view), limits,
-                                 rig.min_separation) is None, (path.name, point)
+            assert emulated_rig.check_geometry(point.theta_i, point.phi_i, point.view) is None, (protocol.name, point)
         for refusal in plan.refused:
             point = refusal.point
-            assert check_targets(axis_targets(point.theta_i, point.phi_i, point.view), limits,
-                                 rig.min_separation) is not None, (path.name, point)
+            assert emulated_rig.check_geometry(point.theta_i, point.phi_i, point.view) == refusal.reason, \
+                (protocol.name, point)
+    from drivers.acceptance import EMULATED_SENSOR
+
+    assert emulated_rig.info == EMULATED_SENSOR  # the plan's camera is the emulated one
+    edge = P.plan(protocols[-1])
+    reasons = " ".join(r.reason for r in edge.refused)
+    assert "travel limits" in reasons and "apart" in reasons and "sample's image" in reasons
 
 
 def test_fig19_is_off_plane_with_the_papers_azimuths():
@@ -130,7 +150,7 @@ def test_refusals_list_travel_limits_and_separation_never_drop_silently():
     text = MINIMAL.replace("view = [-60, 0, 30]", "view = [-95, -60, 45, 47, 60]")
     plan = P.plan(P.loads(text))
     reasons = {r.point.view: r.reason for r in plan.refused}
-    assert "outside travel" in reasons[-95.0]
+    assert "outside the travel limits" in reasons[-95.0]
     assert "apart" in reasons[45.0] and "apart" in reasons[47.0]
     assert [p.view for p in plan.points] == [-60.0, 60.0]
 
@@ -231,7 +251,7 @@ def test_checks_add_frames_and_a_move_each_to_the_time_estimate():
 def test_check_geometry_the_rig_refuses_is_an_error_with_the_reason():
     text = _with_table(MINIMAL, "[rig]\ncamera_range = [-60, 60]\n[checks]\nevery = 3\ngeometry = [30, 0, 70]")
     with pytest.raises(P.ProtocolError, match=r"^my\.toml: field 'checks\.geometry': expected a geometry the rig "
-                                              r"can measure \(the plan refuses it: camera angle 70 deg outside travel"):
+                                              r"can measure \(the plan refuses it: view \(camera swing\)=70 deg is outside the travel"):
         P.loads(text, source="my.toml")
 
 
@@ -296,7 +316,7 @@ def test_views_outside_the_camera_range_stay_refused_points():
     """Views within [-180, 180] but beyond camera_range are refused points, not errors."""
     plan = P.plan(P.loads(MINIMAL.replace("view = [-60, 0, 30]", "view = [-170, 0, 120]")))
     assert [p.view for p in plan.points] == [0.0]
-    assert all("outside travel" in r.reason for r in plan.refused)
+    assert all("outside the travel limits" in r.reason for r in plan.refused)
 
 
 def test_load_reports_unreadable_paths(tmp_path):

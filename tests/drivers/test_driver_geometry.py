@@ -68,7 +68,7 @@ def test_check_targets_reports_limits_and_separation():
     reason = check_targets({1: 10.0, 2: -1.0, 3: 0.0}, LIMITS, 5.0)
     assert "theta_i" in reason and "[0, 90]" in reason
     reason = check_targets({1: 32.0, 2: 30.0, 3: 0.0}, LIMITS, 5.0)
-    assert "2 deg apart" in reason and "minimum separation is 5" in reason
+    assert "2.00 deg apart" in reason and "minimum separation, 5 deg" in reason
     assert "not a finite" in check_targets({1: math.nan, 2: 30.0, 3: 0.0}, LIMITS, 5.0)
 
 
