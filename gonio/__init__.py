@@ -6,16 +6,19 @@ The public entry points (DESIGN.md, "Public API contract")::
     gonio.models.available()                      # registered model names
     gonio.models.get("oren-nayar")                # Model: .name, .params, .reference
     gonio.brdf("oren-nayar", 45, 0, 30, 180, rho=0.9, sigma=30)   # [1/sr]
+    gonio.fit_recording("plaster", models=["lambert", "oren-nayar"])  # as 'gonio fit' (docs/api.md)
 
 Angles are in degrees everywhere in the public interface.
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from . import geometry, models, radiometry
 
-__all__ = ["__version__", "brdf", "models", "geometry", "radiometry"]
+__all__ = ["__version__", "brdf", "models", "geometry", "radiometry", "fit_recording", "load_data"]
 
 
 def _installed_version() -> str:
@@ -28,7 +31,7 @@ def _installed_version() -> str:
         return "0.0.0+unknown"
 
 
-def __getattr__(name: str) -> str:
+def __getattr__(name: str) -> Any:
     """Module attributes resolved on first access (PEP 562).
 
     ``__version__`` reads the package metadata only when asked for: importing
@@ -39,6 +42,10 @@ def __getattr__(name: str) -> str:
         value = _installed_version()
         globals()["__version__"] = value
         return value
+    if name in ("fit_recording", "load_data"):  # the analysis stack loads on first use
+        from . import analysis
+
+        return getattr(analysis, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

@@ -48,7 +48,13 @@ __all__ = [
     "experiment_differences",
     "duplicated_rows",
     "RECORDING_FILES",
+    "EMULATED_SAMPLE",
 ]
+
+#: Key of a reduced recording's metadata (and its datasets') naming the emulated sample it
+#: measured: ``{"spec": ..., "parameters": {...}}``, the truth a fit is held against
+#: (gonio.fitting.truth); absent for a real rig's recording.
+EMULATED_SAMPLE = "emulated_sample"
 
 #: Columns of points.csv: (name, unit, description).
 COLUMNS: tuple[tuple[str, str, str], ...] = (

@@ -16,8 +16,9 @@ import os
 import stat
 import tempfile
 from pathlib import Path
+from typing import Any
 
-__all__ = ["write_atomic", "default_file_mode", "lock_folder", "unlock_folder", "FolderLock", "FolderBusy"]
+__all__ = ["write_atomic", "default_file_mode", "lock_folder", "unlock_folder", "FolderLock", "FolderBusy", "json_default"]
 
 
 def default_file_mode() -> int:
@@ -133,3 +134,20 @@ def unlock_folder(lock: FolderLock | None) -> None:
     """Release a lock :func:`lock_folder` took (None: nothing to release)."""
     if lock is not None:
         lock.release()
+
+
+def json_default(value: Any) -> Any:
+    """``json.dumps(..., default=json_default)``: numpy numbers and arrays as JSON numbers
+    and lists, anything else (a path) as its text.
+
+    >>> import json, numpy as np
+    >>> json.dumps({"n": np.int64(3), "x": np.arange(2.0), "p": Path("a/b")}, default=json_default)
+    '{"n": 3, "x": [0.0, 1.0], "p": "a/b"}'
+    """
+    import numpy as np
+
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)

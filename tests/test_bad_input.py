@@ -254,7 +254,7 @@ BAD_ARGUMENTS = [
      ["unknown model", "no-such-model"]),
     ("plan-folder", ["plan", "mine"], ["mine", "it is a directory"]),
     ("plan-missing", ["plan", "nothing.toml"], ["nothing.toml", "not found"]),
-    ("fit-missing-data", ["fit", "nothing.csv", "--model", "lambert"], ["nothing.csv", "No such file"]),
+    ("fit-missing-data", ["fit", "nothing.csv", "--model", "lambert"], ["nothing.csv", "no such file or recording folder"]),
     ("fit-folder-not-recording", ["fit", "mine", "--model", "lambert"], ["mine", "not a recording"]),
     ("fit-unknown-model", ["fit", "data.csv", "--model", "no-such-model"], ["unknown model", "no-such-model"]),
     ("fit-out-file", ["fit", "data.csv", "--model", "lambert", "--no-mcmc", "--out", "notes.txt"],

@@ -28,7 +28,7 @@ def test_gonio_demo_chooses_an_adequate_model_and_states_its_bias(tmp_path, caps
     assert main(["demo", "--out", str(out), "--quiet"]) == 0  # converged and adequate
     printed = capsys.readouterr().out
     assert "report:" in printed and "truth inside" in printed
-    comparison = json.loads((out / "fit" / "model-comparison.json").read_text())
+    comparison = json.loads((out / "fit" / "comparison.json").read_text())
     rows = {row["label"]: row for row in comparison["rows"]}
     assert set(rows) == {"lambert", "oren-nayar-qualitative", "oren-nayar (ir_weight=1)", "oren-nayar-tabulated"}
     assert not rows["oren-nayar (ir_weight=1)"]["adequate"] and not rows["lambert"]["adequate"]

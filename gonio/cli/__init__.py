@@ -11,7 +11,8 @@ error into one line on stderr instead of a traceback:
 * anything else is an internal error: ``gonio: error: <Type>: <message> (run with --debug
   for the traceback)``, exit code 1.
 
-``gonio --debug COMMAND ...`` lets every exception propagate, traceback included.
+``gonio --debug COMMAND ...`` (or ``--debug`` anywhere on the line) lets every exception
+propagate, traceback included.
 """
 from __future__ import annotations
 
@@ -79,7 +80,9 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"gonio: error: {describe_error(error)[0]}", file=sys.stderr)
         return EXIT_INTERNAL_ERROR
-    args = parser.parse_args(arguments)
+    debug = "--debug" in arguments[:arguments.index("--")] if "--" in arguments else "--debug" in arguments
+    args = parser.parse_args([a for a in arguments if a != "--debug"] if debug else arguments)
+    args.debug = debug  # anywhere on the line: before or after the subcommand
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 0 if args.command is None else EXIT_BAD_INPUT

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 import warnings
@@ -58,10 +59,11 @@ PROTOCOLS = ("oren-nayar-fig16-plaster.toml", "oren-nayar-fig19-off-plane.toml")
 #: Marks a folder as the demo's own output and lists what the demo wrote there, which a
 #: new demo run deletes (nothing else).
 MARKER = ".gonio-demo"
-#: The model comparison and the truth table the demo writes next to the fit result.
-COMPARISON_FILE = "model-comparison.txt"
-COMPARISON_JSON = "model-comparison.json"
+#: The truth table the demo writes next to the fit result (the comparison is saved with
+#: the result: comparison.json, comparison.txt).
 TRUTH_FILE = "truth.txt"
+#: Where older demos wrote the comparison (a new run deletes them with the rest).
+LEGACY_COMPARISON_FILES = ("model-comparison.txt", "model-comparison.json")
 
 
 def protocols_folder() -> Path:
@@ -90,7 +92,7 @@ def demo_paths(fit_folder: str = FIT_FOLDER) -> tuple[list[str], list[str]]:
 
     recordings = [f"recordings/{protocols.load(protocols_folder() / name).name}" for name in PROTOCOLS]
     files = [f"{folder}/{name}" for folder in recordings for name in RECORDING_FILES]
-    files += [f"{fit_folder}/{name}" for name in result_file_names() + (COMPARISON_FILE, COMPARISON_JSON, TRUTH_FILE)]
+    files += [f"{fit_folder}/{name}" for name in result_file_names() + (TRUTH_FILE,) + LEGACY_COMPARISON_FILES]
     return files, recordings + ["recordings", fit_folder]
 
 
@@ -320,11 +322,12 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True, realism: str = DEFAULT_
     _say(quiet, comparison.summary())
     chosen = comparison.row(comparison.chosen)
     _say(quiet, f"fitting {comparison.chosen} with MCMC")
-    line = None if quiet else ProgressLine("MCMC steps")
+    line = None if quiet else ProgressLine("MCMC steps of those convergence needs (50 tau)")
 
     def progress(step: int, max_steps: int, tau: float) -> None:
-        if line is not None:
-            line.update(step, max_steps, None, f"max tau {tau:.1f}")
+        if line is not None:  # toward convergence, not toward the step limit
+            needed = int(min(max_steps, 50 * tau)) if math.isfinite(tau) and tau > 0 else max_steps
+            line.update(min(step, needed), needed, None, f"tau {tau:.3g}; limit {max_steps}")
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)  # reported in the result, loudly
@@ -334,7 +337,6 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True, realism: str = DEFAULT_
 
 
 def _run(args: argparse.Namespace) -> int:
-    from gonio.fitting.results import _clean
     from gonio.report.fit_report import write_report
 
     from .samples import parse_sample_spec
@@ -346,9 +348,8 @@ def _run(args: argparse.Namespace) -> int:
     reduced = measure_demo(out, args.seed, args.quiet, args.sample, args.realism)
     result, comparison = fit_demo(reduced, args.seed, args.quiet, args.realism)
     fit_folder = out / FIT_FOLDER
+    result.comparison = comparison.to_dict()
     result.save(fit_folder)
-    (fit_folder / COMPARISON_FILE).write_text(comparison.summary() + "\n")
-    (fit_folder / COMPARISON_JSON).write_text(json.dumps(_clean(comparison.to_dict()), indent=1, allow_nan=False))
     table = truth_table(result, truth, args.sample, args.realism)
     described = SAMPLE_MODEL if args.sample == DEFAULT_SAMPLE else args.sample
     (fit_folder / TRUTH_FILE).write_text(f"sample: {described}\n{table}\n")
@@ -388,28 +389,9 @@ def truth_table(result, truth: dict[str, float] | None = None, sample: str = DEF
              if not rig_errors_modelled(realism) else
              f"{result.model} with the rig's errors as parameters (--realism {realism}) does not reproduce the "
              f"sample's {described} within these data's noise")
-    rows = {row["name"]: row for row in result.parameter_rows()}
-    lines = ["parameter   truth     fitted (median)   95 % interval           truth inside"]
+    from gonio.fitting.truth import truth_lines
+
+    lines, flags = truth_lines(result.parameter_rows(), truth, result.model, cause)
     if not truth:
         lines.append(f"(the sample {sample} states no value of {', '.join(TRUTH_PARAMETERS)})")
-    flags = []
-    for name, value in truth.items():
-        if name not in rows:
-            lines.append(f"{name:<10} {value:8.4g}   (not a parameter of {result.model})")
-            continue
-        row = rows[name]
-        median = row.get("median", row["value"])
-        low, high = row.get("p2_5"), row.get("p97_5")
-        if low is None:
-            lines.append(f"{name:<10} {value:8.4g}   {median:12.5g}      (no interval: least squares only)")
-            continue
-        inside = low <= value <= high
-        lines.append(f"{name:<10} {value:8.4g}   {median:12.5g}      [{low:.5g}, {high:.5g}] {row['unit']:<6}  "
-                     f"{'yes' if inside else 'NO'}")
-        if not inside:
-            half_width = (median - low) if value < low else (high - median)
-            unit = "" if row["unit"] in ("", "-") else f" {row['unit']}"
-            flags.append(f"BIAS: {name} is {median - value:+.3g}{unit} from the truth, "
-                         f"{abs(median - value) / max(half_width, 1e-300):.1f} times the interval's half-width: "
-                         f"{cause}")
     return "\n".join(lines + flags)

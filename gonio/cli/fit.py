@@ -20,8 +20,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="fit a reflectance model to measured data (least squares + MCMC)",
         description=(
             "Fit a registered model to a CSV of measurements with the columns "
-            "theta_i,phi_i,theta_r,phi_r,value,sigma (angles in degrees), or to a recording folder written "
-            "by 'gonio run'. Weighted, bounded least squares, "
+            "theta_i,phi_i,theta_r,phi_r,value[,sigma] (angles in degrees; --columns maps your names), or to "
+            "recording folders written by 'gonio run' (several are fitted jointly). Several --model: every "
+            "candidate is fitted by least squares and compared, and the chosen one is fitted and saved with the "
+            "comparison (comparison.json, comparison.txt). Weighted, bounded least squares, "
             "then Bayesian sampling with emcee until the chain is 50 autocorrelation times long. The result "
             "(result.json, chain.npz, posterior.nc, summary.txt) is written to a folder next to the data; "
             "'gonio report FOLDER' turns it into an HTML report. Every fit is tested for goodness of fit. "
@@ -29,12 +31,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "4 model inadequate, 5 noise understated (docs/fitting.md, 'Exit codes')."
         ),
     )
-    parser.add_argument("data", help="CSV file (theta_i,phi_i,theta_r,phi_r,value,sigma) or a recording folder of "
-                                     "'gonio run' (absolute BRDF when calibrated, else normalised radiance)")
+    parser.add_argument("data", nargs="+",
+                        help="CSV file(s) (theta_i,phi_i,theta_r,phi_r,value[,sigma]) or recording folder(s) of 'gonio "
+                             "run' (relative radiance with the reference standard's prior when calibrated, else "
+                             "normalised radiance); several are fitted jointly")
     parser.add_argument("--model", required=True, action="append",
                         help="registered model name (see 'gonio models'); repeat to compare models")
     parser.add_argument("--quantity", choices=["brdf", "normalised_radiance", "radiance"],
                         help="what the values are (default: the file's '# quantity:' line, else brdf)")
+    parser.add_argument("--columns", action="append", default=[], metavar="NAME=COLUMN",
+                        help="CSV: your column names for gonio's (theta_i, phi_i, theta_r, phi_r, value, sigma), e.g. "
+                             "--columns theta_i=incidence,value=brdf")
+    parser.add_argument("--angle-unit", choices=["deg", "rad"],
+                        help="CSV: the angles' unit (default: the file's '# angle_unit:' line, else degrees; angles "
+                             "that all lie within [0, pi/2] are refused as probable radians unless this is given)")
     parser.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                         help="hold a parameter fixed (repeatable, or comma-separated)")
     parser.add_argument("--prior", action="append", default=[], metavar="NAME=KIND:A:B",
@@ -70,7 +80,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--rhat-limit", type=float, default=1.01,
                         help="largest rank-normalised split R-hat accepted for convergence (default 1.01)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--out", help="result folder (default: DATA_STEM.fit-MODEL next to the data); "
+    parser.add_argument("--out", help="result folder (default: DATA_STEM.fit-MODEL next to the first data path, "
+                                      "DATA_STEM.fit-comparison with several models); "
                                       "refused if it already holds files, unless --overwrite")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an earlier gonio fit result in --out (only its result and report files; "
@@ -123,9 +134,10 @@ def check_result_folder(out: Path, overwrite: bool, argument: str = "--out") -> 
 def result_file_names() -> tuple[str, ...]:
     """Every file name a fit result folder may hold from FitResult.save and write_report."""
     from gonio.fitting.results import CHAIN_FILE, INFERENCE_DATA_FILE, RESULT_FILE, SUMMARY_FILE
+    from gonio.fitting.selection import COMPARISON_FILE, COMPARISON_TEXT
     from gonio.report.fit_html import REPORT_FILES  # the names without matplotlib
 
-    return (RESULT_FILE, CHAIN_FILE, INFERENCE_DATA_FILE, SUMMARY_FILE) + REPORT_FILES
+    return (RESULT_FILE, CHAIN_FILE, INFERENCE_DATA_FILE, SUMMARY_FILE, COMPARISON_FILE, COMPARISON_TEXT) + REPORT_FILES
 
 
 def remove_stale_results(out: Path, written: tuple[str, ...]) -> list[Path]:
@@ -197,10 +209,17 @@ def _option_value(text: str) -> Any:
 
 
 class _Progress:
-    """Prints the chain's progress to stderr at most every two seconds."""
+    """Prints the chain's progress toward convergence to stderr, at most every two seconds.
 
-    def __init__(self, quiet: bool):
+    The chain stops when it is ``tau_multiple`` (50) autocorrelation times long (and R-hat
+    passes), so the fraction shown is the steps over 50 times the current largest tau
+    estimate; the step cap is only the limit. The estimate of tau grows as the chain
+    explores, so the fraction can step back.
+    """
+
+    def __init__(self, quiet: bool, tau_multiple: float = 50.0):
         self.quiet = quiet
+        self.tau_multiple = tau_multiple
         self.last = 0.0
 
     def __call__(self, steps: int, max_steps: int, tau: float) -> None:
@@ -208,40 +227,22 @@ class _Progress:
         if self.quiet or now - self.last < 2.0:
             return
         self.last = now
-        need = f", needs >= {50 * tau:.0f} steps" if tau == tau and tau != float("inf") else ""
-        print(f"  mcmc: step {steps}/{max_steps}, max tau = {tau:.1f}{need}", file=sys.stderr, flush=True)
+        print(f"  mcmc: {convergence_text(steps, max_steps, tau, self.tau_multiple)}", file=sys.stderr, flush=True)
 
 
-def _load(path: Path, quantity: str | None, calibration: str = "common",
-          linearity: bool = True) -> tuple[Dataset, dict[str, Prior]]:
-    """A CSV file, or a recording folder written by 'gonio run' (reduced here).
+def convergence_text(steps: int, max_steps: int, tau: float, tau_multiple: float = 50.0) -> str:
+    """One progress line of a chain: steps against the length convergence needs.
 
-    Returns the dataset and the priors it implies: for a calibrated recording fitted as
-    it comes, relative radiance with the reference-standard prior on ``scale``
-    (gonio.acquisition.Reduced.fit_inputs), calibrated as ``calibration`` says.
+    >>> convergence_text(600, 20000, 20.0)
+    'step 600 of ~1000 needed for convergence (60 %; 50 tau, tau = 20); limit 20000'
+    >>> convergence_text(50, 20000, float("nan"))
+    'step 50, estimating the autocorrelation time; limit 20000'
     """
-    from gonio.cli import CLIError
-    from gonio.fitting import Dataset
-
-    if not path.is_dir():
-        if calibration != "common" or not linearity:
-            raise CLIError(f"{path}: --calibration and --no-linearity-correction apply to recording folders, not "
-                           "to a CSV file of values")
-        return Dataset.from_csv(path, quantity=quantity), {}
-    from gonio.acquisition import reduce_recording
-
-    reduced = reduce_recording(path, linearity=linearity)
-    try:
-        if quantity is None:
-            return reduced.fit_inputs(calibration)
-        if quantity == "normalised_radiance":
-            if calibration != "common":
-                raise ValueError("--calibration does not apply to normalised radiance (each incidence's level is "
-                                 "divided out, the calibration with it)")
-            return reduced.normalised_radiance(), {}
-        return {"brdf": reduced.brdf, "radiance": reduced.relative_radiance}[quantity](calibration), {}
-    except ValueError as error:
-        raise CLIError(f"{path}: {error}") from None
+    if not (tau == tau and 0 < tau < float("inf")):
+        return f"step {steps}, estimating the autocorrelation time; limit {max_steps}"
+    needed = min(max_steps, tau_multiple * tau)
+    return (f"step {steps} of ~{needed:.0f} needed for convergence ({min(100.0, 100 * steps / needed):.0f} %; "
+            f"{tau_multiple:g} tau, tau = {tau:.3g}); limit {max_steps}")
 
 
 def _alignment(items: list[str]) -> tuple[str, ...]:
@@ -256,49 +257,36 @@ def _alignment(items: list[str]) -> tuple[str, ...]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from gonio import models
-    from gonio.fitting import ConvergenceWarning, compare_models, fit, parse_prior
-    from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
-    from gonio.fitting.results import verdict_exit_code
+    from gonio.analysis import fit_dataset, load_data, split_fixed
+    from gonio.cli.progress import fitting_progress
+    from gonio.cli import CLIError
+    from gonio.fitting import ConvergenceWarning
 
-    data_path = Path(args.data)
-    dataset, priors = _load(data_path, args.quantity, args.calibration, args.linearity_correction)
+    paths = [Path(p) for p in args.data]
+    try:
+        dataset, data_priors = load_data(paths, args.quantity, args.calibration, args.linearity_correction,
+                                         _pairs(args.columns, "--columns") or None, args.angle_unit)
+    except (ValueError, FileNotFoundError) as error:
+        raise CLIError(str(error)) from None
     fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
+    try:
+        split_fixed(args.model, fixed)  # each fixed value names a parameter of a model or of the rig
+    except ValueError as error:
+        raise CLIError(f"--fix: {error}") from None
     options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
-    alignment = _alignment(args.alignment)
-    if len(args.model) > 1:
-        rig = {k: v for k, v in fixed.items() if k in RIG_ERROR_NAMES}  # the rig's errors: every candidate's
-        candidates = [(name, {**{k: v for k, v in fixed.items() if k in models.get(name).param_names}, **rig})
-                      for name in args.model]
-        comparison = compare_models(dataset, candidates, priors=priors, jitter=_jitter(args.jitter),
-                                    alignment=alignment, stray_light=args.stray_light)
-        print(comparison.summary())
-        return verdict_exit_code(comparison.row(comparison.chosen)["verdict"])
-    name = args.model[0]
-    model = models.get(name)
-    for key, text in _pairs(args.prior, "--prior").items():
-        bounds = model.param(key).bounds if key in model.param_names else (-float("inf"), float("inf"))
-        if key in RIG_ERROR_NAMES:
-            bounds = STRAY_LIGHT.bounds if key == STRAY_LIGHT.name else (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
-        priors[key] = parse_prior(text, bounds)
-    if args.out is not None and not args.out.strip():
-        from gonio.cli import CLIError
-
-        raise CLIError(f"--out {args.out!r}: expected the name of a result folder (an empty name would write "
-                       "into the current folder)")
-    out = Path(args.out) if args.out else data_path.with_name(f"{data_path.stem}.fit-{name}")
+    priors = _priors(args.prior, args.model)
+    out = _out_folder(args.out, paths, args.model)
     replacing = check_result_folder(out, args.overwrite)
-    if not args.quiet:
-        print(f"fitting {name} to {dataset.n} {dataset.quantity} values from {data_path}", file=sys.stderr)
+    say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     with _report_workers(args.report) as pool:  # they import matplotlib while this process fits
         drawing = _report_drawing(pool, dataset) if args.report else None
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), fitting_progress(args.quiet):
             warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
-            result = fit(
-                dataset, name, fixed=fixed, priors=priors, mcmc=args.mcmc, jitter=_jitter(args.jitter),
-                options=options, n_walkers=args.walkers, max_steps=args.max_steps, rhat_limit=args.rhat_limit,
-                seed=args.seed, progress=_Progress(args.quiet), alignment=alignment, stray_light=args.stray_light,
-            )
+            result = fit_dataset(
+                dataset, args.model, data_priors=data_priors, fixed=fixed, priors=priors, mcmc=args.mcmc,
+                jitter=_jitter(args.jitter), options=options, n_walkers=args.walkers, max_steps=args.max_steps,
+                rhat_limit=args.rhat_limit, seed=args.seed, progress=_Progress(args.quiet),
+                alignment=_alignment(args.alignment), stray_light=args.stray_light, announce=say)
         if drawing is not None:
             drawing.draw_fit(result)  # the workers draw while this process saves
         path = result.save(out)
@@ -319,6 +307,36 @@ def _run(args: argparse.Namespace) -> int:
     if result.adequate is False:
         print(f"gonio: {result.adequacy.headline()}", file=sys.stderr)
     return result.exit_code()
+
+
+def _priors(items: list[str], names: list[str]) -> dict[str, Prior]:
+    """The ``--prior`` overrides, each checked against the bounds of the parameter it names
+    (in the first model that has it, or the rig's errors)."""
+    from gonio import models
+    from gonio.fitting import parse_prior
+    from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
+
+    priors = {}
+    for key, text in _pairs(items, "--prior").items():
+        bounds = next((models.get(n).param(key).bounds for n in names if key in models.get(n).param_names),
+                      (-float("inf"), float("inf")))
+        if key in RIG_ERROR_NAMES:
+            bounds = STRAY_LIGHT.bounds if key == STRAY_LIGHT.name else (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
+        priors[key] = parse_prior(text, bounds)
+    return priors
+
+
+def _out_folder(out: str | None, paths: list[Path], names: list[str]) -> Path:
+    """``--out``, or next to the first data path: STEM.fit-MODEL (STEM.fit-comparison for several models)."""
+    from gonio.cli import CLIError
+
+    if out is not None:
+        if not out.strip():
+            raise CLIError(f"--out {out!r}: expected the name of a result folder (an empty name would write "
+                           "into the current folder)")
+        return Path(out)
+    stem = "+".join(p.stem for p in paths[:3]) + ("+..." if len(paths) > 3 else "")
+    return paths[0].with_name(f"{stem}.fit-{names[0] if len(names) == 1 else 'comparison'}")
 
 
 def _jitter(option: str) -> str | bool:

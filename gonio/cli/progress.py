@@ -1,9 +1,11 @@
 """A dependency-free progress line for long CLI work (acquisition, MCMC)."""
 from __future__ import annotations
 
+import contextlib
+import logging
 import sys
 import time
-from typing import TextIO
+from typing import Iterator, TextIO
 
 
 def _clock(seconds: float) -> str:
@@ -54,3 +56,23 @@ class ProgressLine:
             self.stream.write(text + "\n")
             self.stream.flush()
             self._next_fraction = fraction + self.step
+
+
+@contextlib.contextmanager
+def fitting_progress(quiet: bool) -> Iterator[None]:
+    """Print the fitting code's progress lines (logger ``gonio.fitting``, INFO: a slow
+    least-squares fit's heartbeat) to stderr while the block runs, unless ``quiet``."""
+    if quiet:
+        yield
+        return
+    logger = logging.getLogger("gonio.fitting")
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("  %(message)s"))
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)

@@ -18,7 +18,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "geometry the stage read back) with its uncertainty split into components (shot and read noise, "
             "dark, PRNU, lamp, angle, linearity correction) and the reference standard's calibration (with its "
             "irradiance at each lamp polar angle). Prints the budget table and "
-            "writes reduced.csv and budget.json (docs/acquisition.md)."
+            "writes reduced.csv and budget.json (docs/acquisition.md); with --brdf also the absolute BRDF "
+            "calibrated by the reference standard, brdf.csv with its covariance brdf_covariance.npy "
+            "(docs/data-format.md)."
         ),
     )
     parser.add_argument("recording", help="recording folder of 'gonio run'")
@@ -28,14 +30,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "else the lamp checks, else the scatter of repeats)")
     parser.add_argument("--linearity-correction", action=argparse.BooleanOptionalAction, default=True,
                         help="correct the readings by the camera's linearity series of the recording (default: yes)")
+    parser.add_argument("--brdf", action="store_true",
+                        help="also write the absolute BRDF [1/sr] with its uncertainty by component (brdf.csv) and "
+                             "the values' covariance (brdf_covariance.npy); needs the reference standard")
+    parser.add_argument("--calibration", choices=["common", "per-incidence"], default="common",
+                        help="the BRDF's calibration: one lamp irradiance for every value ('common', the default) or "
+                             "the standard's at each lamp polar angle ('per-incidence')")
     parser.add_argument("--overwrite", action="store_true", help="replace an earlier 'gonio reduce' output in --out")
     parser.set_defaults(func=_run)
 
 
 def _check_earlier_output(out: Path, overwrite: bool) -> None:
-    from gonio.reduction import REDUCED_BUDGET, REDUCED_TABLE, is_whole_reduction
+    from gonio.reduction import BRDF_COVARIANCE, BRDF_TABLE, REDUCED_BUDGET, REDUCED_TABLE, is_whole_reduction
 
-    present = [name for name in (REDUCED_TABLE, REDUCED_BUDGET) if os.path.lexists(out / name)]
+    files = (REDUCED_TABLE, BRDF_TABLE, BRDF_COVARIANCE, REDUCED_BUDGET)
+    present = [name for name in files if os.path.lexists(out / name)]
     if not present:
         return
     if not is_whole_reduction(out):
@@ -44,6 +53,9 @@ def _check_earlier_output(out: Path, overwrite: bool) -> None:
                        "never overwrites files it did not write)")
     if not overwrite:
         raise CLIError(f"--out {out}: holds an earlier reduction; add --overwrite to replace it")
+    for name in files:  # the earlier reduction goes whole: no brdf.csv of it beside the new one
+        if os.path.lexists(out / name):
+            (out / name).unlink()
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -59,7 +71,14 @@ def _run(args: argparse.Namespace) -> int:
     if reduced.reference_irradiance is not None:
         print(f"reference irradiance E_0 = {reduced.reference_irradiance:.7g} +/- "
               f"{reduced.reference_irradiance_sigma:.2g} ({reduced.unit} per sr)")
-    csv_path, json_path = reduced.write(out)
-    print(f"reduced values: {csv_path}")
-    print(f"budget:         {json_path}")
+    if args.brdf and reduced.reference_irradiance is None:
+        raise CLIError(f"{recording}: --brdf needs the reference standard, and this recording has none (its protocol "
+                       "has no [reference] table, or the reference points were not measured); the radiance is "
+                       "relative only (reduced.csv)")
+    try:
+        paths = reduced.write(out, brdf=args.calibration if args.brdf else None)
+    except ValueError as error:
+        raise CLIError(f"{recording}: {error}") from None
+    for path in paths:
+        print(f"wrote {path}")
     return 0

@@ -51,6 +51,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from .csv_table import ASSUMED_SIGMA
 from .lack_of_fit import LackOfFit, lack_of_fit
 
 __all__ = ["ALPHA", "VERDICTS", "Adequacy", "assess", "chi2_pvalue", "posterior_predictive_pvalue",
@@ -216,7 +217,7 @@ def assess(problem, least_squares, samples: np.ndarray | None = None, alpha: flo
                        "the uncertainties")
     if math.isfinite(ppc_p) and ppc_p < alpha:
         reasons.append(f"posterior predictive p = {_p(ppc_p)} < {alpha:g}")
-    if math.isfinite(ratio) and ratio > 1.0:
+    if math.isfinite(ratio) and ratio > 1.0 and not problem.dataset.metadata.get(ASSUMED_SIGMA):  # else none stated
         reasons.append(f"the fitted extra noise is {ratio:.3g} times the stated uncertainties")
     return Adequacy(chi2_p, ppc_p, ratio, alpha, tuple(reasons), lack_of_fit(problem, vector))
 

@@ -264,20 +264,29 @@ class Dataset:
         )
 
     def to_csv(self, path: str | Path) -> Path:
-        """Write the CSV form (``# key: value`` header lines, then the columns).
+        """Write the CSV form: ``# key: value`` header lines (values in JSON), then the
+        columns ``theta_i,phi_i,theta_r,phi_r,value,sigma``.
 
-        A covariance is not part of the CSV form: the file holds ``sigma`` and says
-        ``# covariance: not stored (independent errors assumed on reading)``.
+        A covariance is written beside the file as ``<stem>_covariance.npy`` (numpy's
+        format), which the header line ``# covariance:`` names and :meth:`from_csv` reads
+        back.
         """
+        import json
+
+        from gonio.files import json_default
+
         path = Path(path)
-        buffer = io.StringIO()
-        buffer.write(f"# quantity: {self.quantity}\n")
+        header: dict[str, Any] = {"quantity": self.quantity}
         if self.label:
-            buffer.write(f"# label: {self.label}\n")
-        for key, value in self.metadata.items():
-            buffer.write(f"# {key}: {value}\n")
+            header["label"] = self.label
+        header.update(self.metadata)
         if self.covariance is not None:
-            buffer.write("# covariance: not stored (independent errors assumed on reading)\n")
+            covariance_path = path.with_name(f"{path.stem}_covariance.npy")
+            np.save(covariance_path, np.asarray(self.covariance), allow_pickle=False)
+            header["covariance"] = covariance_path.name
+        buffer = io.StringIO()
+        for key, value in header.items():
+            buffer.write(f"# {key}: {json.dumps(value, default=json_default)}\n")
         writer = csv.writer(buffer, lineterminator="\n")
         writer.writerow(CSV_COLUMNS)
         for row in zip(*(getattr(self, name) for name in CSV_COLUMNS)):
@@ -286,73 +295,86 @@ class Dataset:
         return path
 
     @classmethod
-    def from_csv(cls, path: str | Path, quantity: str | None = None, label: str | None = None) -> "Dataset":
-        """Read a CSV file with the columns ``theta_i,phi_i,theta_r,phi_r,value,sigma``.
+    def from_csv(cls, path: str | Path, quantity: str | None = None, label: str | None = None,
+                 columns: Mapping[str, str] | None = None, angle_unit: str | None = None) -> "Dataset":
+        """Read a table of measurements: the columns ``theta_i,phi_i,theta_r,phi_r,value``
+        and, optionally, ``sigma`` (:mod:`gonio.fitting.csv_table`; docs/data-format.md).
 
         Parameters
         ----------
         path : path
-            The file.  Lines starting with ``#`` before the header may hold ``key: value``
-            pairs: ``quantity`` and ``label`` set those fields, others go to ``metadata``.
-            Extra columns are ignored.
+            The file.  Lines starting with ``#`` before the column names may hold ``key:
+            value`` pairs (JSON values): ``quantity`` and ``label`` set those fields,
+            ``covariance`` names a numpy ``.npy`` file beside it holding the values'
+            covariance, ``angle_unit`` the angles' unit; others go to ``metadata``.
+            Extra columns are ignored; comma, semicolon, tab or space delimited.
         quantity, label : str, optional
             Override the values given in the file.
+        columns : mapping, optional
+            gonio's column names to the file's, e.g. ``{"theta_i": "incidence"}``.
+        angle_unit : {"deg", "rad"}, optional
+            Unit of the angles (default: the header's ``angle_unit``, else degrees; angles
+            that all lie within [0, pi/2] are refused as probable radians unless the unit
+            is given).
+
+        Without a ``sigma`` column every value's stated uncertainty is
+        :data:`~gonio.fitting.csv_table.ASSUMED_RELATIVE_SIGMA` of itself and the
+        metadata says so (:data:`~gonio.fitting.csv_table.ASSUMED_SIGMA`): a fit then
+        takes the noise as relative and fits its size. Rows with a missing value are left
+        out and counted in the metadata (:data:`~gonio.fitting.csv_table.DROPPED_ROWS`).
 
         Raises
         ------
         FileNotFoundError
-            The file does not exist.
+            The file, or the covariance file its header names, does not exist.
         ValueError
             Naming the file, the line and the column that could not be read.
         """
+        from .csv_table import ASSUMED_RELATIVE_SIGMA, ASSUMED_SIGMA, read_table
+
         path = Path(path)
+        table = read_table(path, CSV_COLUMNS[:-1], ("sigma",), columns, angle_unit)
+        header, data = dict(table.header), table.columns
+        metadata = {**{k: v for k, v in header.items() if k not in ("quantity", "label", "covariance", "angle_unit")},
+                    **table.metadata}
+        if "sigma" not in data:
+            magnitude = np.abs(data["value"])
+            data["sigma"] = ASSUMED_RELATIVE_SIGMA * np.maximum(magnitude, 1e-3 * magnitude.max())
+            metadata[ASSUMED_SIGMA] = (f"the file states no uncertainties: each value's taken as "
+                                       f"{ASSUMED_RELATIVE_SIGMA:g} of itself, a fit's relative extra noise "
+                                       "(rel_jitter) sets the real size")
+        covariance = _covariance_beside(path, header.get("covariance"), table)
         try:
-            text = path.read_text(encoding="utf-8")
-        except UnicodeDecodeError as error:
-            raise ValueError(f"{path}: not a UTF-8 text file (byte {error.start}: {error.reason}); save the CSV as "
-                             "UTF-8 (or plain ASCII)") from None
-        header: dict[str, str] = {}
-        lines = text.splitlines()
-        start = 0
-        while start < len(lines) and (lines[start].startswith("#") or not lines[start].strip()):
-            comment = lines[start].lstrip("#").strip()
-            if ":" in comment:
-                key, _, value = comment.partition(":")
-                header[key.strip()] = value.strip()
-            start += 1
-        if start == len(lines):
-            raise ValueError(f"{path}: no header line; expected the columns {','.join(CSV_COLUMNS)}")
-        reader = csv.reader(lines[start:])
-        columns = [c.strip() for c in next(reader)]
-        missing = [c for c in CSV_COLUMNS if c not in columns]
-        if missing:
-            raise ValueError(
-                f"{path}: header lacks the column(s) {missing}; expected {','.join(CSV_COLUMNS)}"
-            )
-        where = {c: columns.index(c) for c in CSV_COLUMNS}
-        table: dict[str, list[float]] = {c: [] for c in CSV_COLUMNS}
-        for line_number, row in enumerate(reader, start=start + 2):
-            if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
-                continue
-            for column in CSV_COLUMNS:
-                try:
-                    table[column].append(float(row[where[column]]))
-                except (IndexError, ValueError):
-                    cell = row[where[column]] if where[column] < len(row) else "<missing>"
-                    raise ValueError(
-                        f"{path}, line {line_number}: column {column!r} = {cell!r} is not a number"
-                    ) from None
-        quantity = quantity or header.pop("quantity", "brdf")
-        header.pop("quantity", None)
-        label = label if label is not None else header.pop("label", path.stem)
-        header.pop("label", None)
-        try:
-            return cls(*(table[c] for c in CSV_COLUMNS), quantity=quantity, label=label, metadata=header)
+            return cls(*(data[c] for c in CSV_COLUMNS), quantity=quantity or str(header.get("quantity", "brdf")),
+                       label=label if label is not None else str(header.get("label", path.stem)),
+                       metadata=metadata, covariance=covariance)
         except ValueError as error:
             raise ValueError(f"{path}: {error}") from None
 
     def __repr__(self) -> str:
         return f"<Dataset {self.label!r}: {self.n} {self.quantity} values>"
+
+
+def _covariance_beside(path: Path, name: Any, table) -> np.ndarray | None:
+    """The covariance a CSV's ``# covariance:`` line names (a ``.npy`` file beside it), or None.
+
+    Files of older versions say ``not stored (...)``: no covariance. Refused when rows were
+    left out for a missing value (the matrix no longer matches the rows).
+    """
+    if not isinstance(name, str) or not name.endswith(".npy"):
+        return None
+    covariance_path = path.parent / name
+    if not covariance_path.is_file():
+        raise FileNotFoundError(f"{path}: its header names the covariance file {name!r}, which is not beside it; copy "
+                                "it along with the table, or delete the '# covariance:' line to take the errors as "
+                                "independent")
+    if table.metadata.get("dropped_rows"):
+        raise ValueError(f"{path}: rows with a missing value were left out, so the covariance {name!r} no longer "
+                         "matches the rows; remove those rows and their entries from both files")
+    try:
+        return np.load(covariance_path, allow_pickle=False)
+    except ValueError as error:
+        raise ValueError(f"{covariance_path}: not a numpy array file ({error})") from None
 
 
 def _checked_covariance(covariance: Any, sigma: np.ndarray) -> np.ndarray:

@@ -132,7 +132,8 @@ def convergence_diagnostics(chain: np.ndarray, names: Sequence[str], ess: bool =
 
 def inference_data(chain: np.ndarray, log_prob: np.ndarray, names: Sequence[str],
                    log_likelihood: np.ndarray | None = None, observed: np.ndarray | None = None,
-                   attributes: Mapping[str, Any] | None = None):
+                   attributes: Mapping[str, Any] | None = None, predictive: np.ndarray | None = None,
+                   geometry: Mapping[str, np.ndarray] | None = None):
     """An ArviZ ``InferenceData`` of a chain after burn-in (walkers as chains).
 
     Parameters
@@ -147,15 +148,20 @@ def inference_data(chain: np.ndarray, log_prob: np.ndarray, names: Sequence[str]
         The measured values.
     attributes : mapping, optional
         Stored as attributes of the posterior group.
+    predictive : numpy.ndarray, shape (steps', walkers, n), optional
+        Replicated data (the ``posterior_predictive`` group).
+    geometry : mapping of str to numpy.ndarray, optional
+        The measurement geometry [deg] (the ``constant_data`` group).
     """
-    from .inference_file import inference_groups
+    from .inference_file import DATA_DIMENSION, inference_groups
 
     az = arviz()
     groups = {group: {name: values for name, (_, values) in variables.items()}
-              for group, variables in inference_groups(chain, log_prob, names, log_likelihood, observed).items()}
+              for group, variables in inference_groups(chain, log_prob, names, log_likelihood, observed, predictive,
+                                                       geometry).items()}
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
-        data = az.from_dict(**groups)
+        data = az.from_dict(**groups, dims={name: [DATA_DIMENSION] for name in (geometry or {})})
     for key, value in dict(attributes or {}).items():
         data.posterior.attrs[key] = value
     return data

@@ -20,7 +20,9 @@ Diagnostics, all reported as plain-language warnings in the result:
 """
 from __future__ import annotations
 
+import logging
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -34,6 +36,10 @@ __all__ = ["LeastSquaresResult", "fit_least_squares", "jacobian_diagnostics"]
 # a degenerate direction.  Two-point finite differences are accurate to ~1e-8 relative, so
 # an exact degeneracy shows up below ~1e-7; genuine but weak constraints (strong
 # correlations) stay well above 1e-6.
+_log = logging.getLogger("gonio.fitting")
+#: Seconds between the progress lines of a slow least-squares fit.
+HEARTBEAT_SECONDS = 5.0
+
 _DEGENERATE_RCOND = 1e-6
 # A parameter takes part in a degenerate direction when its component in the null vector
 # exceeds this (the vector has unit length; 0.1 leaves out round-off contributions).
@@ -323,6 +329,24 @@ def _with_extra_noise(problem: FitProblem, solve, found, vector: np.ndarray, ind
     return found, vector, calls
 
 
+class _Heartbeat:
+    """Logs a slow least-squares fit's progress (logger ``gonio.fitting``, INFO) every
+    :data:`HEARTBEAT_SECONDS`: the start, the model evaluations and the time so far. A fit
+    of the exact models can take minutes; ``gonio fit`` prints these lines."""
+
+    def __init__(self, model: str, starts: int):
+        self.model, self.starts, self.start, self.calls = model, starts, 0, 0
+        self.begun = self.last = time.monotonic()
+
+    def beat(self) -> None:
+        self.calls += 1
+        now = time.monotonic()
+        if now - self.last >= HEARTBEAT_SECONDS:
+            self.last = now
+            _log.info("least squares of %s: start %d of %d, %d model evaluations, %.0f s", self.model,
+                      self.start, self.starts, self.calls, now - self.begun)
+
+
 def fit_least_squares(
     problem: FitProblem,
     start: Mapping[str, float] | None = None,
@@ -380,11 +404,13 @@ def fit_least_squares(
     prior_sd = np.array([s for _, _, s in gaussian], float)
     best = None
     nfev = 0
+    heartbeat = _Heartbeat(problem.model.name, n_starts)
 
     def solve(template: np.ndarray, x0: np.ndarray):
         """Least squares of the model parameters, the others held at ``template``."""
 
         def residuals(x: np.ndarray) -> np.ndarray:
+            heartbeat.beat()
             vector = template.copy()
             vector[index] = x
             r = _whitened(problem, vector)
@@ -401,6 +427,7 @@ def fit_least_squares(
         return optimize.least_squares(residuals, x0, bounds=(lower, upper), x_scale="jac", method="trf")
 
     for point in _start_points(problem, start, n_starts, rng):
+        heartbeat.start += 1
         found = solve(point, np.clip(point[index], lower, upper))
         if found is None:
             continue

@@ -508,6 +508,21 @@ class FitProblem:
         out[~np.isfinite(out)] = -math.inf
         return out
 
+    def replicated_data(self, vectors: Any, rng: np.random.Generator) -> np.ndarray:
+        """Data the fit says the instrument would give at each row of ``vectors`` (free
+        parameters, shape (D, n_free)): the prediction plus a draw of the likelihood's noise
+        (the stated covariance, or sigma, and the extra noise added independently, which
+        gives exactly their summed covariance). Shape (D, N): the posterior predictive
+        draws of ``posterior.nc``."""
+        values = self.batch_values(vectors)
+        predicted = self._batch_prediction(values)
+        z = rng.standard_normal(predicted.shape)
+        noise = z @ self._cholesky.T if self._cholesky is not None else z * self.dataset.sigma
+        if self.jitter:
+            extra = np.broadcast_to(self.extra_variance(values, predicted), predicted.shape)
+            noise = noise + np.sqrt(extra) * rng.standard_normal(predicted.shape)
+        return predicted + noise
+
     def _batch_prediction(self, values: Mapping[str, Any]) -> np.ndarray:
         """The prediction at every row of :meth:`batch_values` ``values``, shape (W, N)."""
         params = {name: values[name] for name in self.model.param_names}

@@ -40,7 +40,8 @@ from .priors import Prior, prior_from_dict
 from .rig_errors import RIG_ERROR_NAMES, RigPrediction
 from .evaluation import combine_prediction, evaluated_model
 from .problem import FitProblem, jitter_mode, predict_quantity
-from .selection import information_criteria
+from .truth import known_truth, truth_lines
+from .selection import COMPARISON_FILE, COMPARISON_TEXT, comparison_text, information_criteria
 
 __all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE", "SUMMARY_FILE", "INFERENCE_DATA_FILE", "RESULT_FORMAT",
            "is_fit_result", "EXIT_BAD_INPUT", "EXIT_NOT_CONVERGED", "EXIT_INADEQUATE",
@@ -50,6 +51,9 @@ RESULT_FILE = "result.json"
 CHAIN_FILE = "chain.npz"
 #: Largest number of posterior draws (walkers x steps) in an InferenceData / posterior.nc.
 INFERENCE_DRAWS = 8000
+#: Most replicated datasets in posterior.nc's posterior_predictive group (the last steps of
+#: the chain, every walker).
+PREDICTIVE_DRAWS = 1000
 SUMMARY_FILE = "summary.txt"
 #: Draws x geometries evaluated at once by FitResult.posterior_predictive.
 _PREDICTIVE_ELEMENTS = 2**16
@@ -158,6 +162,9 @@ class FitResult:
         The alignment parameters of the fit, free or fixed (:mod:`gonio.fitting.rig_errors`).
     stray_light : bool
         Whether the rig's stray light is a parameter of the fit.
+    comparison : dict or None
+        The model comparison that chose this model, in its JSON form
+        (:meth:`gonio.fitting.ModelComparison.to_dict`), when the fit followed one.
     """
 
     model: str
@@ -177,6 +184,7 @@ class FitResult:
     adequacy: Adequacy | None = None
     alignment: tuple[str, ...] = ()
     stray_light: bool = False
+    comparison: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -266,6 +274,50 @@ class FitResult:
         state = self.__dict__.copy()
         state.pop("_problem", None)
         return state
+
+    def truth_comparison(self, cause: str | None = None) -> tuple[str, list[str], list[str]] | None:
+        """The fit against the emulated sample's truth (:mod:`gonio.fitting.truth`): the
+        sample's spec, the table's lines and the BIAS lines; None for data of a real rig."""
+        known = known_truth(self.dataset.metadata)
+        if known is None or not known[1]:
+            return None
+        lines, bias = truth_lines(self.parameter_rows(), known[1], self.model, cause)
+        return known[0], lines, bias
+
+    def __repr__(self) -> str:
+        """One line: model, data, verdict and the best values (``summary()`` has everything)."""
+        values = self.best_values()
+        shown = ", ".join(f"{name}={_fmt(values[name], 4)}" for name in self.free[:6])
+        verdict = self.adequacy.verdict if self.adequacy is not None else "no verdict"
+        chain = "least squares" if self.mcmc is None else ("MCMC converged" if self.converged else "MCMC NOT converged")
+        return (f"<FitResult {self.model} to {self.dataset.n} {self.dataset.quantity} values: {verdict}, {chain}; "
+                f"{shown}{', ...' if len(self.free) > 6 else ''}>")
+
+    def _repr_html_(self) -> str:
+        """A notebook's view: the verdict, the parameters with their intervals, the comparison."""
+        from html import escape
+
+        from .selection import comparison_html
+
+        rows = []
+        for r in self.parameter_rows():
+            if r["fixed"]:
+                cells = (r["name"], _fmt(r["value"], 6), "fixed", "", r["unit"])
+            elif "median" in r:
+                digits = max(4, digits_to_resolve(r["median"], (r["p84"] - r["p16"]) / 2))
+                cells = (r["name"], _fmt(r["median"], digits), f"-{_fmt(r['median'] - r['p16'], 3)} "
+                         f"+{_fmt(r['p84'] - r['median'], 3)}", f"[{_fmt(r['p2_5'], digits)}, "
+                         f"{_fmt(r['p97_5'], digits)}]", r["unit"])
+            else:
+                cells = (r["name"], _fmt(r["value"], digits_to_resolve(r["value"], r["stderr"])),
+                         f"+/- {_fmt(r['stderr'], 3)}", "", r["unit"])
+            rows.append("<tr>" + "".join(f"<td>{escape(str(c))}</td>" for c in cells) + "</tr>")
+        head = "<tr><th>parameter</th><th>value</th><th>1 sigma</th><th>95 %</th><th>unit</th></tr>"
+        verdict = escape(self.adequacy.headline()) if self.adequacy is not None else "no verdict"
+        comparison = comparison_html(self.comparison) if self.comparison is not None else ""
+        return (f"<p><b>{escape(self.model)}</b> fitted to {self.dataset.n} {escape(self.dataset.quantity)} values "
+                f"of {escape(self.dataset.label or 'data')}: {verdict}</p><table>{head}{''.join(rows)}</table>"
+                + comparison)
 
     @property
     def converged(self) -> bool | None:
@@ -370,6 +422,7 @@ class FitResult:
             "gonio_version": self.gonio_version,
             "created": self.created,
             "result_id": self.result_id,
+            "comparison": self.comparison,
             "model": self.model,
             "model_reference": problem.model.reference,
             "quantity": self.dataset.quantity,
@@ -425,11 +478,14 @@ class FitResult:
         return _clean(out)
 
     def saved_files(self) -> tuple[str, ...]:
-        """Names of the files :meth:`save` writes for this result (chain only with MCMC)."""
-        return (RESULT_FILE, SUMMARY_FILE) + ((CHAIN_FILE, INFERENCE_DATA_FILE) if self.mcmc is not None else ())
+        """Names of the files :meth:`save` writes for this result (chain only with MCMC, the
+        comparison's files only after a comparison)."""
+        return ((RESULT_FILE, SUMMARY_FILE) + ((CHAIN_FILE, INFERENCE_DATA_FILE) if self.mcmc is not None else ())
+                + ((COMPARISON_FILE, COMPARISON_TEXT) if self.comparison is not None else ()))
 
     def save(self, directory: str | Path) -> Path:
-        """Write ``chain.npz`` and ``posterior.nc`` (with MCMC), ``summary.txt`` and, last,
+        """Write ``chain.npz`` and ``posterior.nc`` (with MCMC), ``comparison.json`` and
+        ``comparison.txt`` (after a model comparison), ``summary.txt`` and, last,
         ``result.json`` into a folder.
 
         Each file is written to a temporary file in the same folder and renamed over the
@@ -458,9 +514,14 @@ class FitResult:
             buffer = io.BytesIO()
             # uncompressed: zlib gains ~25 % on a chain's random doubles at ten times the
             # time (2 s for a 256-walker Fig 16 chain)
-            np.savez(buffer, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob, result_id=np.array(self.result_id))
+            np.savez(buffer, chain=self.mcmc.chain, log_prob=self.mcmc.log_prob, result_id=np.array(self.result_id),
+                     names=np.array(self.free), burn_in=np.array(self.mcmc.burn_in), thin=np.array(self.mcmc.thin))
             write_atomic(directory / CHAIN_FILE, buffer.getvalue())
             self._write_inference_data(directory / INFERENCE_DATA_FILE)
+        if self.comparison is not None:
+            comparison = {**_clean(self.comparison), "result_id": self.result_id}
+            write_atomic(directory / COMPARISON_FILE, json.dumps(comparison, indent=1, allow_nan=False))
+            write_atomic(directory / COMPARISON_TEXT, comparison_text(self.comparison) + "\n")
         write_atomic(directory / SUMMARY_FILE, self.summary() + "\n")
         path = directory / RESULT_FILE
         write_atomic(path, json.dumps(self.to_dict(), indent=1, allow_nan=False))
@@ -475,9 +536,9 @@ class FitResult:
         """
         from .diagnostics import inference_data
 
-        return inference_data(*self._inference_arrays())
+        return inference_data(**self._inference_arrays())
 
-    def _inference_arrays(self) -> tuple:
+    def _inference_arrays(self) -> dict[str, Any]:
         """The arguments of :func:`~gonio.fitting.diagnostics.inference_data` for this fit."""
         if self.mcmc is None:
             raise ValueError("no posterior: the fit ran without MCMC")
@@ -488,16 +549,26 @@ class FitResult:
         problem = self.problem()
         pointwise = problem.pointwise_log_likelihood_batch(chain.reshape(-1, len(self.free))).reshape(
             chain.shape[:2] + (self.dataset.n,))
-        return (chain, m.log_prob[m.burn_in :: thin], self.free, pointwise, self.dataset.value,
-                {"model": self.model, "quantity": self.dataset.quantity, "gonio_version": self.gonio_version,
-                 "result_id": self.result_id})
+        # replicated data of the last steps, at most PREDICTIVE_DRAWS in all (arviz.plot_ppc)
+        steps = max(1, min(chain.shape[0], PREDICTIVE_DRAWS // chain.shape[1]))
+        recent = chain[-steps:]
+        rng = np.random.default_rng(0 if not self.result_id else int(self.result_id[:8], 16))
+        predictive = problem.replicated_data(recent.reshape(-1, len(self.free)), rng).reshape(
+            recent.shape[:2] + (self.dataset.n,))
+        data = self.dataset
+        return {"chain": chain, "log_prob": m.log_prob[m.burn_in :: thin], "names": self.free,
+                "log_likelihood": pointwise, "observed": data.value, "predictive": predictive,
+                "geometry": {"theta_i": data.theta_i, "phi_i": data.phi_i, "theta_r": data.theta_r,
+                             "phi_r": data.phi_r, "sigma": data.sigma},
+                "attributes": {"model": self.model, "quantity": data.quantity, "gonio_version": self.gonio_version,
+                               "result_id": self.result_id}}
 
     def _write_inference_data(self, path: Path) -> None:
         # written with h5netcdf, read back by arviz.from_netcdf equal to inference_data()
         # (importing ArviZ for the file would cost 1-3 s: gonio.fitting.inference_file)
         from .inference_file import write_inference_data
 
-        write_atomic(path, write_inference_data(*self._inference_arrays()))
+        write_atomic(path, write_inference_data(**self._inference_arrays()))
 
     def loo(self):
         """PSIS-LOO of the fit (ArviZ ``loo``): expected log predictive density, its error
@@ -578,6 +649,7 @@ class FitResult:
             result_id=str(data.get("result_id", "")),
             gonio_version=data.get("gonio_version", ""),
             adequacy=Adequacy.from_dict(data["adequacy"]) if data.get("adequacy") else None,
+            comparison=data.get("comparison"),
         )
 
     # ------------------------------------------------------------------ text
@@ -690,6 +762,18 @@ def _check_same_save(result_path: Path, result_id: str | None, other: Path, othe
                          "fit again into this folder (--overwrite) or another")
 
 
+def digits_to_resolve(value: float, width: float, least: int = 3) -> int:
+    """Significant digits that show ``value`` to a tenth of ``width`` (an interval's or an
+    error's), so that the ends of an interval print different: at least ``least``.
+
+    >>> digits_to_resolve(0.9, 1e-4), digits_to_resolve(237500.0, 300.0), digits_to_resolve(30.0, 2.0)
+    (5, 5, 3)
+    """
+    if not (math.isfinite(value) and math.isfinite(width)) or width <= 0 or value == 0:
+        return least
+    return max(least, min(12, math.floor(math.log10(abs(value))) - math.floor(math.log10(width / 10)) + 1))
+
+
 def _fmt(x: Any, digits: int = 5) -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "n/a"
@@ -737,6 +821,9 @@ def _summary_text(result: FitResult) -> str:
     if result.adequacy is not None:
         lines += [result.adequacy.headline(), ""]
     lines += ["[[Model]]", f"    {result.model}: {model.description}", f"    reference: {model.reference}"]
+    if result.comparison is not None:
+        lines += [f"    chosen among {len(result.comparison['rows'])} candidates (table: [[Model choice]], "
+                  f"{COMPARISON_TEXT})"]
     lines += textwrap.wrap(f"discrepancy: {result.discrepancy}", width=100, initial_indent="    ",
                            subsequent_indent="      ")
     if result.options:
@@ -791,10 +878,11 @@ def _summary_text(result: FitResult) -> str:
         for r in rows:
             if r["fixed"] or "median" not in r:
                 continue
+            digits = max(5, digits_to_resolve(r["median"], (r["p84"] - r["p16"]) / 2))
             lines.append(
-                f"    {r['name']:<{width}} {_fmt(r['median']):>10} {_fmt(r['median'] - r['p16'], 3):>9} "
-                f"{_fmt(r['p84'] - r['median'], 3):>9} {_fmt(r['p2_5']):>10} {_fmt(r['p97_5']):>10} "
-                f"{_fmt(r['map']):>10} {_fmt(r['tau'], 3):>7} {_fmt(r['r_hat'], 4):>7} {_fmt(r['ess_bulk'], 4):>9} "
+                f"    {r['name']:<{width}} {_fmt(r['median'], digits):>10} {_fmt(r['median'] - r['p16'], 3):>9} "
+                f"{_fmt(r['p84'] - r['median'], 3):>9} {_fmt(r['p2_5'], digits):>10} {_fmt(r['p97_5'], digits):>10} "
+                f"{_fmt(r['map'], digits):>10} {_fmt(r['tau'], 3):>7} {_fmt(r['r_hat'], 4):>7} {_fmt(r['ess_bulk'], 4):>9} "
                 f"{_fmt(r['ess_tail'], 4):>9}  {r['prior']}"
             )
     correlations = []
@@ -807,6 +895,13 @@ def _summary_text(result: FitResult) -> str:
     source = "posterior" if result.posterior else "least squares"
     lines.append(f"[[Correlations]] ({source}; unreported correlations are < {_REPORTED_CORRELATION:.3f})")
     lines += [text for _, text in sorted(correlations, reverse=True)] or ["    (none)"]
+    truth = result.truth_comparison()
+    if truth is not None:
+        lines.append(f"[[Truth]] (the emulated sample {truth[0]})")
+        lines += ["    " + line for line in truth[1] + truth[2]]
+    if result.comparison is not None:
+        lines.append("[[Model choice]] (least squares of every candidate, same likelihood)")
+        lines += ["    " + line for line in comparison_text(result.comparison).splitlines()]
     lines.append("[[Warnings]]")
     lines += [f"    ! {flag}" for flag in result.flags] or ["    (none)"]
     return "\n".join(lines)

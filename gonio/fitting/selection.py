@@ -57,9 +57,11 @@ import numpy as np
 
 from .dataset import Dataset
 from .evidence import laplace_evidence, tempered_evidence, laplace_log_evidence, scale_degenerate_factor
+from .csv_table import ASSUMED_SIGMA
 from .problem import jitter_mode
 
 __all__ = ["information_criteria", "laplace_log_evidence", "ModelComparison", "compare_models", "candidate_label",
+           "comparison_text", "comparison_html", "COMPARISON_FILE", "COMPARISON_TEXT",
            "compare_loo", "loo_summary"]
 
 
@@ -75,6 +77,10 @@ def information_criteria(log_likelihood: float, k: int, n: int) -> dict[str, flo
     aicc = aic + 2.0 * k * (k + 1) / (n - k - 1) if n - k - 1 > 0 else math.inf
     bic = -2.0 * log_likelihood + k * math.log(n)
     return {"aic": aic, "aicc": aicc, "bic": bic}
+
+
+#: The comparison's files in a result folder (``gonio fit --model A --model B``).
+COMPARISON_FILE, COMPARISON_TEXT = "comparison.json", "comparison.txt"
 
 
 @dataclass
@@ -127,27 +133,16 @@ class ModelComparison:
         return self.row(self.chosen)["verdict"]
 
     def summary(self) -> str:
-        """A plain-text table, best first."""
-        header = (f"{'model':<34} {'k':>2} {'redchi':>8} {'p(chi2)':>8} {'p(lof)':>8} {'verdict':>17} {'BIC':>10} "
-                  f"{'dBIC':>8} {'lnZ':>10} {'dlnZ':>7} {'lnZ by':>8}")
-        lines = [header, "-" * len(header)]
-        for row in self.rows:
-            mark = " <- chosen" if row["label"] == self.chosen else ""
-            verdict = row["verdict"] if row["verdict"] == "adequate" else row["verdict"].upper()
-            lines.append(
-                f"{row['label']:<34} {row['k']:>2} {row['redchi']:>8.3g} {_format_p(row['chi2_p']):>8} "
-                f"{_format_p(row['lack_of_fit_p']):>8} {verdict:>17} {row['bic']:>10.4g} {row['delta_bic']:>8.3g} "
-                f"{row['log_evidence']:>10.4g} {row['delta_log_evidence']:>7.3g} "
-                f"{_evidence_method_text(row):>8}{mark}"
-            )
-        for row in self.rows:
-            for name in row.get("undetermined", ()):
-                lines.append(f"note: {row['label']}: {name} is undetermined, only {name} x scale is (relative radiance "
-                             f"without a calibration prior); its evidence integrates over the product")
-        lines.append("lnZ by: Laplace = corrected Laplace approximation; SMC+-error = sequential Monte Carlo, where "
-                     "Laplace has no Gaussian to expand")
-        lines.append(f"chosen: {self.chosen} ({self.reason})")
-        return "\n".join(lines)
+        """A plain-text table, best first (:func:`comparison_text`)."""
+        return comparison_text(self.to_dict())
+
+    def __repr__(self) -> str:
+        return (f"<ModelComparison of {len(self.rows)} candidates: chosen {self.chosen} ({self.chosen_verdict}); "
+                "summary() for the table>")
+
+    def _repr_html_(self) -> str:
+        """The table as HTML (notebooks)."""
+        return comparison_html(self.to_dict())
 
     def to_dict(self) -> dict[str, Any]:
         """The comparison as JSON-ready data (the fits left out)."""
@@ -158,6 +153,56 @@ class ModelComparison:
         rows = [{k: row[k] for k in keep} for row in self.rows]
         return {"chosen": self.chosen, "chosen_adequate": self.chosen_adequate, "chosen_verdict": self.chosen_verdict,
                 "reason": self.reason, "threshold": self.threshold, "jitter": self.jitter, "rows": rows}
+
+
+def comparison_text(comparison: Mapping[str, Any]) -> str:
+    """The plain-text table of a comparison in its JSON form (:meth:`ModelComparison.to_dict`),
+    best first, with the notes and the choice."""
+    header = (f"{'model':<34} {'k':>2} {'redchi':>8} {'p(chi2)':>8} {'p(lof)':>8} {'verdict':>17} {'BIC':>10} "
+              f"{'dBIC':>8} {'lnZ':>10} {'dlnZ':>7} {'lnZ by':>8}")
+    lines = [header, "-" * len(header)]
+    chosen = comparison["chosen"]
+    for row in comparison["rows"]:
+        mark = " <- chosen" if row["label"] == chosen else ""
+        verdict = row["verdict"] if row["verdict"] == "adequate" else row["verdict"].upper()
+        lines.append(
+            f"{row['label']:<34} {row['k']:>2} {_number(row['redchi']):>8.3g} {_format_p(_number(row['chi2_p'])):>8} "
+            f"{_format_p(_number(row['lack_of_fit_p'])):>8} {verdict:>17} {_number(row['bic']):>10.4g} "
+            f"{_number(row['delta_bic']):>8.3g} {_number(row['log_evidence']):>10.4g} "
+            f"{_number(row['delta_log_evidence']):>7.3g} {_evidence_method_text(row):>8}{mark}"
+        )
+    for row in comparison["rows"]:
+        for name in row.get("undetermined", ()):
+            lines.append(f"note: {row['label']}: {name} is undetermined, only {name} x scale is (relative radiance "
+                         f"without a calibration prior); its evidence integrates over the product")
+    lines.append("lnZ by: Laplace = corrected Laplace approximation; SMC+-error = sequential Monte Carlo, where "
+                 "Laplace has no Gaussian to expand")
+    lines.append(f"chosen: {chosen} ({comparison['reason']})")
+    return "\n".join(lines)
+
+
+def comparison_html(comparison: Mapping[str, Any]) -> str:
+    """A comparison in its JSON form as an HTML table (the report, notebooks), best first."""
+    from html import escape
+
+    head = ("model", "k", "reduced chi-square", "p(chi-square)", "p(lack of fit)", "verdict", "BIC", "dBIC",
+            "ln Z", "d ln Z", "ln Z by")
+    body = []
+    for row in comparison["rows"]:
+        cells = (row["label"], row["k"], f"{_number(row['redchi']):.3g}", _format_p(_number(row["chi2_p"])),
+                 _format_p(_number(row["lack_of_fit_p"])), row["verdict"], f"{_number(row['bic']):.4g}",
+                 f"{_number(row['delta_bic']):.3g}", f"{_number(row['log_evidence']):.4g}",
+                 f"{_number(row['delta_log_evidence']):.3g}", _evidence_method_text(row))
+        chosen = ' class="chosen"' if row["label"] == comparison["chosen"] else ""
+        body.append(f"<tr{chosen}>" + "".join(f"<td>{escape(str(c))}</td>" for c in cells) + "</tr>")
+    return ('<table class="comparison"><thead><tr>' + "".join(f"<th>{escape(h)}</th>" for h in head)
+            + "</tr></thead><tbody>" + "".join(body) + "</tbody></table>"
+            + f"<p>chosen: <b>{escape(comparison['chosen'])}</b> ({escape(comparison['reason'])})</p>")
+
+
+def _number(value: Any) -> float:
+    """A number of a comparison row (``None`` in JSON: NaN)."""
+    return math.nan if value is None else float(value)
 
 
 def _evidence_method_text(row: Mapping[str, Any]) -> str:
@@ -237,9 +282,11 @@ def compare_models(
         raise ValueError("compare_models needs at least one candidate model")
     pairs = [(c, {}) if isinstance(c, str) else (c[0], dict(c[1])) for c in candidates]
     noise = None if jitter == "auto" else jitter
-    rows, fits = _fit_candidates(dataset, pairs, n_starts, priors, noise, alignment, stray_light)
     note = ""
-    if jitter == "auto" and not any(r["adequate"] for r in rows) and any(
+    if jitter == "auto" and dataset.metadata.get(ASSUMED_SIGMA):
+        noise, note = "relative", "; the data state no uncertainties: compared with a relative noise of fitted size"
+    rows, fits = _fit_candidates(dataset, pairs, n_starts, priors, noise, alignment, stray_light)
+    if noise is None and jitter == "auto" and not any(r["adequate"] for r in rows) and any(
             r["verdict"] == "noise understated" for r in rows):
         noise = "relative"
         rows, fits = _fit_candidates(dataset, pairs, n_starts, priors, noise, alignment, stray_light)

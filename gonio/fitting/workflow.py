@@ -5,6 +5,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from gonio.models import Model
 
+from .csv_table import ASSUMED_SIGMA, data_notes
 from .dataset import Dataset
 from .adequacy import assess
 from .least_squares import fit_least_squares
@@ -108,13 +109,17 @@ def fit(
         if polished is not None:
             chain, least_squares = shifted_chain(chain, problem, polished.shift), polished.least_squares
         result = FitResult.build(problem, least_squares, chain, used_priors, judge=judge)
-    result.flags[:0] = flags
+    result.flags[:0] = data_notes(dataset.metadata) + flags
     return result
 
 
 def _least_squares(problem_of, model, jitter, priors, start, seed):
     """The least-squares fit, redone with ``rel_jitter`` when ``jitter="auto"`` and the verdict
     is "noise understated": (problem, least squares, priors, flags)."""
+    if jitter == AUTO and problem_of(model, None).dataset.metadata.get(ASSUMED_SIGMA):  # nothing stated to judge
+        problem = problem_of(model, "relative")
+        all_priors = problem.priors_with_defaults(priors)
+        return problem, fit_least_squares(problem, start=start, seed=seed, priors=all_priors), all_priors, []
     problem = problem_of(model, None if jitter == AUTO else jitter)
     all_priors = problem.priors_with_defaults(priors)
     least_squares = fit_least_squares(problem, start=start, seed=seed, priors=all_priors)

@@ -37,9 +37,10 @@ from __future__ import annotations
 
 from .readings import CHECK_BLOCK, REFERENCE_BLOCK, Readings, read_readings
 from .recording import combine_reduced, reduce_recording
-from .result import (CALIBRATIONS, LOW_SIGNAL_SIGMAS, REDUCED_BUDGET, REDUCED_TABLE, REDUCTION_FORMAT, SATURATED_MAJORITY,
+from .result import (BRDF_COVARIANCE, BRDF_TABLE, CALIBRATIONS, LOW_SIGNAL_SIGMAS, REDUCED_BUDGET, REDUCED_TABLE, REDUCTION_FORMAT, SATURATED_MAJORITY,
                      IncidenceCalibration, Reduced, is_whole_reduction)
 
 __all__ = ["Reduced", "IncidenceCalibration", "Readings", "reduce_recording", "read_readings", "combine_reduced",
            "REFERENCE_BLOCK", "CHECK_BLOCK", "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT",
-           "CALIBRATIONS", "REDUCED_TABLE", "REDUCED_BUDGET", "is_whole_reduction"]
+           "CALIBRATIONS", "REDUCED_TABLE", "REDUCED_BUDGET", "is_whole_reduction", "BRDF_TABLE",
+           "BRDF_COVARIANCE"]

@@ -1,6 +1,7 @@
 """Reduce a recording folder (:func:`reduce_recording`) and join reduced recordings."""
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -8,7 +9,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..data import (RecordingError, _describe_duplicates, check_measured_rows, duplicated_rows, read_metadata,
+from ..data import (EMULATED_SAMPLE, RecordingError, _describe_duplicates, check_measured_rows, duplicated_rows, read_metadata,
                     read_points)
 from ..protocols import loads
 from .combining import combine, combine_groups, mounting_scatter
@@ -149,6 +150,14 @@ def _check_points_are_planned(folder: Path, protocol, rows) -> None:
                 f"({protocol.name!r}): the metadata belongs to another recording, or the points do")
 
 
+def _emulated_sample(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """``{EMULATED_SAMPLE: {"spec", "parameters"}}`` for a recording of the emulator, else empty."""
+    rig = meta.get("rig")
+    if not isinstance(rig, Mapping) or rig.get("kind") != "emulator" or "sample" not in rig:
+        return {}
+    return {EMULATED_SAMPLE: {"spec": rig["sample"], "parameters": dict(rig.get("parameters") or {})}}
+
+
 def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = True) -> Reduced:
     """Reduce a recording to radiance per geometry with an uncertainty budget.
 
@@ -246,7 +255,8 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
         metadata={"recording": str(folder), "protocol": meta.get("protocol", {}).get("name"),
                   "planned_view": [k[2] for k in keys], "planned_theta_i": [float(k[0]) for k in keys],
                   **({"aperture_sr": [float(a) for a in aperture]} if aperture else {}),
-                  **({"reference_standard": reference.record} if reference else {})},
+                  **({"reference_standard": reference.record} if reference else {}),
+                  **_emulated_sample(meta)},
         budget=budget, calibration=reference.calibration if reference else {}, flags=flags, excluded=excluded,
         warnings=tuple(rows.warnings), consistency=consistency, unit=rows.unit, repeat_statistics=tuple(repeat_stats),
         window=window, linearity_jacobian=jacobian, mounting_factors=factors,
@@ -372,7 +382,10 @@ def combine_reduced(parts: "list[Reduced]", label: str | None = None) -> Reduced
                   "planned_view": [v for p in parts for v in p.metadata.get("planned_view", list(p.view))],
                   "planned_theta_i": planned_theta_i,
                   **({"aperture_sr": parts[0].metadata["aperture_sr"]} if "aperture_sr" in parts[0].metadata else {}),
-                  **({"reference_standard": reference_record} if reference_record else {})},
+                  **({"reference_standard": reference_record} if reference_record else {}),
+                  **({EMULATED_SAMPLE: parts[0].metadata[EMULATED_SAMPLE]}
+                     if len({json.dumps(p.metadata.get(EMULATED_SAMPLE), sort_keys=True) for p in parts}) == 1
+                     and EMULATED_SAMPLE in parts[0].metadata else {})},
         budget=budget, calibration=calibration,
         flags=_low_signal_flags(radiance, total),
         excluded={k: sum(p.excluded.get(k, 0) for p in parts) for k in {k for p in parts for k in p.excluded}},

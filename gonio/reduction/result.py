@@ -9,13 +9,14 @@ from typing import TYPE_CHECKING, Any, Mapping
 import numpy as np
 
 from ..uncertainty import COMPONENTS, LinearityCorrection
+from .brdf_table import BRDF_COVARIANCE, BRDF_TABLE, brdf_table_text, csv_text
 
 if TYPE_CHECKING:  # gonio.fitting imports the reduction's results: imported where used
     from ..fitting import Dataset, Prior
 
 __all__ = ["Reduced", "IncidenceCalibration", "CALIBRATIONS", "COMMON_CALIBRATION", "ANGULAR_BEHAVIOUR",
            "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT", "REDUCED_TABLE", "REDUCED_BUDGET",
-           "is_whole_reduction"]
+           "is_whole_reduction", "BRDF_TABLE", "BRDF_COVARIANCE"]
 
 #: A fit is refused when more than this fraction of the sample points saturated.
 SATURATED_MAJORITY = 0.5
@@ -42,12 +43,13 @@ def is_whole_reduction(folder: str | Path) -> bool:
     folder = Path(folder)
     try:
         budget = json.loads((folder / REDUCED_BUDGET).read_text(encoding="utf-8"))
-        table = (folder / REDUCED_TABLE).read_bytes()
-    except (OSError, ValueError):
+        files = budget.get("files") if isinstance(budget, dict) and budget.get("format") == REDUCTION_FORMAT else None
+        if not isinstance(files, dict) or REDUCED_TABLE not in files:
+            return False
+        return all(hashlib.sha256((folder / name).read_bytes()).hexdigest() == digest for name, digest in files.items()
+                   if name in (REDUCED_TABLE, BRDF_TABLE, BRDF_COVARIANCE))
+    except (OSError, ValueError, TypeError):
         return False
-    return (isinstance(budget, dict) and budget.get("format") == REDUCTION_FORMAT
-            and isinstance(budget.get("files"), dict)
-            and budget["files"].get(REDUCED_TABLE) == hashlib.sha256(table).hexdigest())
 
 
 #: How a recording is calibrated by its reference standard (:meth:`Reduced.fit_inputs`):
@@ -357,13 +359,20 @@ class Reduced:
             rows.append({key: (float(v) if isinstance(v, (np.floating, float)) else v) for key, v in row.items()})
         return rows
 
-    def write(self, folder: str | Path) -> tuple[Path, Path]:
-        """Write ``reduced.csv`` (one row per value, every budget component as ``u_<name>``)
-        and then ``budget.json`` (:meth:`budget_summary`, the reference irradiance, the
-        repeat statistics, and the SHA-256 of the table it belongs to: the folder's
-        manifest, :func:`is_whole_reduction`) into ``folder``, each atomically. Returns both
-        paths."""
-        import csv
+    def write(self, folder: str | Path, brdf: str | None = None) -> tuple[Path, ...]:
+        """Write ``reduced.csv`` (one row per value, every budget component as ``u_<name>``),
+        with ``brdf`` (a calibration of :data:`CALIBRATIONS`) also ``brdf.csv`` and
+        ``brdf_covariance.npy`` (:func:`gonio.reduction.brdf_table.brdf_table_text`), and
+        then ``budget.json`` (:meth:`budget_summary`, the reference irradiance, the repeat
+        statistics, and the SHA-256 of every table it belongs to: the folder's manifest,
+        :func:`is_whole_reduction`) into ``folder``, each atomically. Returns the paths,
+        ``budget.json`` last.
+
+        Raises
+        ------
+        ValueError
+            ``brdf`` given for a recording without a reference standard (naming why).
+        """
         import hashlib
         import io
         import json
@@ -371,21 +380,49 @@ class Reduced:
         from ..files import write_atomic
 
         folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        rows = self.table_rows()
-        buffer = io.StringIO()
-        writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
-        writer.writeheader()
-        writer.writerows({k: (repr(v) if isinstance(v, float) else v) for k, v in r.items()} for r in rows)
-        table = buffer.getvalue().encode("utf-8")
+        tables = {REDUCED_TABLE: csv_text(self.table_rows()).encode("utf-8")}
+        if brdf is not None:
+            text, covariance = brdf_table_text(self, brdf)
+            buffer = io.BytesIO()
+            np.save(buffer, covariance, allow_pickle=False)
+            tables[BRDF_TABLE], tables[BRDF_COVARIANCE] = text.encode("utf-8"), buffer.getvalue()
         summary = {"format": REDUCTION_FORMAT, "label": self.label, "metadata": dict(self.metadata),
                    "reference_irradiance": self.reference_irradiance,
                    "reference_irradiance_sigma": self.reference_irradiance_sigma,
                    **self.budget_summary(), "repeat_statistics": list(self.repeat_statistics),
-                   "files": {REDUCED_TABLE: hashlib.sha256(table).hexdigest()}}
-        csv_path = write_atomic(folder / REDUCED_TABLE, table)
-        json_path = write_atomic(folder / REDUCED_BUDGET, json.dumps(summary, indent=2, default=float) + "\n")
-        return csv_path, json_path
+                   "files": {name: hashlib.sha256(data).hexdigest() for name, data in tables.items()}}
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = [write_atomic(folder / name, data) for name, data in tables.items()]
+        paths.append(write_atomic(folder / REDUCED_BUDGET, json.dumps(summary, indent=2, default=float) + "\n"))
+        return tuple(paths)
+
+    def brdf_components(self, calibration: str = "common") -> tuple[Dataset, dict[str, np.ndarray]]:
+        """The absolute BRDF (:meth:`brdf`) and its standard uncertainty by component [1/sr].
+
+        Every radiance component of :attr:`budget` divided by the value's calibration
+        factor ``E cos(theta_i)``, and ``calibration``: the reference standard's part
+        (``f u_cal`` with ``u_cal`` the relative uncertainty of ``E_0``, or of the
+        irradiance at the value's lamp polar angle and the certificate, per incidence).
+        ``linearity`` is the correction's part relative to the standard's readings that
+        calibrate the value. The components add in quadrature to the dataset's ``sigma``.
+        """
+        data = self.brdf(calibration)
+        scale = self.radiance / data.value
+        components = {name: np.asarray(values, float) / np.abs(scale) for name, values in self.budget.items()}
+        if _calibration(calibration) == "per-incidence":
+            group = self._incidence_groups()
+            common = sum(self.calibration.get(k, 0.0) ** 2 for k in COMMON_CALIBRATION if k != ANGULAR_BEHAVIOUR)
+            relative = np.sqrt(self._incidence_variances()[group] + common)
+            radiance_covariance = self._per_incidence()[2]
+        else:
+            relative = np.full(data.n, self.reference_irradiance_sigma / self.reference_irradiance)
+            radiance_covariance = self.covariance()
+        if "linearity" in components:
+            total, linear = np.asarray(self.radiance_sigma, float), np.asarray(self.budget["linearity"], float)
+            own = np.diag(radiance_covariance) - total**2 + linear**2  # the correction's variance in this calibration
+            components["linearity"] = np.sqrt(np.maximum(own, 0.0)) / np.abs(scale)
+        components["calibration"] = np.abs(data.value) * relative
+        return data, components
 
     def _dataset_metadata(self, calibration: str = "common", group: np.ndarray | None = None) -> dict[str, Any]:
         """The metadata a dataset carries; calibrated per incidence, with each value's

@@ -92,6 +92,7 @@ th { background: #f2f2f2; } td.name, th.name { text-align: left; }
 .verdict { font-size: 1.1em; margin: 0.6em 0 1em 0; }
 figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #eee; }
 figcaption { font-size: 0.9em; color: #555; }
+tr.chosen td { font-weight: bold; background: #eef6ee; }
 pre { background: #f7f7f7; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
 .meta { color: #555; }
 """
@@ -119,11 +120,16 @@ def _parameter_table(result: FitResult) -> str:
             cells += [f"<td>{_number(r['value'])}</td>", "<td>fixed</td>"]
             cells += ["<td></td>"] * (7 if sampled else 0)
         else:
-            cells += [f"<td>{_number(r['value'])}</td>", f"<td>{_number(r['stderr'], 3)}</td>"]
+            width = (r["p84"] - r["p16"]) / 2 if sampled and "p84" in r else r["stderr"]
+            from gonio.fitting.results import digits_to_resolve  # loaded with the result itself
+
+            digits = digits_to_resolve(r["value"], width)
+            cells += [f"<td>{_number(r['value'], digits)}</td>", f"<td>{_number(r['stderr'], 3)}</td>"]
             if sampled:
-                cells += [f"<td><b>{_number(r['median'])}</b></td>", f"<td>{_number(r['median'] - r['p16'], 3)}</td>",
-                          f"<td>{_number(r['p84'] - r['median'], 3)}</td>", f"<td>{_number(r['p2_5'])}</td>",
-                          f"<td>{_number(r['p97_5'])}</td>", f"<td>{_number(r['map'])}</td>",
+                cells += [f"<td><b>{_number(r['median'], digits)}</b></td>",
+                          f"<td>{_number(r['median'] - r['p16'], 3)}</td>",
+                          f"<td>{_number(r['p84'] - r['median'], 3)}</td>", f"<td>{_number(r['p2_5'], digits)}</td>",
+                          f"<td>{_number(r['p97_5'], digits)}</td>", f"<td>{_number(r['map'], digits)}</td>",
                           f"<td class=name>{html.escape(r['prior'])}</td>"]
         rows.append("<tr>" + "".join(cells) + "</tr>")
     return "<table>" + "".join(rows) + "</table>"
@@ -217,6 +223,30 @@ def _verdict(result: FitResult) -> str:
         return ""
     return (f"<div class='{'flags' if bad else 'ok'} verdict'>" + "<br>".join(parts) + "</div>"
             f"<p class=meta><b>Model discrepancy.</b> {html.escape(result.discrepancy)}</p>")
+
+
+def _truth_section(result: FitResult) -> str:
+    """The fit against the emulated sample's truth, when the data come from the emulator."""
+    truth = result.truth_comparison()
+    if truth is None:
+        return ""
+    spec, lines, bias = truth
+    box = ("<div class=flags>" + "<br>".join(html.escape(b) for b in bias) + "</div>") if bias else (
+        "<div class=ok>Every true value lies inside its 95 % interval.</div>")
+    return (f"<h2>Against the truth</h2><p class=meta>The data were measured on the emulated rig, whose sample is "
+            f"<code>{html.escape(spec)}</code>.</p><pre>{html.escape(chr(10).join(lines))}</pre>{box}")
+
+
+def _comparison_section(result: FitResult) -> str:
+    """The model comparison that chose the fitted model, when there was one."""
+    from gonio.fitting.selection import comparison_html
+
+    if result.comparison is None:
+        return ""
+    return ("<h2>Model choice</h2>" + comparison_html(result.comparison)
+            + "<p class=meta>Every candidate fitted by least squares with the same likelihood; chosen by evidence "
+              "among those whose verdict is adequate (docs/fitting.md, 'Model selection'). The fit below is the "
+              "chosen model's.</p>")
 
 
 def _budget_table(result: FitResult) -> str:
@@ -314,6 +344,8 @@ Reference: {html.escape(model.reference)}.<br>
 Data: {data.n} measurements of {html.escape(data.quantity)} [{html.escape(data.unit)}] at {len(data.incidences()[0])} incidences.
 Fixed parameters: {html.escape(fixed)}. Created {html.escape(result.created)} with gonio {html.escape(result.gonio_version)}; result id {html.escape(result.result_id or "(none)")}.</p>
 {flags}
+{_truth_section(result)}
+{_comparison_section(result)}
 <h2>What was measured</h2>{figures['What was measured']}
 <h2>Uncertainty budget of the data</h2>{_budget_table(result)}
 <h2>Data and model</h2>{figures['Data and model']}

@@ -83,14 +83,17 @@ def test_posterior_file_reads_back_as_arvizs_inference_data(tmp_path):
     rng = np.random.default_rng(3)
     args = (rng.normal(size=(40, 6, 2)), rng.normal(size=(40, 6)), ["rho", "sigma"], rng.normal(size=(40, 6, 5)),
             rng.normal(size=5), {"model": "oren-nayar", "quantity": "brdf", "gonio_version": "1"})
-    (tmp_path / "posterior.nc").write_bytes(write_inference_data(*args))
+    extra = {"predictive": rng.normal(size=(10, 6, 5)),
+             "geometry": {"theta_i": rng.uniform(0, 80, 5), "theta_r": rng.uniform(0, 80, 5)}}
+    (tmp_path / "posterior.nc").write_bytes(write_inference_data(*args, **extra))
     got = az.from_netcdf(tmp_path / "posterior.nc")
-    expected = inference_data(*args)
+    expected = inference_data(*args, **extra)
     assert set(got.groups()) == set(expected.groups()) == {"posterior", "sample_stats", "log_likelihood",
-                                                           "observed_data"}
+                                                           "posterior_predictive", "observed_data", "constant_data"}
     for group in expected.groups():
         assert got[group].equals(expected[group]), group  # values, dimensions, coordinates
-        assert got[group]["chain" if group != "observed_data" else "y_dim_0"].dtype == np.int64
+        dimension = "chain" if group not in ("observed_data", "constant_data") else "y_dim_0"
+        assert got[group][dimension].dtype == np.int64
     for key in ("model", "quantity", "gonio_version"):
         assert got.posterior.attrs[key] == expected.posterior.attrs[key]
     np.testing.assert_array_equal(got.posterior["sigma"].values, args[0][:, :, 1].T)

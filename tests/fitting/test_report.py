@@ -144,7 +144,11 @@ def test_cli_fit_reads_a_recording_folder(tmp_path, capsys, monkeypatch):
     )
     folder = tmp_path / "recording"
     folder.mkdir()
-    monkeypatch.setattr(acquisition, "reduce_recording", lambda path, **options: reduced)
+    import gonio.analysis
+    import gonio.reduction
+
+    monkeypatch.setattr(gonio.reduction, "reduce_recording", lambda path, **options: reduced)
+    monkeypatch.setattr(gonio.analysis, "recording_notes", lambda folder, quantity: [])
     assert main(["fit", str(folder), "--model", "minnaert", "--no-mcmc", "--quiet"]) == 0
     result = FitResult.load(tmp_path / "recording.fit-minnaert")
     assert result.dataset.quantity == "normalised_radiance" and result.dataset.label == "recorded"
