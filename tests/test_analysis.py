@@ -169,6 +169,22 @@ def test_recordings_are_fitted_jointly_from_the_command_line_and_the_api(tmp_pat
     assert "scale" in result.priors  # the reference standard's prior on the joint E_0
     api = gonio.fit_recording([first, second], models="oren-nayar", fixed={"ir_weight": 1}, mcmc=False)
     assert api.least_squares.values == pytest.approx(result.least_squares.values, rel=1e-9)
+    # the emulated sample's truth travels with the data into the summary
+    summary = result.summary()
+    assert "[[Truth]] (the emulated sample oren-nayar:sigma=25,rho=0.8)" in summary
+    assert "(no interval: least squares only)" in summary
+
+
+def test_the_truth_table_flags_a_truth_outside_its_interval():
+    from gonio.fitting.truth import known_truth, truth_lines
+
+    rows = [{"name": "sigma", "value": 27.0, "median": 27.0, "p2_5": 26.0, "p97_5": 28.0, "unit": "deg"},
+            {"name": "rho", "value": 0.8, "median": 0.8001, "p2_5": 0.79, "p97_5": 0.81, "unit": "-"}]
+    lines, bias = truth_lines(rows, {"sigma": 25.0, "rho": 0.8, "k": 1.0}, "oren-nayar")
+    assert "NO" in lines[1] and "yes" in lines[2] and "not a parameter of oren-nayar" in lines[3]
+    assert bias == ["BIAS: sigma is +2 deg from the truth, 2.0 times the interval's half-width: oren-nayar does "
+                    "not reproduce the emulated sample within these data's noise"]
+    assert known_truth({}) is None
 
 
 def test_an_interrupted_recording_without_its_reference_says_what_is_missing(tmp_path, capsys):

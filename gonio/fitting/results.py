@@ -40,6 +40,7 @@ from .priors import Prior, prior_from_dict
 from .rig_errors import RIG_ERROR_NAMES, RigPrediction
 from .evaluation import combine_prediction, evaluated_model
 from .problem import FitProblem, jitter_mode, predict_quantity
+from .text import digits_to_resolve
 from .truth import known_truth, truth_lines
 from .selection import COMPARISON_FILE, COMPARISON_TEXT, comparison_text, information_criteria
 
@@ -720,6 +721,16 @@ def _summarise(
     }
 
 
+def _limit_text(limit: float, bound: float) -> str:
+    """A one-sided limit with digits enough to differ from the bound it lies near
+    (``rho > 0.9996``, never ``rho > 1`` for a parameter bounded at 1).
+
+    >>> _limit_text(0.99962, 1.0), _limit_text(12.3456, 0.0)
+    ('0.9996', '12.3')
+    """
+    return format(limit, f".{digits_to_resolve(limit, abs(bound - limit) * 10)}g")
+
+
 def _posterior_flags(problem: FitProblem, posterior: Mapping[str, Any]) -> list[str]:
     notes = []
     for name in problem.free:
@@ -730,13 +741,13 @@ def _posterior_flags(problem: FitProblem, posterior: Mapping[str, Any]) -> list[
         if math.isfinite(lo) and low - lo < _PILE_FRACTION * width:
             notes.append(
                 f"{name}: the posterior piles up at the lower bound {_with_unit(f'{lo:g}', unit)}; quote the upper "
-                f"limit {name} < {_with_unit(format(posterior['p97_5'][name], '.3g'), unit)} (97.5 %) rather than "
+                f"limit {name} < {_with_unit(_limit_text(high, lo), unit)} (97.5 %) rather than "
                 "median +/- error"
             )
         elif math.isfinite(hi) and hi - high < _PILE_FRACTION * width:
             notes.append(
                 f"{name}: the posterior piles up at the upper bound {_with_unit(f'{hi:g}', unit)}; quote the lower "
-                f"limit {name} > {_with_unit(format(posterior['p2_5'][name], '.3g'), unit)} (2.5 %) rather than "
+                f"limit {name} > {_with_unit(_limit_text(low, hi), unit)} (2.5 %) rather than "
                 "median +/- error"
             )
     correlation = np.asarray(posterior["correlation"], float)
@@ -760,18 +771,6 @@ def _check_same_save(result_path: Path, result_id: str | None, other: Path, othe
         raise ValueError(f"{other} belongs to another save than {result_path} (result ids {other_id[:12]} and "
                          f"{result_id[:12]}): the folder mixes two fits, probably from a save that was interrupted; "
                          "fit again into this folder (--overwrite) or another")
-
-
-def digits_to_resolve(value: float, width: float, least: int = 3) -> int:
-    """Significant digits that show ``value`` to a tenth of ``width`` (an interval's or an
-    error's), so that the ends of an interval print different: at least ``least``.
-
-    >>> digits_to_resolve(0.9, 1e-4), digits_to_resolve(237500.0, 300.0), digits_to_resolve(30.0, 2.0)
-    (5, 5, 3)
-    """
-    if not (math.isfinite(value) and math.isfinite(width)) or width <= 0 or value == 0:
-        return least
-    return max(least, min(12, math.floor(math.log10(abs(value))) - math.floor(math.log10(width / 10)) + 1))
 
 
 def _fmt(x: Any, digits: int = 5) -> str:

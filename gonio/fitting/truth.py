@@ -13,6 +13,8 @@ from typing import Any, Mapping
 
 from gonio.data import EMULATED_SAMPLE
 
+from .text import digits_to_resolve
+
 __all__ = ["EMULATED_SAMPLE", "known_truth", "truth_lines"]
 
 #: Parameters a sample states that fits can be held against (the physical ones).
@@ -66,7 +68,9 @@ def truth_lines(rows: list[Mapping[str, Any]], truth: Mapping[str, float], model
             lines.append(f"{name:<10} {value:8.4g}   {median:12.5g}      (no interval: least squares only)")
             continue
         inside = low <= value <= high
-        lines.append(f"{name:<10} {value:8.4g}   {median:12.5g}      [{low:.5g}, {high:.5g}] {row['unit']:<6}  "
+        digits = max(5, digits_to_resolve(median, (high - low) / 4))
+        interval = f"[{low:#.{digits}g}, {high:#.{digits}g}]"  # trailing zeros kept: 30.000, not 30
+        lines.append(f"{name:<10} {value:8.4g}   {median:#12.{digits}g}      {interval:<20} {row['unit']:<6}  "
                      f"{'yes' if inside else 'NO'}")
         if not inside:
             half_width = (median - low) if value < low else (high - median)

@@ -11,7 +11,8 @@ Each function takes a :class:`gonio.fitting.FitResult` and returns a
   against the signed viewing angle (positive on the source side, DESIGN.md), off-plane
   data against theta_r with one series per azimuth difference (an incidence measured in
   both gets two adjacent panels);
-* :func:`residual_figure` - normalised residuals (data - model) / sigma;
+* :func:`residual_figure` - normalised residuals (data - model) / sigma per incidence, and
+  measured against model;
 * :func:`corner_figure` - one- and two-dimensional marginals of the posterior;
 * :func:`trace_figure` - walker traces with the burn-in shaded, and the log posterior.
 
@@ -85,6 +86,8 @@ MAX_AZIMUTH_SERIES = 6
 #: With more incidences than this, the geometry and residual figures colour the points by
 #: the source's polar angle (one colour bar) instead of one colour and legend entry each.
 MAX_LEGEND_INCIDENCES = 10
+#: With at most this many incidences the residual figure draws one panel per incidence.
+MAX_RESIDUAL_PANELS = 6
 #: Scatter plots with more points than this draw smaller markers without edges.
 DENSE_POINTS = 1000
 #: Steps drawn per walker in the trace figure at most (more than the axes have pixel
@@ -120,7 +123,7 @@ _GRID_GAPS_IN = (0.2, 0.65, 0.95)
 # the corner plot's rotated tick labels, axis labels, suptitle and the titles of its
 # diagonal panels; the traces' axis labels and two-line suptitle.
 _GEOMETRY_MARGINS = _Margins(left=0.55, right=0.55, top=0.8, bottom=1.15)
-_RESIDUAL_MARGINS = _Margins(left=0.8, right=0.2, top=0.4, bottom=0.6)
+_RESIDUAL_MARGINS = _Margins(left=0.8, right=0.2, top=0.5, bottom=0.6, gap_x=0.12, gap_y=0.85)
 _CORNER_MARGINS = _Margins(left=0.95, right=0.15, top=0.6, bottom=1.0, gap_x=0.12, gap_y=0.3)
 _TRACE_MARGINS = _Margins(left=1.05, right=0.2, top=0.65, bottom=0.55, gap_y=0.15)
 # The data figure's panels share one vertical axis when the data of every panel span at
@@ -173,12 +176,13 @@ def _theta_colourbar(fig: Figure, ax: Axes) -> None:
 
 
 def _view_sizes(data: Dataset, index: np.ndarray, n_sources: int) -> np.ndarray:
-    """Marker area [pt^2] of each view of the geometry figure: decreasing with the
-    incidence's rank when few incidences are shown (coincident views of several incidences
-    stay visible), else one size for all."""
+    """Marker area [pt^2] of each view of the geometry figure: with few incidences, rings
+    whose diameter shrinks by 3 pt with the incidence's rank (coincident views of every
+    incidence stay visible as concentric rings), else one size for all."""
     if n_sources > MAX_LEGEND_INCIDENCES:
         return np.full(data.n, _marker_area(data.n, 30.0))
-    return np.maximum(70.0 - 50.0 * index / max(n_sources - 1, 1), 12.0)
+    # rings 3 pt apart in diameter: a view measured at every incidence shows every ring
+    return (4.0 + 3.0 * (n_sources - 1 - np.asarray(index, float))) ** 2
 
 
 def geometry_figure(result: FitResult) -> Figure:
@@ -202,15 +206,19 @@ def measurement_geometry_figure(data: Dataset) -> Figure:
     sizes = _view_sizes(data, index, len(sources))
     # Drawn by incidence (stable): later incidences, with smaller markers, on top.
     order = np.argsort(index, kind="stable")
-    ax.scatter(np.radians(data.phi_r[order]), data.theta_r[order], s=sizes[order], c=colours[order],
-               edgecolors="white", linewidths=0.5 if data.n <= DENSE_POINTS else 0.0)
+    if _by_incidence(sources):  # hollow rings, one size per incidence: coincident views all show
+        ax.scatter(np.radians(data.phi_r[order]), data.theta_r[order], s=sizes[order], facecolors="none",
+                   edgecolors=colours[order], linewidths=1.3)
+    else:
+        ax.scatter(np.radians(data.phi_r[order]), data.theta_r[order], s=sizes[order], c=colours[order],
+                   edgecolors="white", linewidths=0.5 if data.n <= DENSE_POINTS else 0.0)
     source_colours = _incidence_colours(sources, np.arange(len(sources)))
     star = 220.0 if _by_incidence(sources) else max(_marker_area(len(sources), 120.0), 8.0)
     ax.scatter(np.radians(sources[:, 1]), sources[:, 0], marker="*", s=star, c=source_colours, edgecolors="k",
                linewidths=0.7 if len(sources) <= DENSE_POINTS else 0.3, zorder=5)
     handles = []
     if _by_incidence(sources):
-        handles = [Line2D([], [], ls="none", marker="o", ms=math.sqrt(size), color=colour, mec="white", mew=0.5,
+        handles = [Line2D([], [], ls="none", marker="o", ms=min(math.sqrt(size), 9.0), mfc="none", mec=colour, mew=1.3,
                           label=f"views, theta_i = {theta_i:g} deg, phi_i = {phi_i:g} deg")
                    for (theta_i, phi_i), colour, size in zip(sources, source_colours, _view_sizes(
                        data, np.arange(len(sources)), len(sources)))]
@@ -226,7 +234,8 @@ def measurement_geometry_figure(data: Dataset) -> Figure:
     ax.set_rlabel_position(112)
     fig.suptitle(f"Measurement geometry: {data.n} measurements, {len(sources)} incidences\n"
                  "radius: polar angle theta [deg], angle: azimuth phi [deg]", fontsize=10)
-    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.06), fontsize=8, frameon=False, ncol=2)
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.06), fontsize=7.5, frameon=False, ncol=2,
+              columnspacing=0.8, handletextpad=0.3)
     return fig
 
 
@@ -594,56 +603,112 @@ def data_figure(result: FitResult, n_draws: int = 200) -> Figure:
 
 
 def residual_figure(result: FitResult) -> Figure:
-    """Normalised residuals (data - posterior median model) / sigma against the viewing angle.
+    """How far the model is from every measurement: normalised residuals and measured
+    against model.
 
-    sigma is each value's total uncertainty under the fit's likelihood: the stated one with
-    the fitted extra noise (``jitter``, or ``rel_jitter`` x prediction) in quadrature. The
-    title's chi-square is the fit's own, with the data's covariance where they have one.
+    Top row: the normalised residuals (data - posterior median model) / sigma against the
+    viewing angle, one panel per incidence when there are few (at most
+    :data:`MAX_RESIDUAL_PANELS`; a misfit that one incidence shows stands out), else one
+    panel coloured by the source's polar angle. sigma is each value's total uncertainty
+    under the fit's likelihood: the stated one with the fitted extra noise (``jitter``, or
+    ``rel_jitter`` x prediction) in quadrature. Bottom: every measured value against the
+    model's, with its error bar and the 1:1 line, and the relative difference on the right
+    axis scale in the title. The title's chi-square is the fit's own, with the data's
+    covariance where they have one.
     """
     data = result.dataset
     problem = result.problem()
     values = result.best_values()
     model = problem.predict(values)
     extra = problem.extra_variance(values, model) if problem.jitter else 0.0
-    z = (data.value - model) / problem.total_sigma(values, model)
+    sigma = problem.total_sigma(values, model)
+    z = (data.value - model) / sigma
     whitened = problem.whiten(model - data.value, extra)[0]
     noise_label = {None: "sigma", "absolute": "hypot(sigma, jitter)",
                    "relative": "hypot(sigma, rel_jitter x model)"}[problem.jitter]
     x = np.where(data.in_plane, data.signed_view, data.theta_r)
-    fig, grid = _fixed_grid(7.5, 3.8, 1, 1, _RESIDUAL_MARGINS)
-    ax = fig.add_subplot(grid[0, 0])
+    sources, index = data.incidences()
+    panels = len(sources) if 1 < len(sources) <= MAX_RESIDUAL_PANELS else 1
+    fig, grid = _fixed_grid(max(7.5, 2.3 * panels + 1.0), 7.6, 2, panels, _RESIDUAL_MARGINS)
+    limit = max(3.5, float(np.nanmax(np.abs(z))) * 1.1) if z.size else 3.5
+    first = None
+    for k in range(panels):
+        ax = fig.add_subplot(grid[0, k], sharey=first)
+        first = first or ax
+        chosen = np.ones(data.n, bool) if panels == 1 else index == k
+        _residual_band(ax)
+        _residual_points(fig, ax, data, x, z, chosen, legend=panels == 1)
+        ax.set_xlim(-90, 90)
+        ax.set_ylim(-limit, limit)
+        if panels > 1:
+            theta_i, phi_i = sources[k]
+            ax.set_title(f"theta_i = {theta_i:g}, phi_i = {phi_i:g} deg", fontsize=8)
+            if k:
+                ax.tick_params(labelleft=False)
+        ax.set_xlabel("theta_r [deg] (signed in plane)" if panels > 1 else
+                      "signed viewing angle theta_r [deg] (in plane; + source side)", fontsize=8)
+        ax.grid(alpha=0.3)
+    first.set_ylabel(f"(data - model) / {noise_label} [-]", fontsize=8)
+    if panels == 1 and first.get_legend_handles_labels()[0]:
+        first.legend(fontsize=8, ncol=2, loc="upper left")
+    _measured_against_model(fig.add_subplot(grid[1, :]), data, model, sigma, index, sources)
+    chi2 = float(np.dot(whitened, whitened))
+    correlated = " (with the data's covariance)" if data.covariance is not None else ""
+    # centred on the figure (the axes sit right of the vertical label): room for the long line
+    fig.suptitle(f"Residuals at the posterior median: chi2{correlated} = {chi2:.1f} for {data.n} points",
+                 fontsize=10, y=1.0 - 0.08 / fig.get_figheight(), va="top")
+    return fig
+
+
+def _residual_band(ax: Axes) -> None:
+    """The 1- and 2-sigma bands and the zero line behind normalised residuals."""
     ax.axhspan(-1, 1, color="0.85", lw=0)
     ax.axhspan(-2, -1, color="0.93", lw=0)
     ax.axhspan(1, 2, color="0.93", lw=0)
     ax.axhline(0, color="0.4", lw=1)
-    _residual_points(fig, ax, data, x, z)
-    ax.set_xlim(-90, 90)
-    limit = max(3.5, float(np.nanmax(np.abs(z))) * 1.1) if z.size else 3.5
-    ax.set_ylim(-limit, limit)
-    ax.set_xlabel("signed viewing angle theta_r [deg] (in plane; + source side)")
-    ax.set_ylabel(f"(data - model) / {noise_label} [-]")
-    chi2 = float(np.dot(whitened, whitened))
-    correlated = " (with the data's covariance)" if data.covariance is not None else ""
-    # centred on the figure (the axes sit right of the vertical label): room for the long line
-    fig.suptitle(f"Normalised residuals at the posterior median: chi2{correlated} = {chi2:.1f} for {data.n} points",
-                 fontsize=10, y=1.0 - 0.08 / fig.get_figheight(), va="top")
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=8, ncol=2, loc="upper left")
+
+
+def _measured_against_model(ax: Axes, data: Dataset, model: np.ndarray, sigma: np.ndarray, index: np.ndarray,
+                            sources: np.ndarray) -> None:
+    """Measured values against the model's at the same geometries, with 1-sigma error bars
+    (one collection whatever the number of points) and the 1:1 line; the title gives the
+    rms and largest relative difference."""
+    colours = _incidence_colours(sources, index)
+    ax.errorbar(model, data.value, yerr=sigma, fmt="none", ecolor="0.6", elinewidth=0.8, zorder=1)
+    ax.scatter(model, data.value, s=_marker_area(data.n, 16.0), c=colours, zorder=2,
+               edgecolors="face", linewidths=0.0 if data.n > DENSE_POINTS else 1.0)
+    finite = np.isfinite(model) & np.isfinite(data.value)
+    low = float(min(model[finite].min(), data.value[finite].min())) if finite.any() else 0.0
+    high = float(max(model[finite].max(), data.value[finite].max())) if finite.any() else 1.0
+    ax.plot([low, high], [low, high], color="0.3", lw=1, label="measured = model")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        relative = (data.value - model) / np.abs(model)
+    shown = relative[finite & np.isfinite(relative)]
+    spread = (f": rms {100 * np.sqrt(np.mean(shown**2)):.3g} %, largest {100 * np.max(np.abs(shown)):.3g} %"
+              if shown.size else "")
+    ax.set_title(f"Measured against model{spread} (relative difference)", fontsize=9)
+    ax.set_xlabel(f"model (posterior median) [{data.unit}]", fontsize=8)
+    ax.set_ylabel(f"measured [{data.unit}]", fontsize=8)
+    ax.legend(fontsize=8, loc="upper left")
     ax.grid(alpha=0.3)
-    return fig
 
 
-def _residual_points(fig: Figure, ax: Axes, data: Dataset, x: np.ndarray, z: np.ndarray) -> None:
-    """The normalised residuals as one scatter per plane (circles in plane, triangles out of
-    plane), coloured by incidence (:func:`_incidence_colours`), with their legend entries."""
+def _residual_points(fig: Figure, ax: Axes, data: Dataset, x: np.ndarray, z: np.ndarray,
+                     chosen: np.ndarray | None = None, legend: bool = True) -> None:
+    """The normalised residuals of the ``chosen`` values as one scatter per plane (circles
+    in plane, triangles out of plane), coloured by incidence (:func:`_incidence_colours`),
+    with their legend entries (``legend``) or the colour bar."""
     sources, index = data.incidences()
     colours = _incidence_colours(sources, index)
     size = _marker_area(data.n, 16.0)
-    for plane, marker in ((data.in_plane, "o"), (~data.in_plane, "^")):
+    chosen = np.ones(data.n, bool) if chosen is None else chosen
+    for plane, marker in ((data.in_plane & chosen, "o"), (~data.in_plane & chosen, "^")):
         if plane.any():
             dense = data.n > DENSE_POINTS
             ax.scatter(x[plane], z[plane], s=size, c=colours[plane], marker=marker, edgecolors="face",
                        linewidths=0.0 if dense else 1.0, alpha=0.6 if dense else 1.0)
+    if not legend:
+        return
     if _by_incidence(sources):
         for k, (theta_i, _) in enumerate(sources):
             ax.plot([], [], "o", ms=4, color=f"C{k % 10}", label=f"theta_i = {theta_i:g} deg")

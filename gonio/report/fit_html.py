@@ -55,13 +55,15 @@ REPORT_FILE = "report.html"
 #: The report's figures in report order.
 FIGURES: tuple[ReportFigure, ...] = (
     ReportFigure("fit-geometry.png", "What was measured", "geometry_figure",
-                 "Viewing directions (dots) and source directions (stars) on the hemisphere.", 0.09),
+                 "Viewing directions (rings, one size per incidence: views shared by several incidences show as concentric rings) and source directions (stars) on the hemisphere.", 0.09),
     ReportFigure("fit-data.png", "Data and model", "data_figure",
                  "Measurements with one-sigma error bars; the model's posterior median with its 68 % and 95 % "
                  "posterior predictive bands (spread of the model over posterior draws, measurement noise not "
                  "added).", 0.15),
     ReportFigure("fit-residuals.png", "Residuals", "residual_figure",
-                 "Normalised residuals; about 68 % should fall in the dark band and 95 % within the light one.", 0.08),
+                 "Normalised residuals, one panel per incidence (about 68 % should fall in the dark band and 95 % "
+                 "within the light one), and every measured value against the model's at its geometry with the "
+                 "1:1 line: a misfit the data figure's scale hides shows here.", 0.08),
     ReportFigure("fit-corner.png", "Posterior", "corner_figure",
                  "One- and two-dimensional marginal posteriors of the free parameters.", 0.18),
     ReportFigure("fit-traces.png", "Chain", "trace_figure",
@@ -121,7 +123,7 @@ def _parameter_table(result: FitResult) -> str:
             cells += ["<td></td>"] * (7 if sampled else 0)
         else:
             width = (r["p84"] - r["p16"]) / 2 if sampled and "p84" in r else r["stderr"]
-            from gonio.fitting.results import digits_to_resolve  # loaded with the result itself
+            from gonio.fitting.text import digits_to_resolve
 
             digits = digits_to_resolve(r["value"], width)
             cells += [f"<td>{_number(r['value'], digits)}</td>", f"<td>{_number(r['stderr'], 3)}</td>"]

@@ -195,12 +195,19 @@ def test_few_incidences_get_a_colour_and_legend_entry_each_many_a_colour_bar():
     # each view in its incidence's colour of the cycle (C0..C4), ordered by incidence
     _, index = few.dataset.incidences()
     order = np.argsort(index, kind="stable")
-    np.testing.assert_allclose(views.get_facecolors(), to_rgba_array([f"C{k}" for k in index[order]]))
-    assert len(fig.axes) == 1 and len(residual_figure(few).axes) == 1  # no colour bar
+    np.testing.assert_allclose(views.get_edgecolors(), to_rgba_array([f"C{k}" for k in index[order]]))
+    assert len(views.get_facecolors()) == 0  # hollow rings: coincident views of every incidence show
+    assert len(set(views.get_sizes())) == 5  # one ring size per incidence
+    assert len(fig.axes) == 1
+    # residuals: one panel per incidence, then measured against model; no colour bar
+    axes = residual_figure(few).axes
+    assert len(axes) == 6 and "Measured against model" in axes[-1].get_title()
+    assert [ax.get_title().startswith("theta_i = ") for ax in axes[:5]] == [True] * 5
     many = fit(_random_incidences(40), "minnaert", mcmc=False)
-    for make in (geometry_figure, residual_figure):
-        fig = make(many)
-        assert len(fig.axes) == 2 and "theta_i" in fig.axes[1].get_ylabel()  # the colour bar
+    fig = geometry_figure(many)
+    assert len(fig.axes) == 2 and "theta_i" in fig.axes[1].get_ylabel()  # the colour bar
+    fig = residual_figure(many)
+    assert len(fig.axes) == 3 and "theta_i" in fig.axes[1].get_ylabel()  # residuals, colour bar, measured
 
 
 def test_data_figure_bands_come_from_one_draw_set_equal_to_per_series_bands(sampled_fits, monkeypatch):
