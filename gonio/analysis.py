@@ -29,7 +29,7 @@ import numpy as np
 if TYPE_CHECKING:
     from .fitting import Dataset, FitResult, Prior
 
-__all__ = ["load_data", "fit_recording", "fit_dataset", "recording_notes", "split_fixed", "joined"]
+__all__ = ["load_data", "fit_recording", "fit_dataset", "recording_notes", "model_candidates", "joined"]
 
 def _paths(paths: str | Path | Sequence[str | Path]) -> list[Path]:
     items = [paths] if isinstance(paths, (str, Path)) else list(paths)
@@ -180,19 +180,46 @@ def recording_notes(folder: str | Path, quantity: str) -> list[str]:
     return notes
 
 
-def split_fixed(models: Sequence[str], fixed: Mapping[str, float]) -> list[tuple[str, dict[str, float]]]:
-    """Each candidate with the fixed values that belong to it: its own parameters, and the
-    rig's (alignment, stray light), which every candidate shares."""
+def model_candidates(models: str | Sequence[str], fixed: Mapping[str, float] | None = None
+                     ) -> list[tuple[str, dict[str, float]]]:
+    """Each model with the fixed values that belong to it, as ``gonio fit --model`` and
+    ``gonio curet fit --model`` take them: ``NAME`` or ``NAME:p=v,...`` (values fixed for that
+    candidate alone, ``oren-nayar:ir_weight=1``), plus the ``fixed`` values of every
+    candidate that has the parameter, and the rig's (alignment, stray light, scale), which
+    every candidate shares.
+
+    >>> model_candidates(["lambert", "oren-nayar:ir_weight=1"], {"rho": 0.5})
+    [('lambert', {'rho': 0.5}), ('oren-nayar', {'ir_weight': 1.0, 'rho': 0.5})]
+
+    Raises
+    ------
+    ValueError
+        An unknown model, a spec value that is not a number (model options go in
+        ``options``), or a fixed value that belongs to no candidate.
+    """
     from . import models as registry
     from .fitting.rig_errors import RIG_ERROR_NAMES
+    from .sample_specs import parse_model_spec
 
-    unknown = sorted(set(fixed) - set(RIG_ERROR_NAMES) - {"scale", "jitter", "rel_jitter"}
-                     - {p for name in models for p in registry.get(name).param_names})
+    specs = [models] if isinstance(models, str) else list(models)
+    if not specs:
+        raise ValueError("models: expected at least one registered model name")
+    fixed = dict(fixed or {})
+    parsed = []
+    for spec in specs:
+        name, values = parse_model_spec(spec)
+        text = {k: v for k, v in values.items() if not isinstance(v, float)}
+        if text:
+            raise ValueError(f"model {spec!r}: {sorted(text)} are not numbers; a value after ':' fixes a parameter "
+                             "(model options go in --option)")
+        parsed.append((name, values))
+    shared = set(RIG_ERROR_NAMES) | {"scale", "jitter", "rel_jitter"}
+    unknown = sorted(set(fixed) - shared - {p for name, _ in parsed for p in registry.get(name).param_names})
     if unknown:
-        raise ValueError(f"fixed parameter(s) {unknown} belong to none of the models {list(models)}")
-    rig = {k: v for k, v in fixed.items() if k in RIG_ERROR_NAMES or k in ("scale",)}
-    return [(name, {**{k: v for k, v in fixed.items() if k in registry.get(name).param_names}, **rig})
-            for name in models]
+        raise ValueError(f"fixed parameter(s) {unknown} belong to none of the models {specs}")
+    return [(name, {**values, **{k: v for k, v in fixed.items()
+                                 if k in registry.get(name).param_names or k in shared}})
+            for name, values in parsed]
 
 
 def fit_recording(paths: str | Path | Sequence[str | Path], models: str | Sequence[str] = "oren-nayar", *,
@@ -211,7 +238,8 @@ def fit_recording(paths: str | Path | Sequence[str | Path], models: str | Sequen
     paths : path or sequence of paths
         Recording folders or CSV files (:func:`load_data`); several are fitted jointly.
     models : str or sequence of str
-        One registered model, or several candidates: then every candidate is fitted by
+        One registered model, or several candidates (each ``NAME`` or ``NAME:p=v,...``,
+        :func:`model_candidates`): then every candidate is fitted by
         least squares and compared (:func:`gonio.fitting.compare_models`), and the chosen
         one is fitted (with MCMC when ``mcmc``); the comparison is kept in the result
         (``result.comparison``) and saved with it (``comparison.json``, ``comparison.txt``).
@@ -243,22 +271,20 @@ def fit_dataset(dataset: Dataset, models: str | Sequence[str], *, data_priors: M
     """:func:`fit_recording` of a loaded dataset and its priors (:func:`load_data`)."""
     from .fitting import compare_models, fit
 
-    names = [models] if isinstance(models, str) else list(models)
-    if not names:
-        raise ValueError("models: expected at least one registered model name")
+    candidates = model_candidates(models, fixed)
     say = announce or (lambda text: None)
     all_priors = {**dict(data_priors or {}), **dict(priors or {})}
-    fixed = dict(fixed or {})
     comparison = None
-    if len(names) > 1:
-        say(f"comparing {len(names)} models on {dataset.n} {dataset.quantity} values (least squares)")
-        comparison = compare_models(dataset, split_fixed(names, fixed), priors=all_priors, jitter=jitter,
-                                    alignment=alignment, stray_light=stray_light)
+    name, fixed = candidates[0]
+    if len(candidates) > 1:
+        say(f"comparing {len(candidates)} models on {dataset.n} {dataset.quantity} values (least squares)")
+        comparison = compare_models(dataset, candidates, priors=all_priors, jitter=jitter, alignment=alignment,
+                                    stray_light=stray_light)
         say(comparison.summary())
         chosen = comparison.row(comparison.chosen)
-        names, fixed = [chosen["model"]], dict(chosen["fixed"])
-    say(f"fitting {names[0]} to {dataset.n} {dataset.quantity} values" + (" (least squares, then MCMC)" if mcmc else ""))
-    result = fit(dataset, names[0], fixed=fixed, priors=all_priors, mcmc=mcmc, jitter=jitter, options=options,
+        name, fixed = chosen["model"], dict(chosen["fixed"])
+    say(f"fitting {name} to {dataset.n} {dataset.quantity} values" + (" (least squares, then MCMC)" if mcmc else ""))
+    result = fit(dataset, name, fixed=fixed, priors=all_priors, mcmc=mcmc, jitter=jitter, options=options,
                  n_walkers=n_walkers, max_steps=max_steps, rhat_limit=rhat_limit, seed=seed, progress=progress,
                  alignment=alignment, stray_light=stray_light)
     if comparison is not None:

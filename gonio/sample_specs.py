@@ -11,7 +11,12 @@ from __future__ import annotations
 
 from gonio import models
 
-__all__ = ["CURET_PREFIX", "SURFACE_PREFIX", "SPEC_SYNTAX", "parse_model_spec", "check_sample_spec"]
+#: The emulated sample when none is named (``gonio demo``, ``gonio run``, ``gonio emulator``):
+#: Oren & Nayar's wall plaster as the physical V-cavity model itself (sigma 30 deg, rho 0.9).
+PLASTER_MODEL = "oren-nayar-exact"
+PLASTER_TRUTH = {"rho": 0.9, "sigma": 30.0}
+DEFAULT_SAMPLE = f"{PLASTER_MODEL}:" + ",".join(f"{k}={v:g}" for k, v in PLASTER_TRUTH.items())
+__all__ = ["DEFAULT_SAMPLE", "PLASTER_MODEL", "PLASTER_TRUTH", "CURET_PREFIX", "SURFACE_PREFIX", "SPEC_SYNTAX", "parse_model_spec", "check_sample_spec"]
 
 #: Prefix of a CUReT sample spec.
 CURET_PREFIX = "curet:"

@@ -257,3 +257,15 @@ def test_posterior_file_has_the_predictive_the_observed_data_and_the_geometry(tm
     az.plot_ppc(data, num_pp_samples=20)  # ArviZ's posterior predictive check runs on the file
     with np.load(tmp_path / "fit" / "chain.npz") as chain:
         assert list(chain["names"]) == list(result.free) and chain["chain"].shape[-1] == len(result.free)
+
+
+def test_model_specs_fix_values_per_candidate_as_curet_fit_does(tmp_path, capsys):
+    path = _write(tmp_path / "lab.csv", OWN_COLUMNS + ("sigma",), _oren_nayar_rows(0.01), ",",
+                  lambda r: (*r, 0.01 * r[-1]))
+    out = tmp_path / "variants"
+    assert main(["fit", str(path), "--columns", MAPPING, "--model", "oren-nayar:ir_weight=1", "--model",
+                 "oren-nayar", "--no-mcmc", "--quiet", "--out", str(out)]) in (0, 4)
+    labels = {row["label"] for row in FitResult.load(out).comparison["rows"]}
+    assert labels == {"oren-nayar (ir_weight=1)", "oren-nayar"}
+    assert main(["fit", str(path), "--columns", MAPPING, "--model", "lambert", "--fix", "sigma=3"]) == 2
+    assert "belong to none of the models" in capsys.readouterr().err

@@ -274,9 +274,9 @@ BAD_ARGUMENTS = [
     ("demo-out-device", ["demo", "--out", "/dev/null"], ["--out /dev/null", "device"]),
     ("demo-out-foreign-folder", ["demo", "--out", "mine"], ["--out mine", "not a gonio demo folder"]),
     ("demo-out-empty", ["demo", "--out", ""], ["--out ''"]),
-    ("tables-output-folder", ["tables", "build", "oren-nayar", "--output", "mine"], ["--output mine", "is a folder"]),
+    ("tables-output-folder", ["tables", "build", "oren-nayar", "--out", "mine"], ["--out mine", "is a folder"]),
     ("tables-output-foreign-file", ["tables", "build", "oren-nayar", "--output", "notes.txt"],
-     ["--output notes.txt", "not a table written by"]),
+     ["--out notes.txt", "not a table written by"]),
     ("tables-unknown", ["tables", "build", "no-such-table"], ["unknown table", "no-such-table"]),
 ]
 

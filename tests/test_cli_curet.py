@@ -228,7 +228,7 @@ def test_fit_command_least_squares_writes_results_and_a_comparison(tmp_path, cap
 def test_fit_command_with_a_short_mcmc_run_writes_the_report(tmp_path, capsys):
     out = tmp_path / "sandpaper"
     code = main(["curet", "fit", "sandpaper", "--model", "lambert", "--walkers", "8", "--max-steps", "2000",
-                 "--tau-multiple", "10", "--rhat-limit", "1.05", "--quiet", "--out", str(out)])
+                 "--tau-multiple", "10", "--rhat-limit", "1.05", "--quiet", "--report", "--out", str(out)])
     assert code == 4  # converged by the loose criteria asked for; Lambert cannot explain sandpaper
     result = FitResult.load(out / "lambert")
     assert result.jitter and result.mcmc is not None and set(result.free) == {"rho", "jitter"}

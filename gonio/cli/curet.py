@@ -458,8 +458,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               "writes; other files are left alone)")
     fitting.add_argument("--mcmc", action=argparse.BooleanOptionalAction, default=True,
                          help="sample the posterior with emcee (default: yes)")
-    fitting.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=True,
-                         help="fit an extra noise term, in every fit and in the comparison (default: yes)")
+    fitting.add_argument("--jitter", nargs="?", const="absolute", default="absolute",
+                         choices=["none", "absolute", "relative"],
+                         help="the extra noise term of every fit and of the comparison, as in gonio fit: 'absolute' "
+                              "(the default here: CUReT values carry an estimated noise whose size the fit adjusts), "
+                              "'relative' or 'none'")
+    fitting.add_argument("--no-jitter", dest="jitter", action="store_const", const="none",
+                         help="the same as --jitter none")
     fitting.add_argument("--walkers", type=int, default=None,
                          help="emcee walkers (default 32, for every model: gonio.fitting.mcmc.default_walkers)")
     fitting.add_argument("--max-steps", type=int, default=20000, help="step limit of each chain (default 20000)")
@@ -468,8 +473,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     fitting.add_argument("--rhat-limit", type=float, default=1.01,
                          help="largest rank-normalised split R-hat accepted for convergence (default 1.01)")
     fitting.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    fitting.add_argument("--report", action=argparse.BooleanOptionalAction, default=True,
-                         help="write report.html per model (default: yes)")
+    fitting.add_argument("--report", action=argparse.BooleanOptionalAction, default=False,
+                         help="also write report.html per model (default: no, as gonio fit; 'gonio report FOLDER' "
+                              "writes it later)")
     fitting.add_argument("--quiet", action="store_true", help="no progress messages")
     fitting.set_defaults(func=_run_fit)
     parser.set_defaults(func=lambda args: _no_action(parser))
@@ -607,7 +613,7 @@ def _run_fit(args: argparse.Namespace) -> int:
         start = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)  # reported below
-            result = fit(dataset, name, fixed=fixed, options=options, mcmc=args.mcmc, jitter=args.jitter,
+            result = fit(dataset, name, fixed=fixed, options=options, mcmc=args.mcmc, jitter=_jitter(args.jitter),
                          n_walkers=args.walkers, max_steps=args.max_steps, tau_multiple=args.tau_multiple,
                          rhat_limit=args.rhat_limit,
                          seed=args.seed)
@@ -626,17 +632,18 @@ def _run_fit(args: argparse.Namespace) -> int:
     # The comparison uses the fits' likelihood: the noise model and, when fitted, the jitter.
     with_options = [candidate_label(name, fixed) for name, fixed, options in candidates if options]
     comparison = None if with_options else compare_models(dataset, [(name, fixed) for name, fixed, _ in candidates],
-                                                          jitter=args.jitter)
+                                                          jitter=_jitter(args.jitter))
     lines = [_describe(dataset, noise), CREDIT + ".", ""]
     for label, folder, result, seconds in summary_rows:
         best = result.best_values()
         values = ", ".join(f"{k} = {best[k]:.4g}" for k in result.free)
         lines.append(f"{label:<34} redchi {result.least_squares.redchi:8.3f}  {values}  [{folder.name}, {seconds:.1f} s]")
     if comparison is not None:
-        likelihood = "the noise model and a fitted jitter" if args.jitter else "the noise model, no jitter"
+        likelihood = ("the noise model and a fitted jitter" if _jitter(args.jitter) else
+                      "the noise model, no jitter")
         lines += ["", f"Model comparison (posterior modes under {likelihood}, as the fits):", comparison.summary()]
         chosen = next(row for row in summary_rows if row[0] == comparison.chosen)
-        spread_lines, spread = noise_model_lines(dataset, chosen[2], args.jitter)
+        spread_lines, spread = noise_model_lines(dataset, chosen[2], _jitter(args.jitter))
         lines += spread_lines
         record = {**comparison_record(comparison), "noise_models": {"model": comparison.chosen, **spread.to_dict()}}
         (out / COMPARISON_JSON).write_text(json.dumps(record, indent=1, allow_nan=False))
@@ -653,7 +660,12 @@ def _run_fit(args: argparse.Namespace) -> int:
     return fit_exit_code([result for _, _, result, _ in summary_rows], comparison)
 
 
-def noise_model_lines(dataset, result, jitter: bool):
+def _jitter(option: str) -> str | bool:
+    """The ``jitter`` argument of the fits for a ``--jitter`` choice (as ``gonio fit``)."""
+    return False if option == "none" else option
+
+
+def noise_model_lines(dataset, result, jitter: bool | str):
     """The chosen fit's dependence on the shape of the estimated noise (lines of
     comparison.txt) and the :class:`gonio.fitting.noise_models.NoiseModelSpread`.
 

@@ -32,15 +32,14 @@ import time
 import warnings
 from pathlib import Path
 
+from gonio.sample_specs import DEFAULT_SAMPLE, PLASTER_MODEL, PLASTER_TRUTH
+
 from . import CLIError
 from .progress import ProgressLine
 from .realism import DEFAULT_REALISM, IDEAL_RIG_NOTE, REALISM_HELP, REALISM_SYNTAX
 
-#: The emulated sample and its true parameters.
-SAMPLE_MODEL = "oren-nayar-exact"
-TRUTH = {"rho": 0.9, "sigma": 30.0}
-#: The default sample spec (``--sample``).
-DEFAULT_SAMPLE = f"{SAMPLE_MODEL}:" + ",".join(f"{k}={v:g}" for k, v in TRUTH.items())
+#: The emulated sample and its true parameters (``--sample``'s default, gonio.sample_specs).
+SAMPLE_MODEL, TRUTH = PLASTER_MODEL, PLASTER_TRUTH
 #: Parameters of a sample spec that the candidates can recover (the truth table's rows).
 TRUTH_PARAMETERS = ("rho", "sigma")
 #: The models the demo compares: Lambert, the qualitative model (eq 30), the paper's

@@ -6,6 +6,8 @@ import argparse
 import signal
 import threading
 
+from gonio.sample_specs import DEFAULT_SAMPLE
+
 from . import CLIError
 from .realism import DEFAULT_REALISM, IDEAL_RIG_NOTE, REALISM_HELP, REALISM_SYNTAX, parse_realism
 from .samples import SPEC_SYNTAX, parse_sample_spec
@@ -110,9 +112,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "interrupted."
         ),
     )
-    parser.add_argument("--sample", default="lambert", metavar=SPEC_SYNTAX.replace(" or ", "|"),
+    parser.add_argument("--sample", default=DEFAULT_SAMPLE, metavar=SPEC_SYNTAX.replace(" or ", "|"),
                         help="sample BRDF, e.g. oren-nayar:sigma=30,rho=0.9, surface:kind=vgrooves,sigma=30,rho=0.9 "
-                             "(a rendered surface, docs/surfaces.md) or curet:plaster_a (default lambert)")
+                             "(a rendered surface, docs/surfaces.md) or curet:plaster_a (default "
+                             f"{DEFAULT_SAMPLE}, the paper's wall plaster, as for gonio demo and gonio run)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random process (default 0)")
     parser.add_argument("--realism", default=DEFAULT_REALISM, metavar=REALISM_SYNTAX, help=REALISM_HELP)
     parser.add_argument("--realtime", action="store_true",

@@ -35,8 +35,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="CSV file(s) (theta_i,phi_i,theta_r,phi_r,value[,sigma]) or recording folder(s) of 'gonio "
                              "run' (relative radiance with the reference standard's prior when calibrated, else "
                              "normalised radiance); several are fitted jointly")
-    parser.add_argument("--model", required=True, action="append",
-                        help="registered model name (see 'gonio models'); repeat to compare models")
+    parser.add_argument("--model", required=True, action="append", metavar="NAME[:p=v,...]",
+                        help="registered model name (see 'gonio models'), with values after ':' fixed for that "
+                             "model alone (e.g. oren-nayar:ir_weight=1, as in gonio curet fit); repeat to compare "
+                             "models")
     parser.add_argument("--quantity", choices=["brdf", "normalised_radiance", "radiance"],
                         help="what the values are (default: the file's '# quantity:' line, else brdf)")
     parser.add_argument("--columns", action="append", default=[], metavar="NAME=COLUMN",
@@ -86,7 +88,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an earlier gonio fit result in --out (only its result and report files; "
                              "other files are left alone)")
-    parser.add_argument("--report", action="store_true", help="also write the HTML report into the result folder")
+    parser.add_argument("--report", action=argparse.BooleanOptionalAction, default=False,
+                        help="also write the HTML report into the result folder (default: no; 'gonio report FOLDER' "
+                             "writes it later)")
     parser.add_argument("--quiet", action="store_true", help="no progress messages")
     parser.set_defaults(func=_run)
 
@@ -257,26 +261,26 @@ def _alignment(items: list[str]) -> tuple[str, ...]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from gonio.analysis import fit_dataset, load_data, split_fixed
+    from gonio.analysis import fit_dataset, load_data, model_candidates
     from gonio.cli.progress import fitting_progress
     from gonio.cli import CLIError
     from gonio.fitting import ConvergenceWarning
 
     paths = [Path(p) for p in args.data]
+    fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
+    try:  # known models; each fixed value names a parameter of one of them
+        names = [name for name, _ in model_candidates(args.model, fixed)]
+    except (ValueError, KeyError) as error:
+        raise CLIError(f"--model/--fix: {error}") from None
+    options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
+    priors = _priors(args.prior, names)
+    out = _out_folder(args.out, paths, names)
+    replacing = check_result_folder(out, args.overwrite)
     try:
         dataset, data_priors = load_data(paths, args.quantity, args.calibration, args.linearity_correction,
                                          _pairs(args.columns, "--columns") or None, args.angle_unit)
     except (ValueError, FileNotFoundError) as error:
         raise CLIError(str(error)) from None
-    fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
-    try:
-        split_fixed(args.model, fixed)  # each fixed value names a parameter of a model or of the rig
-    except ValueError as error:
-        raise CLIError(f"--fix: {error}") from None
-    options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
-    priors = _priors(args.prior, args.model)
-    out = _out_folder(args.out, paths, args.model)
-    replacing = check_result_folder(out, args.overwrite)
     say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     with _report_workers(args.report) as pool:  # they import matplotlib while this process fits
         drawing = _report_drawing(pool, dataset) if args.report else None

@@ -13,6 +13,8 @@ import gonio
 
 from . import CLIError
 from .realism import DEFAULT_REALISM, IDEAL_RIG_NOTE, REALISM_HELP, REALISM_SYNTAX, parse_realism, realism_metadata
+from gonio.sample_specs import DEFAULT_SAMPLE
+
 from .samples import SPEC_SYNTAX, parse_sample_spec
 from .paths import check_output_folder
 from .progress import ProgressLine
@@ -20,8 +22,6 @@ from .progress import ProgressLine
 if TYPE_CHECKING:  # loaded by the command itself: every gonio command builds this parser
     from gonio import acquisition, protocols
 
-#: The paper's wall plaster (Oren & Nayar 1995, Fig 16): the default emulated sample.
-DEFAULT_SAMPLE = "oren-nayar:sigma=30,rho=0.9"
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``gonio run``."""
     parser = subparsers.add_parser(

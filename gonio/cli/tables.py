@@ -1,7 +1,7 @@
 """``gonio tables``: build, inspect and clear the tables of the tabulated models and rendered surfaces.
 
 ``gonio tables build [NAME ...]`` evaluates the exact model on the table grid (minutes on
-a few cores) and writes the table to the user cache, or to ``--output``;
+a few cores) and writes the table to the user cache, or to ``--out``;
 ``gonio tables build surface:kind=...`` renders the table of a surface sample into the
 cache (what its first use as an emulated sample would do, docs/surfaces.md);
 ``gonio tables info`` says which table each tabulated model would read and lists the
@@ -20,12 +20,12 @@ from . import CLIError
 
 
 def check_output_file(output: str) -> None:
-    """Refuse a ``tables build --output`` that would overwrite something gonio did not write.
+    """Refuse a ``tables build --out`` that would overwrite something gonio did not write.
 
     Parameters
     ----------
     output : str
-        The ``--output`` argument.
+        The ``--out`` argument.
 
     Raises
     ------
@@ -38,14 +38,14 @@ def check_output_file(output: str) -> None:
     from gonio.models.tabulated import store
 
     if not output.strip():
-        raise CLIError(f"--output {output!r}: expected the name of a .npz file to write")
+        raise CLIError(f"--out {output!r}: expected the name of a .npz file to write")
     path = Path(output)
     if path.is_dir():
-        raise CLIError(f"--output {output}: is a folder; expected the name of a .npz file to write")
+        raise CLIError(f"--out {output}: is a folder; expected the name of a .npz file to write")
     if path.exists() and not path.is_file():
-        raise CLIError(f"--output {output}: is a device or special file; expected the name of a .npz file to write")
+        raise CLIError(f"--out {output}: is a device or special file; expected the name of a .npz file to write")
     if path.exists() and not store.written_by_builder(path):
-        raise CLIError(f"--output {output}: the file exists and is not a table written by 'gonio tables build' "
+        raise CLIError(f"--out {output}: the file exists and is not a table written by 'gonio tables build' "
                        "(gonio never overwrites files it did not write); choose another name")
 
 
@@ -54,7 +54,7 @@ def _build_surface(spec: str, args: argparse.Namespace) -> None:
     from .samples import SURFACE_PREFIX, parse_sample_spec
 
     if args.output is not None or args.grid:
-        raise CLIError(f"{spec}: --output and --grid apply to model tables; a surface table is cached under "
+        raise CLIError(f"{spec}: --out and --grid apply to model tables; a surface table is cached under "
                        "its key (docs/surfaces.md)")
     sample = parse_sample_spec(spec)
     if args.workers is not None:
@@ -82,7 +82,7 @@ def _run_build(args: argparse.Namespace) -> int:
         raise CLIError(f"unknown table {unknown[0]!r}; known tables: {sorted(tabulated.TABLES)}")
     if args.output is not None:
         if len(names) != 1:
-            raise CLIError("--output needs exactly one table name")
+            raise CLIError("--out needs exactly one table name")
         check_output_file(args.output)
     options = {}
     if args.grid:
@@ -165,7 +165,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     build = actions.add_parser("build", help="compute a table with the exact model (slow: minutes)")
     build.add_argument("name", nargs="*", help="table names (default: all) or surface sample specs "
                                                 "(surface:kind=...,...)")
-    build.add_argument("--output", help="file to write instead of the user cache")
+    build.add_argument("--out", "--output", dest="output",
+                       help="file to write instead of the user cache (--output: the same, its older name)")
     build.add_argument("--rtol", type=float, default=1e-5, help="accuracy of oren-nayar-exact at the nodes")
     build.add_argument("--workers", type=int, default=None,
                        help="processes (threads for a surface) (default: all CPUs)")

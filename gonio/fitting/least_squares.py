@@ -404,7 +404,7 @@ def fit_least_squares(
     prior_sd = np.array([s for _, _, s in gaussian], float)
     best = None
     nfev = 0
-    heartbeat = _Heartbeat(problem.model.name, n_starts)
+    heartbeat = _Heartbeat(problem.base_model.name, n_starts)
 
     def solve(template: np.ndarray, x0: np.ndarray):
         """Least squares of the model parameters, the others held at ``template``."""
@@ -435,7 +435,7 @@ def fit_least_squares(
         if best is None or found.cost < best[0].cost:
             best = (found, point)
     if best is None:  # pragma: no cover - every start invalid
-        raise ValueError(f"model {problem.model.name!r}: no valid starting point for the least-squares fit")
+        raise ValueError(f"model {problem.base_model.name!r}: no valid starting point for the least-squares fit")
     found, template = best
     vector = template.copy()
     vector[index] = found.x

@@ -241,13 +241,13 @@ class FitProblem:
         for name, value in dict(fixed or {}).items():
             if name not in self._spec:
                 raise ValueError(
-                    f"cannot fix {name!r}: model {self.model.name!r} fitted to {dataset.quantity} data "
+                    f"cannot fix {name!r}: model {self.base_model.name!r} fitted to {dataset.quantity} data "
                     f"has the parameters {list(self._spec)}"
                 )
-            self.fixed[name] = self._spec[name].check(value, self.model.name)
+            self.fixed[name] = self._spec[name].check(value, self.base_model.name)
         self.free: tuple[str, ...] = tuple(p.name for p in self.specs if p.name not in self.fixed)
         if not self.free:
-            raise ValueError(f"every parameter of {self.model.name!r} is fixed; nothing to fit")
+            raise ValueError(f"every parameter of {self.base_model.name!r} is fixed; nothing to fit")
         _, self.options = self.model.resolve(self.options)
         self._rig_errors = tuple(self.alignment) + ((STRAY_LIGHT.name,) if self.stray_light else ())
         # a fit with free alignment evaluates the rig thousands of times: the compiled path
@@ -389,7 +389,7 @@ class FitProblem:
         values = self.values(vector)
         for spec in self._free_model_specs:
             if not spec.contains(values[spec.name]):
-                spec.check(values[spec.name], self.model.name)  # raises, naming the value
+                spec.check(values[spec.name], self.base_model.name)  # raises, naming the value
         params = {name: values[name] for name in self.model.param_names}
         return values, self._predict_checked(values, params)
 
