@@ -323,15 +323,21 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True, realism: str = DEFAULT_
     _say(quiet, f"fitting {comparison.chosen} with MCMC")
     line = None if quiet else ProgressLine("MCMC steps of those convergence needs (50 tau)")
 
+    needed = [0]
+
     def progress(step: int, max_steps: int, tau: float) -> None:
-        if line is not None:  # toward convergence, not toward the step limit
-            needed = int(min(max_steps, 50 * tau)) if math.isfinite(tau) and tau > 0 else max_steps
-            line.update(min(step, needed), needed, None, f"tau {tau:.3g}; limit {max_steps}")
+        if line is not None:  # toward convergence, not toward the step limit; full only when it is reached
+            needed[0] = int(min(max_steps, 50 * tau)) if math.isfinite(tau) and tau > 0 else max_steps
+            settling = "; length reached, tau and R-hat settling" if step >= needed[0] else ""
+            line.update(min(step, needed[0] - 1), needed[0], None, f"tau {tau:.3g}; limit {max_steps}{settling}")
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)  # reported in the result, loudly
         result = fit(dataset, chosen["model"], fixed=chosen["fixed"], priors=priors, seed=seed, progress=progress,
                      jitter=comparison.jitter or "auto", **errors)
+    if line is not None and result.mcmc is not None:
+        line.update(result.mcmc.n_steps, result.mcmc.n_steps, None, "converged" if result.converged else
+                    "step limit reached: NOT converged")
     return result, comparison
 
 
