@@ -101,20 +101,27 @@ def _recording_inputs(folders: list[Path], quantity: str | None, calibration: st
     from .reduction import combine_reduced, reduce_recording
 
     parts = [reduce_recording(folder, linearity=linearity) for folder in folders]
-    reduced = parts[0] if len(parts) == 1 else combine_reduced(parts, label=parts[0].label)
-    if quantity is None:
-        dataset, priors = reduced.fit_inputs(calibration)
-    elif quantity == "normalised_radiance":
-        if calibration != "common":
-            raise ValueError("calibration per incidence does not apply to normalised radiance (each incidence's "
-                             "level is divided out, the calibration with it)")
-        dataset, priors = reduced.normalised_radiance(), {}
-    else:
-        dataset, priors = {"brdf": reduced.brdf, "radiance": reduced.relative_radiance}[quantity](calibration), {}
+    try:
+        reduced = parts[0] if len(parts) == 1 else combine_reduced(parts, label=parts[0].label)
+        dataset, priors = _quantity_of(reduced, quantity, calibration)
+    except ValueError as error:
+        raise ValueError(f"{', '.join(map(str, folders))}: {error}") from None
     notes = [note for folder in folders for note in recording_notes(folder, dataset.quantity)]
     if notes:
         dataset = replace(dataset, metadata={**dataset.metadata, DATA_NOTES: notes})
     return dataset, priors
+
+
+def _quantity_of(reduced, quantity: str | None, calibration: str) -> tuple[Dataset, dict[str, Prior]]:
+    """The dataset of ``quantity`` of a reduced recording and the priors it implies."""
+    if quantity is None:
+        return reduced.fit_inputs(calibration)
+    if quantity == "normalised_radiance":
+        if calibration != "common":
+            raise ValueError("calibration per incidence does not apply to normalised radiance (each incidence's "
+                             "level is divided out, the calibration with it)")
+        return reduced.normalised_radiance(), {}
+    return {"brdf": reduced.brdf, "radiance": reduced.relative_radiance}[quantity](calibration), {}
 
 
 def joined(datasets: Sequence[Dataset]) -> Dataset:
@@ -164,7 +171,7 @@ def recording_notes(folder: str | Path, quantity: str) -> list[str]:
     folder = Path(folder)
     metadata = read_metadata(folder)
     status = metadata.get("status", "unknown")
-    protocol = loads(metadata["protocol"]["text"], source=str(folder / "metadata.json"))
+    protocol = loads(metadata["protocol"]["text"], source=str(metadata["protocol"].get("source") or "PROTOCOL"))
     rows = read_points(folder, as_arrays=False)
     measured = [r for r in rows if r.get("status") == "ok"]
     sample = sum(1 for r in measured if r.get("block") not in (REFERENCE_BLOCK, CHECK_BLOCK))

@@ -199,6 +199,7 @@ def test_an_interrupted_recording_without_its_reference_says_what_is_missing(tmp
     assert main(["fit", str(folder), "--model", "lambert", "--no-mcmc", "--out", str(tmp_path / "f")]) in (0, 4, 5)
     out = capsys.readouterr().out
     assert "the recording is interrupted: 3 of 5 planned sample points measured" in out
+    assert f"gonio run partial.toml --out {folder} --resume" in out
     assert "reference standard was planned but not measured" in out and "not calibrated BRDF" in out
 
 

@@ -1,0 +1,131 @@
+"""``gonio design``: a protocol whose geometries carry the most information per second."""
+from __future__ import annotations
+
+import argparse
+import math
+import re
+from pathlib import Path
+
+from . import CLIError
+
+#: Durations ``--budget`` accepts: a number with an optional unit.
+_DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|sec|min|h)?\s*$")
+_UNIT_SECONDS = {None: 1.0, "s": 1.0, "sec": 1.0, "min": 60.0, "h": 3600.0}
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``gonio design``."""
+    parser = subparsers.add_parser(
+        "design",
+        help="design a protocol: the geometries with the most information per second of instrument time",
+        description=(
+            "Choose, among the geometries the rig accepts, those that add the most expected information about "
+            "the model's parameters (Bayesian D-optimality over the prior ranges) per second of instrument time "
+            "(moves, settling, exposures, the reference standard), until the budget; write them as a protocol "
+            "that 'gonio plan' and 'gonio run' accept, with a comment block saying how it was chosen, the "
+            "expected 95 %% interval widths and the estimated time (docs/design.md)."
+        ),
+    )
+    parser.add_argument("--model", required=True, help="registered model the design is for (see 'gonio models')")
+    parser.add_argument("--prior", action="append", default=[], metavar="NAME=LOW:HIGH",
+                        help="a parameter to design for and its prior range (uniform); repeatable or comma-separated")
+    parser.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                        help="value of a parameter not designed for (others: the model's defaults)")
+    parser.add_argument("--budget", required=True, metavar="SECONDS|Nmin|Nh",
+                        help="instrument time the protocol may take, as gonio plan estimates it (e.g. 300s, 5min)")
+    parser.add_argument("--out", required=True, help="protocol file to write (.toml)")
+    parser.add_argument("--overwrite", action="store_true", help="replace a protocol 'gonio design' wrote at --out")
+    parser.add_argument("--noise", type=float, default=None, metavar="FRACTION",
+                        help="relative noise of one value (default 0.0025, the realistic rig's budget)")
+    parser.add_argument("--calibration", type=float, default=None, metavar="FRACTION",
+                        help="relative uncertainty of the calibration common to every value (default 0.005)")
+    parser.add_argument("--no-reference", action="store_true",
+                        help="no reference standard (relative values; saves its two swaps)")
+    parser.add_argument("--azimuth", action="append", type=float, default=None, metavar="DEG",
+                        help="lamp azimuths considered (default 0: the plane of incidence); repeat for out-of-plane")
+    parser.add_argument("--label", default="designed sample", help="the protocol's sample label")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the prior draws (default 0)")
+    parser.set_defaults(func=_run)
+
+
+def parse_duration(text: str) -> float:
+    """Seconds of ``300``, ``300s``, ``5min`` or ``1.5h``.
+
+    >>> parse_duration("5min"), parse_duration("300"), parse_duration("1.5h")
+    (300.0, 300.0, 5400.0)
+    """
+    match = _DURATION.match(text)
+    if not match:
+        raise CLIError(f"--budget {text!r}: expected a duration such as 300s, 5min or 1.5h")
+    return float(match.group(1)) * _UNIT_SECONDS[match.group(2)]
+
+
+def _ranges(items: list[str]) -> dict[str, tuple[float, float]]:
+    ranges = {}
+    for item in ",".join(items).split(","):
+        if not item.strip():
+            continue
+        name, sep, span = item.partition("=")
+        low, colon, high = span.partition(":")
+        try:
+            if not sep or not colon:
+                raise ValueError
+            ranges[name.strip()] = (float(low), float(high))
+        except ValueError:
+            raise CLIError(f"--prior {item!r}: expected NAME=LOW:HIGH, e.g. sigma=10:45") from None
+    return ranges
+
+
+def _fixed(items: list[str]) -> dict[str, float]:
+    fixed = {}
+    for item in ",".join(items).split(","):
+        if not item.strip():
+            continue
+        name, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            fixed[name.strip()] = float(value)
+        except ValueError:
+            raise CLIError(f"--fix {item!r}: expected NAME=VALUE with a number") from None
+    return fixed
+
+
+def _check_out(out: Path, overwrite: bool) -> None:
+    if out.suffix != ".toml":
+        raise CLIError(f"--out {out}: expected a protocol file name ending in .toml")
+    if out.is_dir():
+        raise CLIError(f"--out {out}: is a folder; expected a protocol file name")
+    if out.exists():
+        if not overwrite:
+            raise CLIError(f"--out {out}: exists; choose another name or give --overwrite")
+        if not out.read_text(errors="replace").startswith("# Designed by gonio design"):
+            raise CLIError(f"--out {out}: not a protocol gonio design wrote; gonio never overwrites files it did "
+                           "not write")
+
+
+def _run(args: argparse.Namespace) -> int:
+    from gonio import design as designing
+    from gonio.files import write_atomic
+
+    out = Path(args.out)
+    _check_out(out, args.overwrite)
+    budget = parse_duration(args.budget)
+    options = {"noise": args.noise, "calibration": args.calibration}
+    for name, value in options.items():
+        if value is not None and not (0 < value < 1 and math.isfinite(value)):
+            raise CLIError(f"--{name} {value!r}: expected a fraction in (0, 1)")
+    try:
+        result = designing.design(
+            args.model, _ranges(args.prior), budget, fixed=_fixed(args.fix),
+            noise=args.noise or designing.DEFAULT_NOISE, calibration=args.calibration or designing.DEFAULT_CALIBRATION,
+            azimuths=tuple(args.azimuth or (0.0,)), seed=args.seed, label=args.label, reference=not args.no_reference)
+    except (ValueError, KeyError) as error:
+        raise CLIError(str(error).strip("'\"")) from None
+    write_atomic(out, designing.design_protocol_text(result))
+    widths = ", ".join(f"{n} {w:.3g}" for n, w in result.widths.items())
+    print(f"{len(result.points)} points at {len(result.blocks)} lamp direction(s), estimated instrument time "
+          f"{result.seconds:.0f} s (budget {budget:.0f} s)")
+    print(f"expected 95 % interval widths at the prior's centre: {widths}")
+    print(f"protocol: {out}  (check it with 'gonio plan {out}', measure it with 'gonio run {out} --out FOLDER')")
+    return 0
