@@ -158,6 +158,21 @@ class QuadraticChiSquare:
         return out
 
 
+def _lapack():
+    """LAPACK's Cholesky factorisation and triangular solve (``dpotrf``, ``dtrtrs``),
+    imported on first use: called directly they cost a third of scipy.linalg's wrappers,
+    which check their inputs on every call."""
+    global _LAPACK
+    if _LAPACK is None:
+        from scipy.linalg.lapack import dpotrf, dtrtrs
+
+        _LAPACK = (dpotrf, dtrtrs)
+    return _LAPACK
+
+
+_LAPACK = None
+
+
 class FitProblem:
     """A model, a dataset, fixed parameters: prediction, residuals, log-likelihood.
 
@@ -420,12 +435,17 @@ class FitProblem:
         if self._cholesky is None:
             sigma = self.dataset.sigma if extra_zero else np.sqrt(self.dataset.sigma**2 + extra)
             return difference / sigma, float(np.sum(np.log(sigma)))
-        factor = self._cholesky
-        if not extra_zero:
-            factor = np.linalg.cholesky(self.dataset.covariance + np.diag(np.broadcast_to(extra, (self.dataset.n,))))
-        from scipy.linalg import solve_triangular
-
-        return solve_triangular(factor, difference, lower=True, check_finite=False), float(np.sum(np.log(np.diag(factor))))
+        potrf, trtrs = _lapack()
+        if extra_zero:
+            factor = self._cholesky
+        else:  # LAPACK directly: a fit with a free extra noise factors once per walker and step
+            matrix = self.dataset.covariance.copy()
+            matrix.flat[:: self.dataset.n + 1] += extra  # the diagonal
+            factor, info = potrf(matrix, lower=1, clean=1, overwrite_a=1)
+            if info != 0:
+                factor = np.linalg.cholesky(matrix)  # raises LinAlgError, naming the problem
+        z, _ = trtrs(factor, difference, lower=1)
+        return z, float(np.sum(np.log(np.diag(factor))))
 
     def residuals(self, vector: Any) -> np.ndarray:
         """Whitened residuals (prediction - value) / sigma, or L^-1 (prediction - value) for
@@ -502,9 +522,11 @@ class FitProblem:
         elif not self.jitter:
             z = self._whitening_matrix() @ difference[finite].T
             out[finite] = -0.5 * np.sum(z * z, axis=0) + self._log_normalisation
-        else:  # a covariance with a free extra noise: one Cholesky factor per walker
-            rows = np.asarray(vectors, float).reshape(walkers, self.ndim)
-            out[finite] = [self.log_likelihood(row) for row in rows[finite]]
+        else:  # a covariance with a free extra noise: one Cholesky factor per walker, the predictions shared
+            extra_rows = np.broadcast_to(extra, difference.shape)
+            for w in np.flatnonzero(finite):
+                z, log_det = self.whiten(difference[w], extra_rows[w])
+                out[w] = -0.5 * float(np.dot(z, z)) - log_det - normaliser
         out[~np.isfinite(out)] = -math.inf
         return out
 

@@ -131,10 +131,27 @@ def _batch_cases():
         ("lambert", correlated, {}, "absolute"),
         ("oren-nayar-tabulated", apertures, {}, False),
         ("oren-nayar", apertures, {"ir_weight": 1.0}, "relative"),
+        ("oren-nayar", correlated, {"ir_weight": 1.0}, "relative"),
     ]
 
 
-@pytest.mark.parametrize("case", range(8))
+def test_a_covariance_with_a_free_extra_noise_is_the_multivariate_normal():
+    """The likelihood LAPACK factors once per walker (a covariance with rel_jitter) is the
+    Gaussian density with the covariance plus the extra noise's variance on its diagonal."""
+    from scipy.stats import multivariate_normal
+
+    model, data, fixed, jitter = _batch_cases()[8]
+    problem = FitProblem(model, data, fixed, jitter=jitter)
+    vector = np.array([{"rho": 0.85, "sigma": 28.0, "scale": 2.1, "rel_jitter": 0.03}[n] for n in problem.free])
+    values = problem.values(vector)
+    predicted = problem.predict(values)
+    covariance = data.covariance + np.diag((0.03 * predicted) ** 2)
+    expected = multivariate_normal(predicted, covariance).logpdf(data.value)
+    assert problem.log_likelihood(vector) == pytest.approx(expected, rel=1e-12)
+    assert problem.log_likelihood_batch(vector[None])[0] == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("case", range(9))
 def test_batch_likelihood_equals_one_walker_at_a_time(case):
     """The ensemble's walkers in one evaluation (emcee vectorize=True) give the same
     log-likelihood as one call per walker: every quantity, extra-noise form, covariance
