@@ -69,7 +69,9 @@ def test_gonio_design_writes_a_protocol_gonio_plan_accepts(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "expected 95 % interval widths" in printed and str(out) in printed
     assert main(["plan", str(out)]) == 0
-    assert "points refused: 0" in capsys.readouterr().out
+    planned = capsys.readouterr().out
+    assert "points refused: 0" in planned
+    assert "how it was designed (gonio design):" in planned and "Expected 95 % interval widths" in planned
     assert main(["design", "--model", "lambert", "--prior", "rho=0.2:0.9", "--budget", "5min", "--out", str(out)]) == 2
     assert "exists" in capsys.readouterr().err
     assert main(["design", "--model", "lambert", "--prior", "rho=0.2:0.9", "--budget", "soon", "--out",

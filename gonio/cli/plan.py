@@ -23,10 +23,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     from gonio import protocols  # loaded by the command itself: every gonio command builds this parser
 
-    result = protocols.plan(protocols.load(args.protocol))
+    protocol = protocols.load(args.protocol)
+    result = protocols.plan(protocol)
     print(result.summary())
+    design = design_notes(protocol.text)
+    if design:
+        print("how it was designed (gonio design):")
+        print("\n".join(f"  {line}" for line in design))
     if args.points:
         print("planned points (index, block, repeat, theta_i, phi_i, view) [deg]:")
         for p in result.points:
             print(f"  {p.index:5d}  {p.block:<32} {p.repeat:3d}  {p.theta_i:7.2f} {p.phi_i:8.2f} {p.view:8.2f}")
     return 0
+
+
+def design_notes(text: str) -> list[str]:
+    """The comment block ``gonio design`` writes at the head of a protocol (how it was
+    chosen, the expected widths, the estimated time), without its ``#``; empty for any
+    other protocol.
+
+    >>> design_notes("# Designed by gonio design for lambert.\\n# Expected widths: rho 0.01.\\n[protocol]\\n")
+    ['Designed by gonio design for lambert.', 'Expected widths: rho 0.01.']
+    """
+    lines = text.splitlines()
+    if not lines or not lines[0].startswith("# Designed by gonio design"):
+        return []
+    notes = []
+    for line in lines:
+        if not line.startswith("#"):
+            break
+        notes.append(line.lstrip("#").strip())
+    return notes
