@@ -206,7 +206,7 @@ def model_candidates(models: str | Sequence[str], fixed: Mapping[str, float] | N
     """
     from . import models as registry
     from .fitting.rig_errors import RIG_ERROR_NAMES
-    from .sample_specs import parse_model_spec
+    from .sample_specs import split_model_spec
 
     specs = [models] if isinstance(models, str) else list(models)
     if not specs:
@@ -214,10 +214,9 @@ def model_candidates(models: str | Sequence[str], fixed: Mapping[str, float] | N
     fixed = dict(fixed or {})
     parsed = []
     for spec in specs:
-        name, values = parse_model_spec(spec)
-        text = {k: v for k, v in values.items() if not isinstance(v, float)}
-        if text:
-            raise ValueError(f"model {spec!r}: {sorted(text)} are not numbers; a value after ':' fixes a parameter "
+        name, values, options = split_model_spec(spec)
+        if options:
+            raise ValueError(f"model {spec!r}: {sorted(options)} are not numbers; a value after ':' fixes a parameter "
                              "(model options go in --option)")
         parsed.append((name, values))
     shared = set(RIG_ERROR_NAMES) | {"scale", "jitter", "rel_jitter"}
@@ -290,6 +289,7 @@ def fit_dataset(dataset: Dataset, models: str | Sequence[str], *, data_priors: M
         say(comparison.summary())
         chosen = comparison.row(comparison.chosen)
         name, fixed = chosen["model"], dict(chosen["fixed"])
+        jitter = comparison.jitter or jitter  # the noise the candidates were compared with, as gonio demo
     say(f"fitting {name} to {dataset.n} {dataset.quantity} values" + (" (least squares, then MCMC)" if mcmc else ""))
     result = fit(dataset, name, fixed=fixed, priors=all_priors, mcmc=mcmc, jitter=jitter, options=options,
                  n_walkers=n_walkers, max_steps=max_steps, rhat_limit=rhat_limit, seed=seed, progress=progress,

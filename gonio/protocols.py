@@ -1062,18 +1062,9 @@ def camera_lamp_separation(theta_i: float, phi_i: float, view: float) -> float:
 
 
 def refusal_reason(theta_i: float, phi_i: float, view: float, rig: RigLimits) -> str | None:
-    """Why the rig would refuse this geometry, or None if it can measure it.
-
-    Parameters
-    ----------
-    theta_i, phi_i : float
-        Lamp polar angle and azimuth [deg].
-    view : float
-        Signed camera angle [deg].
-    rig : RigLimits
-        Travel limits and the minimum camera/lamp separation.
-    """
-    return refusal_reasons(theta_i, phi_i, (view,), rig)[0]
+    """Why the rig would refuse the geometry ``(theta_i, phi_i, view)`` [deg], or None: the
+    rig's own rule with ``rig``'s limits (:meth:`drivers.acceptance.GeometryRule.refusal`)."""
+    return rig.geometry_rule.refusal(theta_i, phi_i, view)
 
 
 def refusal_reasons(theta_i: float, phi_i: float, views: Sequence[float], rig: RigLimits) -> list[str | None]:

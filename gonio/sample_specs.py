@@ -16,7 +16,7 @@ from gonio import models
 PLASTER_MODEL = "oren-nayar-exact"
 PLASTER_TRUTH = {"rho": 0.9, "sigma": 30.0}
 DEFAULT_SAMPLE = f"{PLASTER_MODEL}:" + ",".join(f"{k}={v:g}" for k, v in PLASTER_TRUTH.items())
-__all__ = ["DEFAULT_SAMPLE", "PLASTER_MODEL", "PLASTER_TRUTH", "CURET_PREFIX", "SURFACE_PREFIX", "SPEC_SYNTAX", "parse_model_spec", "check_sample_spec"]
+__all__ = ["split_model_spec", "DEFAULT_SAMPLE", "PLASTER_MODEL", "PLASTER_TRUTH", "CURET_PREFIX", "SURFACE_PREFIX", "SPEC_SYNTAX", "parse_model_spec", "check_sample_spec"]
 
 #: Prefix of a CUReT sample spec.
 CURET_PREFIX = "curet:"
@@ -49,6 +49,18 @@ def parse_model_spec(text: str) -> tuple[str, dict[str, float | str]]:
     model = models.get(name.strip())
     model.resolve(values)  # unknown names and out-of-range values fail here, by name
     return model.name, values
+
+
+def split_model_spec(text: str) -> tuple[str, dict[str, float], dict[str, str]]:
+    """A candidate model spec ``NAME[:key=value,...]`` as its name, the parameters it fixes
+    (numbers) and its options (text): the ``--model`` of ``gonio fit`` and ``gonio curet fit``.
+
+    >>> split_model_spec("oren-nayar:ir_weight=1")
+    ('oren-nayar', {'ir_weight': 1.0}, {})
+    """
+    name, values = parse_model_spec(text)
+    fixed = {k: float(v) for k, v in values.items() if not isinstance(v, str)}
+    return name, fixed, {k: v for k, v in values.items() if isinstance(v, str)}
 
 
 def check_sample_spec(text: str) -> None:

@@ -392,15 +392,9 @@ def candidate_slug(name: str, fixed: dict[str, Any], options: dict[str, Any] | N
 
 
 def _parse_candidates(specs: Sequence[str]) -> list[tuple[str, dict[str, float], dict[str, str]]]:
-    from .models import parse_model_spec
+    from gonio.sample_specs import split_model_spec
 
-    out = []
-    for spec in specs:
-        name, values = parse_model_spec(spec)
-        fixed = {k: float(v) for k, v in values.items() if not isinstance(v, str)}
-        options = {k: v for k, v in values.items() if isinstance(v, str)}
-        out.append((name, fixed, options))
-    return out
+    return [split_model_spec(spec) for spec in specs]
 
 
 # ---------------------------------------------------------------------- CLI
