@@ -107,6 +107,9 @@ class RunResult:
     flagged: int = 0
     wall_seconds: float = 0.0
     instrument_seconds: float = 0.0
+    #: Instrument time of the lamp's switch-on and warm-up (and the monitor's dark reading
+    #: before it) [s]: what ``gonio plan``'s estimate leaves out.
+    warm_up_seconds: float = 0.0
     messages: list[str] = field(default_factory=list)
     #: False when the final status could not be written to metadata.json (a full disk).
     status_recorded: bool = True
@@ -116,7 +119,8 @@ class RunResult:
         return (
             f"{self.status}: {self.measured} points measured{flagged}, {self.refused} refused, "
             f"{self.errors} failed, {self.skipped} already recorded; "
-            f"{self.wall_seconds:.1f} s wall, {self.instrument_seconds:.1f} s instrument time; "
+            f"{self.wall_seconds:.1f} s wall, {self.instrument_seconds:.1f} s instrument time"
+            f"{f' ({self.warm_up_seconds:.0f} s of it warming the lamp)' if self.warm_up_seconds >= 0.5 else ''}; "
             f"recording in {self.folder}"
         )
 
@@ -522,6 +526,7 @@ class _Run:
         """Motion settings, monitor dark, lamp on and warm, camera characterisation."""
         rig, stored = self.rig, self.writer.stored_metadata
         self.prepared = True
+        started = self.clock()
         limits = self.protocol.rig
         if limits.velocity is not None or limits.acceleration is not None:
             rig.set_motion(limits.velocity, limits.acceleration)
@@ -533,6 +538,7 @@ class _Run:
         rig.lamp_on(lamp_voltage)
         if warm_up:
             rig.wait_lamp_stable()
+        self.result.warm_up_seconds += self.clock() - started
         if "camera" not in stored and first is not None and hasattr(rig, "roi_frame"):
             self.writer.update(camera=self._characterise(first))
 
@@ -688,7 +694,8 @@ class _Run:
         extra: dict[str, Any] = {"finished": _now_iso(), "last_run": {
             "measured": r.measured, "refused": r.refused, "errors": r.errors, "skipped": r.skipped,
             "flagged": r.flagged, "wall_seconds": r.wall_seconds,
-            "instrument_seconds": r.instrument_seconds if math.isfinite(r.instrument_seconds) else None}}
+            "instrument_seconds": r.instrument_seconds if math.isfinite(r.instrument_seconds) else None,
+            "warm_up_seconds": r.warm_up_seconds}}
         if error:
             extra["error"] = error
         try:

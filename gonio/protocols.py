@@ -44,7 +44,8 @@ else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
 from drivers.acceptance import GeometryRule
-from drivers.rig_geometry import angular_separation, camera_direction
+from drivers.emulator.stage_firmware import DEFAULT_AXES
+from drivers.rig_geometry import angular_separation, axis_targets, camera_direction, plan_moves
 
 from .geometry import azimuth_difference
 
@@ -94,9 +95,13 @@ MAX_RANGE_ANGLES = 100_000
 #: data file given by mistake from filling the memory).
 MAX_FILE_BYTES = 10_000_000
 #: Stage speed and acceleration the time estimate uses when the protocol leaves the
-#: controller's settings [deg/s, deg/s^2].
+#: controller's settings [deg/s, deg/s^2]: the slowest axis's (the camera swing), for bounds.
 DEFAULT_VELOCITY = 10.0
 DEFAULT_ACCELERATION = 20.0
+#: Speed and acceleration of each axis (1 camera swing, 2 lamp polar angle, 3 lamp
+#: azimuth) the time estimate of a move uses when the protocol leaves the controller's
+#: settings [deg/s, deg/s^2]: the emulated ESP300's defaults (10/20, 15/30, 20/40).
+DEFAULT_AXIS_MOTION = {axis.number: (axis.velocity, axis.acceleration) for axis in DEFAULT_AXES}
 #: Relative standard uncertainties of a reference standard are at most this [-].
 MAX_REFERENCE_UNCERTAINTY = 0.5
 
@@ -161,6 +166,14 @@ class RigLimits:
     def estimate_velocity(self) -> float:
         """Stage speed the time estimate uses [deg/s]: ``velocity``, else 10 deg/s."""
         return DEFAULT_VELOCITY if self.velocity is None else self.velocity
+
+    def axis_motion(self, axis: int) -> tuple[float, float]:
+        """Speed [deg/s] and acceleration [deg/s^2] the estimate of a move of stage ``axis``
+        uses: ``velocity`` and ``acceleration`` when the protocol programs them, else that
+        axis's default (:data:`DEFAULT_AXIS_MOTION`)."""
+        velocity, acceleration = DEFAULT_AXIS_MOTION[axis]
+        return (velocity if self.velocity is None else self.velocity,
+                acceleration if self.acceleration is None else self.acceleration)
 
     @property
     def estimate_acceleration(self) -> float:
@@ -1176,11 +1189,12 @@ def plan(protocol: Protocol) -> Plan:
 
     Points are visited mounting by mounting (``[sample] mountings``), in each block by
     block (the lamp moves once per block), camera angles in the order given, each block's
-    sweep repeated ``repeats`` times.  The time estimate adds stage moves (trapezoidal
-    profile; axes move one after another, as a conservative bound), settling, exposures,
-    dark frames, the remounts and the texture image of every mounting
-    (:func:`mounting_seconds`), the reference standard (swapped in and out, each
-    ``rig.remount_time``) and the lamp checks.
+    sweep repeated ``repeats`` times.  The time estimate is everything the run spends
+    after the lamp's warm-up (:func:`run_seconds`): the camera's characterisation, the
+    stage moves (trapezoidal profile; the axes of one move command travel together, as
+    the driver sends them), settling, exposures, dark frames, the remounts and the
+    texture image of every mounting (:func:`mounting_seconds`), the reference standard
+    (swapped in and out, each ``rig.remount_time``) and the lamp checks.
 
     Raises
     ------
@@ -1199,26 +1213,72 @@ def plan(protocol: Protocol) -> Plan:
     )
     dark_time = protocol.exposure.max_time if protocol.exposure.mode == "auto" else protocol.exposure.time
     seconds += darks * (min(dark_time, 1.0) + rig.readout_time)
-    per_point = _exposure_estimate(protocol.exposure, rig) + rig.settle_time
-    long_move = move_time(90.0, rig.estimate_velocity, rig.estimate_acceleration)
-    reference = protocol.reference
-    if reference:  # swapping the standard in and the sample back, and its points
-        seconds += 2 * rig.remount_time + len(reference.geometries) * (per_point + 2 * long_move)
+    seconds += _reference_seconds(protocol, points)
     seconds += mounting_seconds(protocol)
+    if points:
+        seconds += CAMERA_CHARACTERISATION_SECONDS
+    reference = protocol.reference
     reference_measured = reference is not None and any(refusal_reason(*g, rig) is None for g in reference.geometries)
     checks = check_count(protocol.checks, len(points), reference_measured)
     # a check: one move there (at most 90 deg, a bound), settling and its frames
+    long_move = move_time(90.0, rig.estimate_velocity, rig.estimate_acceleration)
     seconds += checks * (long_move + rig.settle_time + protocol.checks.frames * _frame_seconds(protocol.exposure, rig))
     return Plan(protocol, tuple(points), tuple(refused), darks, seconds, moves, checks)
+
+
+#: Instrument time of the camera's characterisation in a run [s]: the photon transfer at
+#: the first point (an automatic exposure, then six exposures of two light and two dark
+#: frames of the window, 24 frames read out at 115200 baud, about 3.4 s each) and the
+#: linearity series after the last point (8 exposure levels up and down); measured on the
+#: emulated rig at 83-86 s and 9-11 s (gonio.acquisition.characterise_camera,
+#: characterise_linearity).
+CAMERA_CHARACTERISATION_SECONDS = 95.0
+
+
+def travel_seconds(start: tuple[float, float, float], end: tuple[float, float, float], rig: RigLimits) -> float:
+    """Time the stage takes from geometry ``start`` to ``end`` [s], both ``(theta_i, phi_i,
+    view)`` [deg]: the driver's move plan (:func:`drivers.rig_geometry.plan_moves`, one or
+    two commands), the axes of one command travelling together at the estimate's speed.
+
+    >>> travel_seconds((30, 0, -80), (45, 0, 80), RigLimits())   # the camera's 160 deg: 16 s + 0.5 s
+    16.5
+    >>> travel_seconds((30, 0, 40), (30, 90, 40), RigLimits())   # the lamp's azimuth: 4.5 s + 0.5 s
+    5.0
+    """
+    current = axis_targets(*start)
+    route = plan_moves(current, axis_targets(*end), rig.min_separation)
+    stages = route.stages if route is not None else tuple(((a, t),) for a, t in axis_targets(*end).items())
+    seconds = 0.0
+    for stage in stages:
+        seconds += max(move_time(target - current[axis], *rig.axis_motion(axis)) for axis, target in stage)
+        current.update(dict(stage))
+    return seconds
+
+
+def _reference_seconds(protocol: Protocol, points: Sequence[PlannedPoint]) -> float:
+    """The reference standard's part of the run [s]: swapped in after the last sample
+    point and the sample back (two ``rig.remount_time``), each reference geometry
+    measured in the order given."""
+    reference, rig = protocol.reference, protocol.rig
+    if reference is None:
+        return 0.0
+    per_point = _exposure_estimate(protocol.exposure, rig) + rig.settle_time
+    last = points[-1] if points else None
+    position = (last.theta_i, last.phi_i, last.view) if last else (0.0, 0.0, 0.0)
+    seconds = 2 * rig.remount_time
+    for geometry in reference.geometries:
+        if refusal_reason(*geometry, rig) is None:
+            seconds += travel_seconds(position, tuple(geometry), rig) + per_point
+            position = tuple(geometry)
+    return seconds
 
 
 def _expand(protocol: Protocol) -> tuple[list[PlannedPoint], list[Refusal], dict, float]:
     """Points, refusals, travel per axis [deg] and time of the sample points [s]."""
     rig = protocol.rig
-    velocity, acceleration = rig.estimate_velocity, rig.estimate_acceleration
     points, refused = [], []
     index = 0
-    position = (0.0, 0.0, 0.0)  # camera view, lamp theta, lamp phi after homing
+    position: tuple[float, float, float] | None = None  # from the camera's characterisation point
     seconds = 0.0
     moves = {"camera": 0.0, "lamp_theta": 0.0, "lamp_phi": 0.0}
     per_point = _exposure_estimate(protocol.exposure, rig) + rig.settle_time
@@ -1232,10 +1292,11 @@ def _expand(protocol: Protocol) -> tuple[list[PlannedPoint], list[Refusal], dict
                     if reason:
                         refused.append(Refusal(point, reason))
                         continue
-                    target = (view, block.theta_i, block.phi_i)
-                    for axis, a, b in zip(moves, position, target):
+                    target = (block.theta_i, block.phi_i, view)
+                    position = position or target
+                    for axis, a, b in zip(("lamp_theta", "lamp_phi", "camera"), position, target):
                         moves[axis] += abs(b - a)
-                        seconds += move_time(b - a, velocity, acceleration)
+                    seconds += travel_seconds(position, target, rig)
                     position = target
                     seconds += per_point
                     points.append(point)
