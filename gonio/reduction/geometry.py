@@ -7,7 +7,8 @@ import numpy as np
 
 from ..uncertainty import local_slopes
 
-__all__ = ["AXES", "DEFAULT_RESOLUTION", "readback_or_plan", "readback_geometry", "planned_groups", "geometry_slopes"]
+__all__ = ["AXES", "DEFAULT_RESOLUTION", "readback_or_plan", "readback_geometry", "lamp_direction", "planned_groups",
+           "geometry_slopes"]
 
 #: Encoder resolution assumed for recordings that did not store it [deg].
 DEFAULT_RESOLUTION = 0.001
@@ -22,8 +23,28 @@ def readback_or_plan(points: Mapping[str, np.ndarray], readback: str, planned: s
     return np.where(np.isfinite(values), values, np.asarray(points[planned], float))
 
 
+def lamp_direction(theta_i: np.ndarray, phi_i: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The lamp's polar angle and azimuth [deg] of a stage readback, as a direction.
+
+    At normal incidence the polar axis reads back a few encoder counts either side of 0:
+    a reading of -0.004 deg at azimuth phi is the direction 0.004 deg at phi + 180 deg
+    (the azimuth wrapped to (-180, 180]), which the models accept (polar angles in
+    [0, 90] deg).
+
+    >>> lamp_direction(np.array([-0.004, 30.0]), np.array([0.0, 10.0]))
+    (array([4.e-03, 3.e+01]), array([180.,  10.]))
+    """
+    theta_i, phi_i = np.asarray(theta_i, float), np.asarray(phi_i, float)
+    negative = theta_i < 0
+    turned = phi_i + 180.0
+    turned = np.where(turned > 180.0, turned - 360.0, turned)
+    return np.abs(theta_i), np.where(negative, turned, phi_i)
+
+
 def readback_geometry(points) -> np.ndarray:
-    """(theta_i, phi_i, view) of every row from the stage readback (the plan where missing)."""
+    """(theta_i, phi_i, view) of every row from the stage readback (the plan where missing),
+    as the stage read them (a polar angle a hair below 0 stays: :func:`lamp_direction`
+    makes it a direction where a model is evaluated)."""
     return np.stack([readback_or_plan(points, "stage_lamp_theta", "theta_i"),
                      readback_or_plan(points, "stage_lamp_phi", "phi_i"),
                      readback_or_plan(points, "stage_camera", "view")], axis=1)

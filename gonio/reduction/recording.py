@@ -13,7 +13,7 @@ from ..data import (EMULATED_SAMPLE, RecordingError, _describe_duplicates, check
                     read_points)
 from ..protocols import loads
 from .combining import combine, combine_groups, mounting_scatter
-from .geometry import planned_groups, readback_geometry, readback_or_plan
+from .geometry import lamp_direction, planned_groups, readback_geometry
 from .readings import CHECK_BLOCK, REFERENCE_BLOCK, Readings, readings_of
 from .result import (ANGULAR_BEHAVIOUR, COMMON_CALIBRATION, INCONSISTENT_INCIDENCES, LOW_SIGNAL_SIGMAS,
                      IncidenceCalibration, Reduced)
@@ -48,9 +48,8 @@ def _reference(rows: Readings, protocol, aperture) -> _Reference | None:
 
     standard = protocol.reference
     lamp_sr, camera_sr = aperture if aperture is not None else (1e-12, 1e-12)
-    theta_i = readback_or_plan(p, "stage_lamp_theta", "theta_i")[ref]
-    phi_i = readback_or_plan(p, "stage_lamp_phi", "phi_i")[ref]
-    view = readback_or_plan(p, "stage_camera", "view")[ref]
+    stage_theta, stage_phi, view = readback_geometry(p)[ref].T
+    theta_i, phi_i = lamp_direction(stage_theta, stage_phi)
     model = aperture_averaged("lambert", lamp_sr, camera_sr)
     theta_r, phi_r = np.abs(view), np.where(view >= 0, phi_i * 0, 180.0)
     expected = model(theta_i, phi_i, theta_r, phi_r, rho=standard.reflectance) * np.cos(np.radians(theta_i))
@@ -242,10 +241,8 @@ def reduce_recording(folder: str | Path, lamp: str = "auto", linearity: bool = T
     if dof:
         consistency["repeats_reduced_chi2"] = sum(r["chi2"] for r in repeat_stats) / dof
     excluded = _excluded(points)
-    ti, pi_, view = geometry[:, 0], geometry[:, 1], geometry[:, 2]
-    # A lamp read back a hair past the normal (encoder noise at theta_i = 0) is the same
-    # direction at |theta_i| and phi_i + 180 deg.
-    ti, pi_ = np.abs(ti), np.where(ti < 0.0, (pi_ + 360.0) % 360.0 - 180.0, pi_)
+    ti, pi_ = lamp_direction(geometry[:, 0], geometry[:, 1])
+    view = geometry[:, 2]
     label = meta.get("sample", {}).get("label", folder.name)
     return Reduced(
         theta_i=ti, phi_i=pi_, theta_r=np.abs(view), phi_r=np.where(view >= 0, 0.0, 180.0), view=view,

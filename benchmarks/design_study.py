@@ -1,0 +1,191 @@
+"""Designed against shipped protocols on the emulated rig: measured widths, coverage and time.
+
+The expected front of ``bench_design.py`` is the Laplace approximation at the truth. This
+study measures what a user gets: every protocol is run on the default (realistic) emulated
+rig with ``oren-nayar-exact`` (sigma = 30 deg, rho = 0.9, the plaster) as the sample, over
+``--seeds`` emulator seeds, and each recording is fitted as ``gonio fit REC --model
+oren-nayar-tabulated`` does (one calibration from the reference standard, MCMC, the
+extra noise ``auto``), with uniform priors sigma 10-45 deg and rho 0.5-1 (the design's).
+Per protocol: the median 95 % interval width of sigma and rho, how often the interval
+holds the truth (coverage, with a Wilson 95 % interval), the reduced chi-square and the
+adequacy verdict; and the time: the plan's estimate against the recording's instrument
+time less its lamp warm-up.
+
+Protocols: the shipped Figs 16 and 19, Fig 16 at one incidence (45 deg), and ``gonio
+design`` for ``oren-nayar-tabulated`` at 300 s, at Fig 16's estimated time and at 600 s.
+
+Run: ``python benchmarks/design_study.py --seeds 20`` (about 25 minutes on one core; the
+runs are appended to ``docs/benchmarks/design_study.jsonl`` as they finish, so an
+interrupted study resumes); writes ``docs/benchmarks/design_study.json`` and ``.png``.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import shutil
+import tempfile
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from _common import OUT, ROOT, machine, write_json
+
+MODEL = "oren-nayar-tabulated"
+TRUTH_SPEC = "oren-nayar-exact:rho=0.9,sigma=30"
+TRUTH = {"sigma": 30.0, "rho": 0.9}
+PRIORS = {"sigma": (10.0, 45.0), "rho": (0.5, 1.0)}
+FIG16 = ROOT / "protocols" / "oren-nayar-fig16-plaster.toml"
+FIG19 = ROOT / "protocols" / "oren-nayar-fig19-off-plane.toml"
+RECORDS = OUT / "design_study.jsonl"
+
+
+def protocols_studied() -> dict[str, str]:
+    """``{name: protocol text}`` of every protocol of the study."""
+    from gonio import design as D
+    from gonio import protocols as P
+
+    fig16 = FIG16.read_text()
+    texts = {"Fig 16 (shipped)": fig16, "Fig 19 (shipped)": FIG19.read_text(),
+             "Fig 16, theta_i = 45 only": fig16.replace("theta_i = [30, 45, 60]", "theta_i = 45")}
+    fig16_seconds = P.plan(P.loads(fig16)).estimated_seconds
+    for label, budget in (("designed, 300 s", 300.0), ("designed, Fig 16's time", fig16_seconds),
+                          ("designed, 600 s", 600.0)):
+        texts[label] = D.design_protocol_text(D.design(MODEL, PRIORS, budget))
+    return texts
+
+
+def run_one(name: str, text: str, seed: int, scratch: Path) -> dict[str, Any]:
+    """Measure ``text`` on the emulated rig with seed ``seed``, fit it, and record the outcome."""
+    import gonio
+    from gonio import acquisition, protocols
+    from gonio.cli.run import emulated_rig
+    from gonio.fitting.priors import Uniform
+
+    protocol = protocols.loads(text, source=name)
+    folder = scratch / f"run-{seed}"
+    shutil.rmtree(folder, ignore_errors=True)
+    start = time.perf_counter()
+    reflectance = protocol.reference.reflectance if protocol.reference else None
+    with emulated_rig(TRUTH_SPEC, seed, name=f"design-study-{seed}") as (rig, _, change_sample, metadata):
+        run = acquisition.run_protocol(protocol, rig, folder, metadata=metadata,
+                                       change_sample=lambda which, **how: change_sample(which, reflectance, **how))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = gonio.fit_recording(folder, MODEL, priors={n: Uniform(*r) for n, r in PRIORS.items()}, seed=seed)
+    shutil.rmtree(folder, ignore_errors=True)
+    post = result.posterior
+    record = {"protocol": name, "seed": seed, "points": run.measured,
+              "planned_seconds": protocols.plan(protocol).estimated_seconds,
+              "recorded_seconds": run.instrument_seconds - run.warm_up_seconds,
+              "warm_up_seconds": run.warm_up_seconds, "redchi": result.least_squares.redchi,
+              "adequate": result.adequacy.adequate if result.adequacy else None,
+              "discrepancy": result.discrepancy, "jitter": result.jitter, "converged": bool(result.converged),
+              "wall_seconds": time.perf_counter() - start, "params": {}}
+    for name_, value in TRUTH.items():
+        low, high = post["p2_5"][name_], post["p97_5"][name_]
+        record["params"][name_] = {"median": post["median"][name_], "p2_5": low, "p97_5": high,
+                                   "width": high - low, "in95": bool(low <= value <= high)}
+    return record
+
+
+def wilson(k: int, n: int) -> list[float]:
+    """Wilson 95 % interval of a binomial proportion."""
+    if n == 0:
+        return [math.nan, math.nan]
+    z = 1.96
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [centre - half, centre + half]
+
+
+def summarise(records: list[dict[str, Any]], names: list[str]) -> list[dict[str, Any]]:
+    rows = []
+    for name in names:
+        mine = [r for r in records if r["protocol"] == name]
+        if not mine:
+            continue
+        row: dict[str, Any] = {
+            "protocol": name, "seeds": len(mine), "points": int(np.median([r["points"] for r in mine])),
+            "planned_seconds": float(np.median([r["planned_seconds"] for r in mine])),
+            "recorded_seconds": float(np.median([r["recorded_seconds"] for r in mine])),
+            "time_error_max": float(max(abs(r["planned_seconds"] / r["recorded_seconds"] - 1) for r in mine)),
+            "redchi_median": float(np.median([r["redchi"] for r in mine])),
+            "adequate": sum(bool(r["adequate"]) for r in mine), "converged": sum(r["converged"] for r in mine),
+        }
+        for parameter in TRUTH:
+            covered = sum(r["params"][parameter]["in95"] for r in mine)
+            row[parameter] = {"width_median": float(np.median([r["params"][parameter]["width"] for r in mine])),
+                              "coverage": covered / len(mine), "coverage_wilson": wilson(covered, len(mine)),
+                              "bias_median": float(np.median([r["params"][parameter]["median"] for r in mine])
+                                                   - TRUTH[parameter])}
+        rows.append(row)
+    return rows
+
+
+def chart(rows: list[dict[str, Any]], path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 4.2))
+    for k, parameter in enumerate(TRUTH):
+        ax = fig.add_subplot(1, 2, k + 1)
+        for row in rows:
+            designed = row["protocol"].startswith("designed")
+            ax.plot(row["recorded_seconds"], row[parameter]["width_median"], "o" if designed else "s",
+                    color="C0" if designed else "C1")
+            ax.annotate(f"{row['protocol']}\n(cov. {row[parameter]['coverage']:.2f})",
+                        (row["recorded_seconds"], row[parameter]["width_median"]), fontsize=6,
+                        xytext=(4, 2), textcoords="offset points")
+        ax.set_xlabel("recorded instrument time after warm-up [s]")
+        ax.set_ylabel(f"median measured 95 % width of {parameter}" + (" [deg]" if parameter == "sigma" else ""))
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"Emulated rig (default realism), {TRUTH_SPEC}, fitted with {MODEL}: "
+                 "designed (circles) and shipped (squares)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=20)
+    args = parser.parse_args()
+    import gonio
+
+    gonio.brdf(TRUTH_SPEC.split(":")[0], 45.0, 0.0, np.array([20.0]), np.array([0.0]), **TRUTH)  # compile first
+    texts = protocols_studied()
+    done = {(r["protocol"], r["seed"]) for r in map(json.loads, RECORDS.read_text().splitlines())} \
+        if RECORDS.exists() else set()
+    todo = [(name, seed) for seed in range(args.seeds) for name in texts if (name, seed) not in done]
+    print(f"{len(texts) * args.seeds} runs, {len(todo)} to do", flush=True)
+    scratch = Path(tempfile.mkdtemp(prefix="gonio-design-study-"))
+    start = time.perf_counter()
+    try:
+        for k, (name, seed) in enumerate(todo, start=1):
+            record = run_one(name, texts[name], seed, scratch)
+            with RECORDS.open("a") as sink:
+                sink.write(json.dumps(record) + "\n")
+            elapsed = time.perf_counter() - start
+            print(f"[{k}/{len(todo)}] {name} seed {seed}: sigma {record['params']['sigma']['median']:.2f} "
+                  f"width {record['params']['sigma']['width']:.3f}, time {record['planned_seconds']:.0f}/"
+                  f"{record['recorded_seconds']:.0f} s (eta {elapsed / k * (len(todo) - k) / 60:.1f} min)", flush=True)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    records = [r for r in map(json.loads, RECORDS.read_text().splitlines()) if r["seed"] < args.seeds]
+    rows = summarise(records, list(texts))
+    for row in rows:
+        print(f"{row['protocol']:<28} {row['seeds']:3d} seeds {row['points']:4d} points "
+              f"{row['recorded_seconds']:6.0f} s  sigma width {row['sigma']['width_median']:.3f} "
+              f"cov {row['sigma']['coverage']:.2f}  rho width {row['rho']['width_median']:.4f} "
+              f"cov {row['rho']['coverage']:.2f}  redchi {row['redchi_median']:.2f}")
+    write_json("design_study", {"model": MODEL, "truth": TRUTH_SPEC, "priors": PRIORS, "rows": rows,
+                                "protocols": texts, "machine": machine()})
+    chart(rows, OUT / "design_study.png")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
