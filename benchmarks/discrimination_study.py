@@ -1,0 +1,144 @@
+"""Telling models apart on the emulated rig: a discrimination design against the paper's sweep.
+
+``gonio design --discriminate lambert,oren-nayar-tabulated,pitted`` (300 s of instrument
+time; over the rig's whole range, and with ``--max-angle 75``), and with ``--with-fig16``
+the shipped Fig 16 protocol, are run on the default (realistic) emulated rig with
+each of three truths: ``lambert`` (rho 0.8), ``oren-nayar-exact`` (sigma 30 deg, rho 0.9)
+and ``pitted`` (rho 0.8, psi 45 deg, coverage 0.5), over ``--seeds`` emulator seeds. Each
+recording is fitted by least squares with each candidate (the design's priors) and the
+remedies for a real rig (``--calibration per-incidence --alignment all --stray-light``, as
+``gonio demo``; without them a Lambertian sample measured at 80-85 deg is fitted with a
+reduced chi-square of 12 by its own model), and the candidate of least BIC is chosen,
+the simpler within 2 of it (the rule ``gonio fit --model ...`` falls back to when a
+Laplace evidence is undefined). The comparison's own evidence, by sequential Monte Carlo
+whenever a parameter sits at its prior's edge (sigma for a Lambertian truth), takes 1 to
+7 minutes per candidate here. Per protocol and truth: the fraction of seeds whose chosen
+model is the truth's, with a Wilson 95 % interval.
+
+Target (docs/design.md): the right family in at least 95 % of seeds with at most a quarter
+of the points of the Fig 16 and Fig 19 protocols (126 points: 31).
+
+Run: ``python benchmarks/discrimination_study.py --seeds 10`` (about 40 minutes); writes
+``docs/benchmarks/discrimination_study.json`` (runs appended to
+``discrimination_study.jsonl`` as they finish).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import tempfile
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+from _common import OUT, ROOT, machine, write_json
+from design_study import wilson
+
+CANDIDATES = ("lambert", "oren-nayar-tabulated", "pitted")
+PRIORS = {"rho": (0.5, 1.0), "sigma": (10.0, 45.0), "psi": (20.0, 90.0), "coverage": (0.2, 0.8)}
+TRUTHS = {"lambert": "lambert:rho=0.8", "oren-nayar-tabulated": "oren-nayar-exact:rho=0.9,sigma=30",
+          "pitted": "pitted:rho=0.8,psi=45,coverage=0.5"}
+BUDGET = 300.0
+RECORDS = OUT / "discrimination_study.jsonl"
+#: What every fit models of the rig (with a calibration per incidence): the remedies for a
+#: real rig (docs/fitting.md), as ``gonio demo``.
+RIG_ERRORS = {"alignment": "all", "stray_light": True}
+
+
+def protocols_studied(with_fig16: bool = False) -> dict[str, str]:
+    from gonio import discrimination
+
+    texts = {}
+    for label, max_angle in (("designed to discriminate, 300 s", 90.0),
+                             ("designed to discriminate, 300 s, angles to 75 deg", 75.0)):
+        designed = discrimination.discriminate(list(CANDIDATES), PRIORS, BUDGET, max_angle=max_angle)
+        texts[label] = discrimination.discrimination_protocol_text(designed)
+    if with_fig16:
+        texts["Fig 16 (shipped)"] = (ROOT / "protocols" / "oren-nayar-fig16-plaster.toml").read_text()
+    return texts
+
+
+def run_one(name: str, text: str, truth: str, seed: int, scratch: Path) -> dict[str, Any]:
+    import gonio
+    import gonio.fitting
+    from gonio import acquisition, models, protocols
+    from gonio.cli.run import emulated_rig
+    from gonio.fitting.priors import Uniform
+
+    protocol = protocols.loads(text, source=name)
+    folder = scratch / f"run-{seed}"
+    shutil.rmtree(folder, ignore_errors=True)
+    start = time.perf_counter()
+    with emulated_rig(TRUTHS[truth], seed, name=f"discrimination-{seed}") as (rig, _, change_sample, metadata):
+        run = acquisition.run_protocol(protocol, rig, folder, metadata=metadata,
+                                       change_sample=lambda which, **how: change_sample(which, 0.99, **how))
+    dataset, data_priors = gonio.load_data(folder, calibration="per-incidence")
+    shutil.rmtree(folder, ignore_errors=True)
+    bic, redchi = {}, {}
+    for model in CANDIDATES:
+        names = models.get(model).param_names
+        priors = {**data_priors, **{n: Uniform(*r) for n, r in PRIORS.items() if n in names}}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fit = gonio.fitting.fit(dataset, model, priors=priors, mcmc=False, jitter=False, **RIG_ERRORS)
+        ls = fit.least_squares
+        bic[model] = ls.chi2 + len(fit.free) * math.log(dataset.n)
+        redchi[model] = ls.redchi
+    chosen = choose_by_bic(bic)
+    return {"protocol": name, "truth": truth, "seed": seed, "points": run.measured, "chosen": chosen,
+            "right": chosen == truth, "bic": bic, "redchi": redchi, "wall_seconds": time.perf_counter() - start}
+
+
+def choose_by_bic(bic: dict[str, float], threshold: float = 2.0) -> str:
+    """The candidate of least BIC; within ``threshold`` of it, the one listed first in
+    :data:`CANDIDATES` (fewest parameters first), as the comparison's BIC rule."""
+    best = min(bic.values())
+    return next(model for model in CANDIDATES if bic[model] <= best + threshold)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--with-fig16", action="store_true",
+                        help="also the shipped Fig 16 protocol (its fits of pitted with the rig's errors take minutes)")
+    args = parser.parse_args()
+    texts = protocols_studied(args.with_fig16)
+    done = {(r["protocol"], r["truth"], r["seed"]) for r in map(json.loads, RECORDS.read_text().splitlines())} \
+        if RECORDS.exists() else set()
+    todo = [(name, truth, seed) for seed in range(args.seeds) for truth in TRUTHS for name in texts
+            if (name, truth, seed) not in done]
+    print(f"{len(texts) * len(TRUTHS) * args.seeds} runs, {len(todo)} to do", flush=True)
+    scratch = Path(tempfile.mkdtemp(prefix="gonio-discrimination-"))
+    start = time.perf_counter()
+    try:
+        for k, (name, truth, seed) in enumerate(todo, start=1):
+            record = run_one(name, texts[name], truth, seed, scratch)
+            with RECORDS.open("a") as sink:
+                sink.write(json.dumps(record) + "\n")
+            elapsed = time.perf_counter() - start
+            print(f"[{k}/{len(todo)}] {name}, {truth} seed {seed}: chose {record['chosen']} "
+                  f"(eta {elapsed / k * (len(todo) - k) / 60:.1f} min)", flush=True)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    records = [r for r in map(json.loads, RECORDS.read_text().splitlines()) if r["seed"] < args.seeds]
+    rows = []
+    for name in texts:
+        for truth in TRUTHS:
+            mine = [r for r in records if r["protocol"] == name and r["truth"] == truth]
+            if mine:
+                right = sum(r["right"] for r in mine)
+                rows.append({"protocol": name, "truth": truth, "seeds": len(mine), "points": mine[0]["points"],
+                             "right": right / len(mine), "right_wilson": wilson(right, len(mine)),
+                             "chosen": {c: sum(r["chosen"] == c for r in mine) for c in CANDIDATES}})
+                print(f"{name:<34} truth {truth:<22} {mine[0]['points']:3d} points: right {right}/{len(mine)} "
+                      f"chosen {rows[-1]['chosen']}")
+    write_json("discrimination_study", {"candidates": CANDIDATES, "priors": PRIORS, "truths": TRUTHS, "rows": rows,
+                                        "protocols": texts, "machine": machine()})
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
