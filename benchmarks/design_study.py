@@ -149,7 +149,7 @@ def summarise(records: list[dict[str, Any]], names: list[str]) -> list[dict[str,
 def chart(rows: list[dict[str, Any]], path: Path) -> None:
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(10, 4.4))
+    fig = Figure(figsize=(10, 4.8))
     for k, parameter in enumerate(TRUTH):
         ax = fig.add_subplot(1, 2, k + 1)
         for row in rows:
@@ -163,8 +163,8 @@ def chart(rows: list[dict[str, Any]], path: Path) -> None:
         ax.set_xlabel("recorded instrument time after the lamp's warm-up [s]")
         ax.set_ylabel(f"median 95 % width of {parameter}" + (" [deg]" if parameter == "sigma" else ""))
         ax.grid(alpha=0.3)
-    fig.suptitle(f"Emulated rig (default realism), {TRUTH_SPEC}, fitted with {MODEL} and the rig's errors: "
-                 "designed (circles), shipped (squares)", fontsize=9)
+    fig.suptitle(f"Emulated rig (default realism), sample {TRUTH_SPEC}\nfitted with {MODEL} and the rig's "
+                 "errors: designed (circles), shipped (squares)", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
