@@ -172,6 +172,9 @@ def chart(rows: list[dict[str, Any]], path: Path) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--only", action="append", default=None, metavar="PROTOCOL",
+                        help="run only these protocols (by name, e.g. 'Fig 16 (shipped)'); the summary keeps "
+                             "every protocol's recorded seeds")
     args = parser.parse_args()
     import gonio
 
@@ -179,7 +182,11 @@ def main() -> int:
     texts = protocols_studied()
     done = {(r["protocol"], r["seed"]) for r in map(json.loads, RECORDS.read_text().splitlines())} \
         if RECORDS.exists() else set()
-    todo = [(name, seed) for seed in range(args.seeds) for name in texts if (name, seed) not in done]
+    unknown = sorted(set(args.only or ()) - set(texts))
+    if unknown:
+        parser.error(f"--only {unknown}: expected one of {list(texts)}")
+    todo = [(name, seed) for seed in range(args.seeds) for name in texts
+            if (name, seed) not in done and (args.only is None or name in args.only)]
     print(f"{len(texts) * args.seeds} runs, {len(todo)} to do", flush=True)
     scratch = Path(tempfile.mkdtemp(prefix="gonio-design-study-"))
     start = time.perf_counter()
