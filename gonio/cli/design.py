@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 from . import CLIError
+from .arguments import name_value_pairs, number
 
 #: Durations ``--budget`` accepts: a number with an optional unit.
 _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|sec|min|h)?\s*$")
@@ -73,33 +74,19 @@ def parse_duration(text: str) -> float:
 
 def _ranges(items: list[str]) -> dict[str, tuple[float, float]]:
     ranges = {}
-    for item in ",".join(items).split(","):
-        if not item.strip():
-            continue
-        name, sep, span = item.partition("=")
+    for name, span in name_value_pairs(items, "--prior").items():
         low, colon, high = span.partition(":")
         try:
-            if not sep or not colon:
+            if not colon:
                 raise ValueError
-            ranges[name.strip()] = (float(low), float(high))
+            ranges[name] = (float(low), float(high))
         except ValueError:
-            raise CLIError(f"--prior {item!r}: expected NAME=LOW:HIGH, e.g. sigma=10:45") from None
+            raise CLIError(f"--prior {name}={span!r}: expected NAME=LOW:HIGH, e.g. sigma=10:45") from None
     return ranges
 
 
 def _fixed(items: list[str]) -> dict[str, float]:
-    fixed = {}
-    for item in ",".join(items).split(","):
-        if not item.strip():
-            continue
-        name, sep, value = item.partition("=")
-        try:
-            if not sep:
-                raise ValueError
-            fixed[name.strip()] = float(value)
-        except ValueError:
-            raise CLIError(f"--fix {item!r}: expected NAME=VALUE with a number") from None
-    return fixed
+    return {name: number(name, value, "--fix") for name, value in name_value_pairs(items, "--fix").items()}
 
 
 def _discrimination(names: str, priors: dict[str, tuple[float, float]], budget: float, common: dict) -> tuple[str, str]:

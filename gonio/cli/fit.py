@@ -9,6 +9,8 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator
 
+from .arguments import name_value_pairs, number
+
 if TYPE_CHECKING:  # loaded on use: the command line starts without the fitting stack
     from gonio.fitting import Dataset, Prior
 
@@ -174,30 +176,6 @@ def remove_stale_results(out: Path, written: tuple[str, ...]) -> list[Path]:
     return removed
 
 
-def _pairs(items: list[str], what: str) -> dict[str, str]:
-    pairs = {}
-    for item in items:
-        for part in item.split(","):
-            if not part.strip():
-                continue
-            name, sep, value = part.partition("=")
-            if not sep or not name.strip() or not value.strip():
-                from gonio.cli import CLIError
-
-                raise CLIError(f"{what} {part!r}: expected NAME=VALUE")
-            pairs[name.strip()] = value.strip()
-    return pairs
-
-
-def _number(name: str, text: str, what: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        from gonio.cli import CLIError
-
-        raise CLIError(f"{what} {name}={text!r}: the value must be a number") from None
-
-
 def _option_value(text: str) -> Any:
     lowered = text.lower()
     if lowered in ("true", "false"):
@@ -267,18 +245,18 @@ def _run(args: argparse.Namespace) -> int:
     from gonio.fitting import ConvergenceWarning
 
     paths = [Path(p) for p in args.data]
-    fixed = {k: _number(k, v, "--fix") for k, v in _pairs(args.fix, "--fix").items()}
+    fixed = {k: number(k, v, "--fix") for k, v in name_value_pairs(args.fix, "--fix").items()}
     try:  # known models; each fixed value names a parameter of one of them
         names = [name for name, _ in model_candidates(args.model, fixed)]
     except (ValueError, KeyError) as error:
         raise CLIError(f"--model/--fix: {error}") from None
-    options = {k: _option_value(v) for k, v in _pairs(args.option, "--option").items()}
+    options = {k: _option_value(v) for k, v in name_value_pairs(args.option, "--option").items()}
     priors = _priors(args.prior, names)
     out = _out_folder(args.out, paths, names)
     replacing = check_result_folder(out, args.overwrite)
     try:
         dataset, data_priors = load_data(paths, args.quantity, args.calibration, args.linearity_correction,
-                                         _pairs(args.columns, "--columns") or None, args.angle_unit)
+                                         name_value_pairs(args.columns, "--columns") or None, args.angle_unit)
     except (ValueError, FileNotFoundError) as error:
         raise CLIError(str(error)) from None
     say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
@@ -321,7 +299,7 @@ def _priors(items: list[str], names: list[str]) -> dict[str, Prior]:
     from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
 
     priors = {}
-    for key, text in _pairs(items, "--prior").items():
+    for key, text in name_value_pairs(items, "--prior").items():
         bounds = next((models.get(n).param(key).bounds for n in names if key in models.get(n).param_names),
                       (-float("inf"), float("inf")))
         if key in RIG_ERROR_NAMES:
