@@ -8,7 +8,7 @@ import numpy as np
 from .ccd import CCDSensor, Exposure
 from .clock import SimClock
 from .monitor import LampMonitor
-from .scpi import ScpiError, ScpiInstrument, definite_length_block, expect_args, format_number, parse_number
+from .scpi import ScpiError, ScpiInstrument, definite_length_block, expect_args, format_number
 from .status import OPERATION_BITS, QUESTIONABLE_BITS
 from .world import Optics
 
@@ -94,10 +94,9 @@ class CameraFirmware(ScpiInstrument):
         self.busy_until: float | None = None
         self._saturation_cache: tuple[int, tuple[int, int, int, int], bool] | None = None
         self.reset()
-        self.add("EXPosure", False, self._set_exposure)
-        self.add("EXPosure", True, lambda a: self._no_args(a) or format_number(self.exposure_s))
-        self.add("GAIN", False, self._set_gain)
-        self.add("GAIN", True, lambda a: self._no_args(a) or format_number(self.gain))
+        self.add_setting("EXPosure", lambda: self.exposure_s, self._put_exposure, *EXPOSURE_RANGE_S,
+                         DEFAULT_EXPOSURE_S, unit="S")
+        self.add_setting("GAIN", lambda: self.gain, self._put_gain, *GAIN_RANGE, 1.0)
         self.add("SHUTter", False, self._set_shutter)
         self.add("SHUTter", True, lambda a: self._no_args(a) or ("OPEN" if self.shutter_open else "CLOSE"))
         self.add("ROI", False, self._set_roi)
@@ -157,13 +156,11 @@ class CameraFirmware(ScpiInstrument):
     def _no_args(args: list[str]) -> None:
         expect_args(args, 0)
 
-    def _set_exposure(self, args: list[str]) -> None:
-        expect_args(args, 1)
-        self.exposure_s = parse_number(args[0], "EXP", *EXPOSURE_RANGE_S, DEFAULT_EXPOSURE_S)
+    def _put_exposure(self, seconds: float) -> None:
+        self.exposure_s = seconds
 
-    def _set_gain(self, args: list[str]) -> None:
-        expect_args(args, 1)
-        self.gain = parse_number(args[0], "GAIN", *GAIN_RANGE, 1.0)
+    def _put_gain(self, gain: float) -> None:
+        self.gain = gain
 
     def _set_shutter(self, args: list[str]) -> None:
         expect_args(args, 1)

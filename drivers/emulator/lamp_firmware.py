@@ -5,7 +5,7 @@ import numpy as np
 
 from .clock import SimClock
 from .lamp import Lamp
-from .scpi import ScpiError, ScpiInstrument, expect_args, format_number, parse_number
+from .scpi import ScpiError, ScpiInstrument, expect_args
 from .status import OPERATION_BITS, QUESTIONABLE_BITS
 
 __all__ = ["LampFirmware"]
@@ -38,12 +38,13 @@ class LampFirmware(ScpiInstrument):
         self.lamp = lamp
         self.rng = rng
         self.serial = serial
-        self.add("OUTPut", False, self._set_output)
-        self.add("OUTPut", True, lambda a: expect_args(a, 0) or ("1" if self.lamp.on else "0"))
-        self.add("VOLTage", False, self._set_voltage)
-        self.add("VOLTage", True, lambda a: expect_args(a, 0) or format_number(self.lamp.voltage_setpoint_v))
-        self.add("MEASure:VOLTage", True, self._measure_voltage)
-        self.add("MEASure:CURRent", True, self._measure_current)
+        self.add("OUTPut[:STATe]", False, self._set_output)
+        self.add("OUTPut[:STATe]", True, lambda a: expect_args(a, 0) or ("1" if self.lamp.on else "0"))
+        p = lamp.params
+        self.add_setting("[SOURce:]VOLTage[:LEVel][:IMMediate][:AMPLitude]", lambda: self.lamp.voltage_setpoint_v,
+                         self.lamp.set_voltage, 0.0, p.max_voltage_v, p.nominal_voltage_v, unit="V")
+        self.add("MEASure[:SCALar]:VOLTage[:DC]", True, self._measure_voltage)
+        self.add("MEASure[:SCALar]:CURRent[:DC]", True, self._measure_current)
         self.add("STATus:LAMP", True, lambda a: expect_args(a, 0) or ("FAULT" if self.lamp.burnt_out else "OK"))
         self.add("*OPT", True, lambda a: expect_args(a, 0) or "0", waits=False)
 
@@ -81,11 +82,6 @@ class LampFirmware(ScpiInstrument):
             self.lamp.switch(False, self.clock.now())
         else:
             raise ScpiError(-104, f"OUTP expects ON or OFF, got '{args[0]}'")  # escaped when queued
-
-    def _set_voltage(self, args: list[str]) -> None:
-        expect_args(args, 1)
-        p = self.lamp.params
-        self.lamp.set_voltage(parse_number(args[0], "VOLT", 0.0, p.max_voltage_v, p.nominal_voltage_v))
 
     def _measure_voltage(self, args: list[str]) -> str:
         expect_args(args, 0)

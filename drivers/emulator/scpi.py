@@ -55,9 +55,12 @@ MESSAGES = {
     -108: "Parameter not allowed",
     -109: "Missing parameter",
     -113: "Undefined header",
+    -131: "Invalid suffix",
+    -138: "Suffix not allowed",
     -200: "Execution error",
     -221: "Settings conflict",
     -222: "Data out of range",
+    -224: "Illegal parameter value",
     -350: "Queue overflow",
     -440: "Query UNTERMINATED after indefinite response",
 }
@@ -226,19 +229,57 @@ def _accepted_tokens(keyword: str) -> frozenset[str]:
 
 # ASCII classes only: a Unicode digit or space is not part of a number or a separator.
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$", re.ASCII)
+#: A decimal number followed by a suffix (IEEE 488.2 7.7.3), e.g. ``25 ms``, ``1.2KV``.
+_NUMBER_WITH_SUFFIX = re.compile(r"^([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z][A-Za-z/0-9]*)$",
+                                 re.ASCII)
+#: Suffix multipliers (IEEE 488.2 table 7-2): ``M`` is milli, ``MA`` mega (SCPI-1999 vol. 1,
+#: 7.2.3: ``MHZ`` and ``MOHM`` are the exceptions, mega).
+_MULTIPLIERS = {"EX": 1e18, "PE": 1e15, "T": 1e12, "G": 1e9, "MA": 1e6, "K": 1e3, "M": 1e-3, "U": 1e-6,
+                "N": 1e-9, "P": 1e-12, "F": 1e-15, "A": 1e-18}
 _INTEGER = re.compile(r"^[+-]?[0-9]+$", re.ASCII)
 _UNIT = re.compile(r"^(:?[*A-Za-z][A-Za-z0-9:]*)(\?)?(?:\s+(.*))?$", re.ASCII)
 #: More significant digits than any integer parameter of the instruments can need.
 _MAX_INTEGER_DIGITS = 18
 
 
-def parse_number(text: str, name: str, low: float, high: float, default: float) -> float:
-    """Parse a SCPI numeric parameter (decimal or ``MIN``/``MAX``/``DEF``) within [low, high].
+def _suffix_scale(suffix: str, unit: str | None, name: str) -> float:
+    """The factor a suffix gives a number in ``unit`` (``"MS"`` with unit ``"S"``: 1e-3).
 
     Raises
     ------
     ScpiError
-        -104 when not a number, -222 when outside the range.
+        -138 when the parameter takes no suffix (``unit`` None), -131 when the suffix is not
+        ``unit`` with an optional multiplier.
+    """
+    if unit is None:
+        raise ScpiError(-138, f"{name} takes no suffix, got '{suffix}'")
+    word, unit = suffix.upper(), unit.upper()
+    if word == unit:
+        return 1.0
+    if word in ("MHZ", "MOHM") and word[1:] == unit:  # SCPI-1999 vol. 1, 7.2.3: mega, not milli
+        return 1e6
+    prefix = word[:-len(unit)] if word.endswith(unit) else None
+    if prefix not in _MULTIPLIERS:
+        raise ScpiError(-131, f"{name} expects a number in {unit} (with a multiplier such as M or U), got '{suffix}'")
+    return _MULTIPLIERS[prefix]
+
+
+def parse_number(text: str, name: str, low: float, high: float, default: float, unit: str | None = None) -> float:
+    """Parse a SCPI numeric parameter (decimal, with a suffix, or ``MIN``/``MAX``/``DEF``) within [low, high].
+
+    ``unit`` is the suffix the parameter takes (``"S"``, ``"V"``; IEEE 488.2 7.7.3, SCPI-1999
+    vol. 1, 7.2.3), with a multiplier (``25 ms`` is 0.025 s, ``1.2 KV`` 1200 V); None: no suffix.
+
+    Examples
+    --------
+    >>> parse_number("25 ms", "EXP", 0, 60, 0.01, unit="S"), parse_number("max", "EXP", 0, 60, 0.01)
+    (0.025, 60)
+
+    Raises
+    ------
+    ScpiError
+        -104 when not a number, -131 or -138 for a wrong or unexpected suffix, -222 when
+        outside the range.
     """
     word = text.strip().upper()
     if word in ("MIN", "MINIMUM"):
@@ -247,9 +288,13 @@ def parse_number(text: str, name: str, low: float, high: float, default: float) 
         return high
     if word in ("DEF", "DEFAULT"):
         return default
+    scale = 1.0
+    with_suffix = _NUMBER_WITH_SUFFIX.match(word)
+    if with_suffix and not _NUMBER.match(word):
+        word, scale = with_suffix.group(1), _suffix_scale(with_suffix.group(2), unit, name)
     if not _NUMBER.match(word):
         raise ScpiError(-104, f"{name} expects a number, got '{text.strip()}'")
-    value = float(word)
+    value = float(word) * scale
     if not low <= value <= high:
         raise ScpiError(-222, f"{name} must be within {low:g}..{high:g}, got {value:g}")
     return value
@@ -286,16 +331,22 @@ def parse_integer(text: str, name: str) -> int:
 
 
 def format_number(value: float) -> str:
-    """Shortest SCPI numeric reply: integers without decimals, else ``%.6g``.
+    """A numeric reply in IEEE 488.2's response forms (8.7.2-8.7.4), six significant digits:
+    an integer as NR1, a value from 1e-4 to 1e6 as NR2, others as NR3 (an explicit radix
+    point, ``E``, a signed exponent).
 
     Examples
     --------
-    >>> format_number(120.0), format_number(0.025), format_number(1e-5)
-    ('120', '0.025', '1e-05')
+    >>> format_number(120.0), format_number(0.025), format_number(1e-5), format_number(2.5e20)
+    ('120', '0.025', '1.0E-05', '2.5E+20')
     """
     if float(value).is_integer() and abs(value) < 1e15:
         return str(int(value))
-    return f"{value:.6g}"
+    text = f"{value:.6g}"
+    if "e" not in text:
+        return text
+    mantissa, exponent = text.split("e")
+    return f"{mantissa if '.' in mantissa else mantissa + '.0'}E{exponent}"
 
 
 def definite_length_block(payload: bytes) -> bytes:
@@ -313,10 +364,72 @@ def definite_length_block(payload: bytes) -> bytes:
 Handler = Callable[[list[str]], "str | bytes | None"]
 
 
-class _Command(NamedTuple):
-    """A registered command: accepted tokens per keyword, query form, handler, whether it waits."""
+class _Keyword(NamedTuple):
+    """One node of a registered header: the tokens it accepts, and whether it may be left out."""
 
-    keywords: tuple[frozenset[str], ...]
+    tokens: frozenset[str]
+    optional: bool
+
+
+#: A node of a header pattern: ``[:KEYword]``, ``[KEYword:]`` (optional) or ``KEYword``.
+_PATTERN_NODE = re.compile(r"\[:?([*A-Za-z][A-Za-z0-9]*):?\]|([*A-Za-z][A-Za-z0-9]*)", re.ASCII)
+
+
+def header_keywords(pattern: str) -> tuple[_Keyword, ...]:
+    """The nodes of a header pattern in SCPI-1999 notation (vol. 1, 6.2.5-6.2.6: long form
+    with the short form in capitals, optional nodes in brackets).
+
+    Examples
+    --------
+    >>> [(sorted(k.tokens), k.optional) for k in header_keywords("[SOURce:]VOLTage[:LEVel]")]
+    [(['SOUR', 'SOURCE'], True), (['VOLT', 'VOLTAGE'], False), (['LEV', 'LEVEL'], True)]
+    """
+    nodes = []
+    for match in _PATTERN_NODE.finditer(pattern):
+        keyword, optional = (match.group(1), True) if match.group(1) else (match.group(2), False)
+        nodes.append(_Keyword(_accepted_tokens(keyword), optional))
+    if not nodes or all(node.optional for node in nodes):
+        raise ValueError(f"header pattern {pattern!r}: expected at least one keyword that is not optional")
+    return tuple(nodes)
+
+
+def _matches(tokens: Sequence[str], keywords: Sequence[_Keyword]) -> bool:
+    """Whether received ``tokens`` spell ``keywords``, optional ones left out or given."""
+    if not keywords:
+        return not tokens
+    first, rest = keywords[0], keywords[1:]
+    if first.optional and _matches(tokens, rest):
+        return True
+    return bool(tokens) and tokens[0] in first.tokens and _matches(tokens[1:], rest)
+
+
+def _header_tokens(header: str, path: Sequence[str]) -> list[str]:
+    """The nodes a received header names (upper case): a common command alone, from the
+    root after a leading ``:``, else after the current ``path``."""
+    if header.startswith("*"):
+        return [header.upper()]
+    if header.startswith(":"):
+        return header[1:].upper().split(":")
+    return [*path, *header.upper().split(":")]
+
+
+def _path_after(unit: str, path: tuple[str, ...]) -> tuple[str, ...]:
+    """The current path after the message unit ``unit``: its header's nodes less the last
+    (SCPI-1999 vol. 1, 6.2.4); unchanged by a common command or a unit without a header.
+
+    >>> _path_after("STAT:OPER:ENAB 16", ()), _path_after("*CLS", ("STAT",)), _path_after(":OUTP ON", ("X",))
+    (('STAT', 'OPER'), ('STAT',), ())
+    """
+    match = _UNIT.match(unit.strip())
+    if not match or match.group(1).startswith("*"):
+        return path
+    return tuple(_header_tokens(match.group(1), path)[:-1])
+
+
+class _Command(NamedTuple):
+    """A registered command: its header's nodes, query form, handler, whether it waits."""
+
+    keywords: tuple[_Keyword, ...]
     query: bool
     handler: Handler
     waits: bool
@@ -373,8 +486,7 @@ class ScpiInstrument:
         self.add("*OPC", True, _without_parameters(lambda: "1"), waits=True)
         self.add("*WAI", False, _without_parameters(lambda: None), waits=True)
         self.add("*TST", True, _without_parameters(lambda: str(self.self_test())), waits=True)
-        self.add("SYSTem:ERRor", True, _without_parameters(self.errors.pop), waits=False)
-        self.add("SYSTem:ERRor:NEXT", True, _without_parameters(self.errors.pop), waits=False)
+        self.add("SYSTem:ERRor[:NEXT]", True, _without_parameters(self.errors.pop), waits=False)
         self.add("SYSTem:ERRor:COUNt", True, _without_parameters(lambda: str(len(self.errors))), waits=False)
         self.add("SYSTem:VERSion", True, _without_parameters(lambda: SCPI_VERSION), waits=False)
         for name, register in (("OPERation", self.status.operation), ("QUEStionable", self.status.questionable)):
@@ -463,9 +575,7 @@ class ScpiInstrument:
     def _add_register(self, name: str, register) -> None:
         """The SCPI commands of one status register (SCPI-1999 vol. 2, 20)."""
         prefix = f"STATus:{name}"
-        read_event = _without_parameters(lambda: str(register.read_event()))
-        self.add(prefix, True, read_event, waits=False)
-        self.add(f"{prefix}:EVENt", True, read_event, waits=False)
+        self.add(f"{prefix}[:EVENt]", True, _without_parameters(lambda: str(register.read_event())), waits=False)
         self.add(f"{prefix}:CONDition", True, _without_parameters(lambda: str(register.condition)), waits=False)
         for keyword, attribute in (("ENABle", "enable"), ("PTRansition", "ptr"), ("NTRansition", "ntr")):
             self.add(f"{prefix}:{keyword}", False, self._register_setter(f"{prefix}:{keyword}", register, attribute),
@@ -481,6 +591,33 @@ class ScpiInstrument:
             setattr(register, attribute, value)
         return handler
 
+    def add_setting(self, header: str, get: Callable[[], float], put: Callable[[float], None], low: float,
+                    high: float, default: float, unit: str | None = None) -> None:
+        """Register a numeric setting: ``HEADER <value>`` (a number, with ``unit`` as suffix
+        and a multiplier, or ``MIN``/``MAX``/``DEF``, :func:`parse_number`) and ``HEADER?``,
+        which with ``MIN``, ``MAX`` or ``DEF`` replies that limit instead of the setting
+        (SCPI-1999 vol. 1, 7.2.1: "MINimum|MAXimum" queries)."""
+        required = re.sub(r"\[[^]]*\]", "", header).strip(":").split(":")
+        name = ":".join("".join(ch for ch in keyword if not ch.islower()) for keyword in required)  # e.g. VOLT
+
+        def put_handler(args: list[str]) -> None:
+            expect_args(args, 1)
+            put(parse_number(args[0], name, low, high, default, unit))
+
+        def get_handler(args: list[str]) -> str:
+            if len(args) > 1:
+                raise ScpiError(-108, f"expected at most 1 parameter, got {len(args)}")
+            if not args:
+                return format_number(get())
+            limits = {"MIN": low, "MINIMUM": low, "MAX": high, "MAXIMUM": high, "DEF": default, "DEFAULT": default}
+            word = args[0].upper()
+            if word not in limits:
+                raise ScpiError(-224, f"{name}? takes MIN, MAX or DEF, got '{args[0]}'")
+            return format_number(limits[word])
+
+        self.add(header, False, put_handler)
+        self.add(header, True, get_handler)
+
     # -- parameter parsing for subclasses -------------------------------------------------
     @staticmethod
     def parse_integer(text: str, name: str) -> int:
@@ -489,32 +626,33 @@ class ScpiInstrument:
 
     # -- registration and dispatch ----------------------------------------------------
     def add(self, header: str, query: bool, handler: Handler, waits: bool = True) -> None:
-        """Register ``header`` (keywords joined by ``:``, long form with short part in capitals).
+        """Register ``header``: keywords joined by ``:``, long form with the short form in
+        capitals, optional nodes in brackets (``[SOURce:]VOLTage[:LEVel]``, :func:`header_keywords`).
 
         ``waits``: let the pending overlapped operations complete before the command runs
         (every device command; the status and common commands do not wait).
         """
-        keywords = tuple(_accepted_tokens(k) for k in header.split(":"))
-        self._commands.append(_Command(keywords, query, handler, waits, header))
+        self._commands.append(_Command(header_keywords(header), query, handler, waits, header))
 
-    def _find(self, header: str, query: bool) -> _Command:
-        tokens = header.lstrip(":").upper().split(":")
+    def _find(self, tokens: Sequence[str], query: bool, header: str) -> _Command:
         for command in self._commands:
-            if command.query != query or len(command.keywords) != len(tokens):
-                continue
-            if all(token in accepted for token, accepted in zip(tokens, command.keywords)):
+            if command.query == query and _matches(tokens, command.keywords):
                 return command
         raise ScpiError(-113, f"{header}{'?' if query else ''}")
 
-    def execute_unit(self, unit: str) -> str | bytes | None:
-        """Execute one message unit (``HEADER[?] [param,...]``); return its reply or None."""
+    def execute_unit(self, unit: str, path: Sequence[str] = ()) -> str | bytes | None:
+        """Execute one message unit (``HEADER[?] [param,...]``); return its reply or None.
+
+        ``path`` is the current path (SCPI-1999 vol. 1, 6.2.4; IEEE 488.2 A.1.1): the nodes
+        a header without a leading colon continues from. :meth:`handle_line` keeps it.
+        """
         unit = unit.strip()
         match = _UNIT.match(unit)
         if not match:  # e.g. a header with a byte outside printable ASCII
             raise ScpiError(-100, f"'{unit[:40]}'")
         header, question, rest = match.group(1), bool(match.group(2)), match.group(3)
         args = [a.strip() for a in rest.split(",")] if rest is not None and rest.strip() else []
-        command = self._find(header, question)
+        command = self._find(_header_tokens(header, path), question, header)
         if question and self._indefinite_reply:  # IEEE 488.2 8.7.11: nothing may follow *IDN?'s reply
             raise ScpiError(-440, f"{header}? after *IDN?")
         if command.waits:
@@ -526,15 +664,26 @@ class ScpiInstrument:
         return reply
 
     def handle_line(self, line: str) -> bytes:
-        """Process one received line; return the reply bytes (possibly empty)."""
+        """Process one received line (a program message); return the reply bytes (possibly empty).
+
+        Its units are separated by ``;``. The current path starts at the root; after a
+        unit whose header has several nodes it is that header less its last node, so that
+        ``STAT:OPER:ENAB 16;PTR 16`` sets ``STAT:OPER:PTR``; a leading ``:`` starts again
+        from the root, and common commands (``*CLS``) leave it as it is (SCPI-1999 vol. 1,
+        6.2.4; IEEE 488.2 A.1.1). ``MEAS:VOLT?;MEAS:CURR?`` is therefore ``MEAS:MEAS:CURR?``,
+        -113, as on a real SCPI instrument; ``MEAS:VOLT?;CURR?`` or ``MEAS:VOLT?;:MEAS:CURR?``
+        is meant.
+        """
         replies: list[bytes] = []
         self._indefinite_reply = False
+        path: tuple[str, ...] = ()
         for unit in line.split(";"):
             if not unit.strip():
                 continue
             self._replies_waiting = bool(replies)
+            before, path = path, _path_after(unit, path)
             try:
-                reply = self.execute_unit(unit)
+                reply = self.execute_unit(unit, before)
             except ScpiError as error:
                 self.errors.push(error)
                 continue

@@ -774,8 +774,8 @@ class Esp300Firmware:
             raise _EspError(100 * n + 6)
         if software_limits and target < axis.left_limit:
             raise _EspError(100 * n + 7)
-        if self.interlock is not None:
-            ends = [a.target() for _, a in sorted(self.axes.items())]
+        if self.interlock is not None:  # on the commanded targets (docs/protocol.md), not where the axes will land
+            ends = [a.desired - a.offset for _, a in sorted(self.axes.items())]
             ends[n - 1] = target - axis.offset
             if not self.interlock(tuple(ends)):
                 raise _EspError(100 * n + 29)

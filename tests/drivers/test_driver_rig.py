@@ -89,6 +89,28 @@ def test_controller_interlock_refuses_collision_bypassing_the_rig(rig, emu):
     assert emu.control.true_state().positions_deg == before
 
 
+@pytest.mark.parametrize("camera", [40.0, 40.01, 50.0])
+def test_the_interlock_decides_on_the_commanded_targets_whatever_the_seed(camera):
+    """Lamp commanded to 45 deg: a camera target exactly 5 deg away (the minimum) is
+    accepted, 0.01 deg closer (40.01) refused, by every seed; where the axes land (their
+    repeatability) does not enter (docs/protocol.md, "Minimum camera-lamp separation").
+    Before, the lamp's landing point decided: 9 of 20 seeds accepted 40 deg."""
+    from drivers.emulator.rig import EmulatedRig
+
+    def lambert(ti, pi, tr, pr):
+        return np.full(np.broadcast(ti, pi, tr, pr).shape, 1 / np.pi)
+
+    outcomes = set()
+    for seed in range(20):
+        emulator = EmulatedRig(lambert, seed=seed, motors_on=True)
+        stage = emulator.channels["stage"]
+        stage.process("2PA45")
+        emulator.control.advance(30.0)
+        stage.process(f"1PA{camera:g}")
+        outcomes.add(stage.process("TE?").decode().strip())
+    assert outcomes == ({"129"} if camera == 40.01 else {"0"})
+
+
 def test_measure_returns_a_complete_record(rig, emu):
     m = rig.measure(30.0, 0.0, -20.0)
     assert isinstance(m, Measurement)

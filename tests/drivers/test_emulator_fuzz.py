@@ -150,7 +150,7 @@ TEMPLATES = {
                       "MEAS:CURR?", "STAT:LAMP?", "MEAS:VOLT? {n}", "VOLT {n},{n}", "OUTP"],
 }
 #: Lines that take real work (a 512 x 480 exposure, a 491 kB transfer): sent rarely.
-EXPENSIVE = {"camera": ["ACQ", "EXP 1e-5;ACQ;ROI:STAT?", "SHUT CLOSE;ACQ;ROI:STAT?;SHUT OPEN", "ACQ;FRAME?",
+EXPENSIVE = {"camera": ["ACQ", "EXP 1e-5;ACQ;ROI:STAT?", "SHUT CLOSE;ACQ;ROI:STAT?;:SHUT OPEN", "ACQ;FRAME?",
                         "EXP?;ACQ;FRAME?;GAIN?"]}
 SUFFIXES = [b"?", b"??", b"x", b" 1", b",", b",1", b";", b" ;", b"\x00", b"\xff", b"\r", b"\n", b"\r\n", b":", b" ?"]
 
@@ -233,7 +233,8 @@ class Dialect:
 
     def drain_line(self) -> bytes:
         query = "TB?" if self.device == "stage" else "SYST:ERR?"
-        return ";".join([query] * self.drain_batch).encode()
+        separator = ";" if self.device == "stage" else ";:"  # SCPI: ':' from the root again (the current path)
+        return separator.join([query] * self.drain_batch).encode()
 
 
 DIALECTS = {

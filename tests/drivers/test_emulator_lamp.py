@@ -24,7 +24,7 @@ def ask(rig, line):
 def test_identity_power_on_state_and_settings(rig):
     assert ask(rig, "*IDN?") == "GONIO,LPS-300,SN0001,1.0\n"
     assert ask(rig, "OUTP?;VOLT?;STAT:LAMP?") == "0;120;OK\n"
-    assert ask(rig, "MEAS:VOLT?;MEAS:CURR?") == "0.000;0.0000\n"
+    assert ask(rig, "MEAS:VOLT?;CURR?") == "0.000;0.0000\n"
     ask(rig, "VOLT 110.5;OUTP ON")
     assert ask(rig, "OUTP?;VOLT?") == "1;110.5\n"
     ask(rig, "outp off;output 1")
@@ -96,7 +96,7 @@ def test_burn_out_fault_darkens_the_sample(rig):
     ask(rig, "OUTP ON")
     rig.control.advance(1000.0)
     rig.control.burn_out_lamp()
-    assert ask(rig, "STAT:LAMP?;MEAS:CURR?") == "FAULT;0.0000\n"
+    assert ask(rig, "STAT:LAMP?;:MEAS:CURR?") == "FAULT;0.0000\n"
     assert rig.control.true_state().radiance_w_m2_sr == 0.0
     rig.channels["stage"].process("1PA20;1WS")
     rig.channels["camera"].process("EXP 0.05;ROI 206,190,100,100;ACQ")

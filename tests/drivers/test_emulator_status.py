@@ -73,10 +73,10 @@ def test_opc_reports_the_end_of_an_overlapped_exposure(rig):
     ask(rig, "camera", "*CLS;*ESE 1;*SRE 32")
     t0 = rig.control.now()
     assert ask(rig, "camera", "EXP 0.5;ACQ;*OPC") == ""
-    assert ask(rig, "camera", "*STB?;STAT:OPER:COND?") == "0;16\n"  # MEASuring, OPC not yet set
+    assert ask(rig, "camera", "*STB?;:STAT:OPER:COND?") == "0;16\n"  # MEASuring, OPC not yet set
     assert rig.control.now() - t0 < 0.01  # the status commands do not wait
     rig.control.advance(0.55)
-    assert ask(rig, "camera", "*STB?;STAT:OPER:COND?") == "96;0\n"  # ESB and MSS
+    assert ask(rig, "camera", "*STB?;:STAT:OPER:COND?") == "96;0\n"  # ESB and MSS
     assert ask(rig, "camera", "*ESR?;*ESR?") == "1;0\n"
     assert ask(rig, "camera", "*OPC;*ESR?") == "1\n"  # nothing pending: OPC at once
 
@@ -91,17 +91,17 @@ def test_opc_query_and_wai_wait_for_the_exposure(rig):
 
 
 def test_operation_events_latch_transitions_through_the_filters(rig):
-    ask(rig, "camera", "*CLS;STAT:OPER:ENAB 16")
+    ask(rig, "camera", "*CLS;:STAT:OPER:ENAB 16")
     ask(rig, "camera", "EXP 0.1;ACQ;*WAI")
     assert ask(rig, "camera", "STAT:OPER:COND?;*STB?") == "0;144\n"  # OPER summary (128) + MAV (16)
-    assert ask(rig, "camera", "STAT:OPER?;STAT:OPER:EVEN?") == "16;0\n"  # read and cleared
-    ask(rig, "camera", "STAT:OPER:PTR 0;STAT:OPER:NTR 16")  # now only the end of an exposure latches
+    assert ask(rig, "camera", "STAT:OPER?;:STAT:OPER:EVEN?") == "16;0\n"  # read and cleared
+    ask(rig, "camera", "STAT:OPER:PTR 0;NTR 16")  # now only the end of an exposure latches
     ask(rig, "camera", "ACQ")
     assert ask(rig, "camera", "STAT:OPER:EVEN?") == "0\n"  # started, not ended
     ask(rig, "camera", "*WAI")
-    assert ask(rig, "camera", "STAT:OPER:EVEN?;STAT:OPER:PTR?;STAT:OPER:NTR?") == "16;0;16\n"
+    assert ask(rig, "camera", "STAT:OPER:EVEN?;PTR?;NTR?") == "16;0;16\n"
     ask(rig, "camera", "STAT:PRES")
-    assert ask(rig, "camera", "STAT:OPER:ENAB?;STAT:OPER:PTR?;STAT:OPER:NTR?") == "0;32767;0\n"
+    assert ask(rig, "camera", "STAT:OPER:ENAB?;PTR?;NTR?") == "0;32767;0\n"
     ask(rig, "camera", "STAT:OPER:ENAB 32768")  # bit 15 does not exist
     assert ask(rig, "camera", "SYST:ERR?").startswith("-222,")
 
@@ -112,18 +112,18 @@ def test_saturated_roi_is_questionable(rig):
     assert ask(rig, "camera", "STAT:QUES:COND?") == "0\n"
     ask(rig, "camera", "EXP 5;ACQ")  # 5 s on a white sample: the ADC saturates
     assert ask(rig, "camera", "ROI:STAT?").split(",")[3].strip() != "0"
-    assert ask(rig, "camera", "STAT:QUES:COND?;STAT:QUES?") == "512;512\n"
+    assert ask(rig, "camera", "STAT:QUES:COND?;:STAT:QUES?") == "512;512\n"
     ask(rig, "camera", "ROI 0,0,4,4")  # a dark corner outside the sample's image
     assert ask(rig, "camera", "STAT:QUES:COND?") == "0\n"
 
 
 def test_rst_keeps_the_status_and_cls_keeps_the_enables(rig):
-    ask(rig, "camera", "*CLS;*ESE 1;*SRE 32;STAT:OPER:ENAB 16;EXP 0.5;ACQ;*OPC")
+    ask(rig, "camera", "*CLS;*ESE 1;*SRE 32;:STAT:OPER:ENAB 16;:EXP 0.5;ACQ;*OPC")
     ask(rig, "camera", "*RST")  # abandons the exposure and cancels the armed *OPC
     rig.control.advance(1.0)
-    assert ask(rig, "camera", "*ESR?;*ESE?;*SRE?;STAT:OPER:ENAB?;EXP?") == "0;1;32;16;0.01\n"
+    assert ask(rig, "camera", "*ESR?;*ESE?;*SRE?;:STAT:OPER:ENAB?;:EXP?") == "0;1;32;16;0.01\n"
     ask(rig, "camera", "FOO;*CLS")
-    assert ask(rig, "camera", "*ESR?;SYST:ERR?;*ESE?;*SRE?;STAT:OPER:ENAB?") == '0;0,"No error";1;32;16\n'
+    assert ask(rig, "camera", "*ESR?;SYST:ERR?;*ESE?;*SRE?;:STAT:OPER:ENAB?") == '0;0,"No error";1;32;16\n'
 
 
 def test_camera_fault_fails_the_self_test(rig):
@@ -135,13 +135,13 @@ def test_camera_fault_fails_the_self_test(rig):
 
 def test_lamp_settling_power_and_burn_out(rig):
     fresh = EmulatedRig(lambert, seed=3)
-    assert ask(fresh, "lamp", "STAT:OPER:COND?;STAT:QUES:COND?") == "0;0\n"  # off: nothing to report
+    assert ask(fresh, "lamp", "STAT:OPER:COND?;:STAT:QUES:COND?") == "0;0\n"  # off: nothing to report
     ask(fresh, "lamp", "OUTP ON")
-    assert ask(fresh, "lamp", "STAT:OPER:COND?;STAT:QUES:COND?") == "2;8\n"  # SETTling, POWer
+    assert ask(fresh, "lamp", "STAT:OPER:COND?;:STAT:QUES:COND?") == "2;8\n"  # SETTling, POWer
     fresh.control.advance(300.0)
     assert ask(fresh, "lamp", "STAT:OPER:COND?") == "2\n"  # 2 % deficit, 120 s: 0.1 % after 366 s
     fresh.control.advance(70.0)
-    assert ask(fresh, "lamp", "STAT:OPER:COND?;STAT:QUES:COND?;STAT:OPER?") == "0;0;2\n"
+    assert ask(fresh, "lamp", "STAT:OPER:COND?;:STAT:QUES:COND?;:STAT:OPER?") == "0;0;2\n"
     fresh.control.burn_out_lamp()
     assert ask(fresh, "lamp", "STAT:QUES:COND?;*TST?;*OPT?") == f"{512 | 8};1;0\n"
-    assert ask(rig, "lamp", "STAT:OPER:COND?;STAT:QUES:COND?;*OPC;*ESR?") == "0;0;129\n"  # warm lamp; PON + OPC
+    assert ask(rig, "lamp", "STAT:OPER:COND?;:STAT:QUES:COND?;*OPC;*ESR?") == "0;0;129\n"  # warm lamp; PON + OPC

@@ -292,7 +292,7 @@ def test_non_ascii_bytes_never_lose_scpi_replies(rig, kind):
     with open_port(rig.addresses()["camera"][kind], "camera") as camera:
         camera.write(b"EX\xe9P 1;*IDN?\n\xff\x00\x1b\n")
         assert camera.readline() == b"GONIO,CCD-512,SN0001,1.0\n"
-        camera.write(b"SYST:ERR?;SYST:ERR?;SYST:ERR?\n")
+        camera.write(b"SYST:ERR?;:SYST:ERR?;ERR?\n")
         reply = camera.readline()
         # Each received byte outside printable ASCII is quoted as \xNN: the reply is ASCII.
         assert reply == (b'-100,"Command error;\'EX\\xe9P 1\'";'

@@ -157,7 +157,7 @@ def test_pyvisa_camera_frame_status_and_errors(visa_camera):
     assert camera.query("SYST:ERR?") == '-222,"Data out of range;EXP must be within 1e-05..60, got 100"'
     assert camera.query("*ESR?") == "17"  # EXE, and OPC of the exposure (read once, then cleared)
     assert camera.query("*ESR?") == "0"
-    assert camera.query("SYST:VERS?;STAT:OPER:COND?;STAT:QUES:COND?") == "1999.0;0;0"
+    assert camera.query("SYST:VERS?;:STAT:OPER:COND?;:STAT:QUES:COND?") == "1999.0;0;0"
 
 
 @pytest.mark.parametrize("kind", TRANSPORTS)
