@@ -86,3 +86,14 @@ def random_geometries(n: int, seed: int = 0, max_theta: float = 89.9) -> tuple[n
         rng.uniform(0.0, max_theta, n),
         rng.uniform(-180.0, 180.0, n),
     )
+
+
+def wilson(k: int, n: int) -> list[float]:
+    """Wilson 95 % score interval of a proportion ``k / n`` (scipy.stats.binomtest), [nan, nan]
+    for ``n = 0``."""
+    if n == 0:
+        return [float("nan"), float("nan")]
+    from scipy import stats
+
+    interval = stats.binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+    return [float(interval.low), float(interval.high)]

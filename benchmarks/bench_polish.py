@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import OUT, machine, write_json  # noqa: E402
+from _common import OUT, machine, wilson, write_json  # noqa: E402
 
 from gonio.cli.demo import TRUTH, measure_demo  # noqa: E402
 from gonio.fitting import fit  # noqa: E402
@@ -65,13 +65,6 @@ def one_seed(seed: int, scratch: Path) -> dict[str, Any]:
           f"{row['polished']['sigma']:+.2f}", flush=True)
     return row
 
-
-def wilson(k: int, n: int, z: float = 1.96) -> list[float]:
-    """Wilson score interval of a proportion k / n."""
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [max(0.0, float(centre - half)), min(1.0, float(centre + half))]
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:

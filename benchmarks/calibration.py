@@ -88,7 +88,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _common import OUT, machine, mcmc_design, write_json  # noqa: E402
+from _common import OUT, machine, mcmc_design, wilson, write_json  # noqa: E402
 
 # --------------------------------------------------------------------------- design
 #: Albedo of the emulated reference standard (the certificate of the Fig 16 protocol).
@@ -469,13 +469,6 @@ def run_tasks(tasks: Sequence[tuple[str, str, int]], workers: int, records_path:
 
 
 # --------------------------------------------------------------------------- statistics
-def wilson(k: int, n: int) -> list[float]:
-    """Wilson 95 % interval of a binomial proportion."""
-    if n == 0:
-        return [math.nan, math.nan]
-    ci = stats.binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
-    return [float(ci.low), float(ci.high)]
-
 
 def proportion(flags: Sequence[bool]) -> dict[str, Any]:
     k, n = int(np.sum(flags)), len(flags)

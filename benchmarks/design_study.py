@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import shutil
 import tempfile
 import time
@@ -36,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import OUT, ROOT, machine, write_json
+from _common import OUT, ROOT, machine, wilson, write_json
 
 MODEL = "oren-nayar-tabulated"
 TRUTH_SPEC = "oren-nayar-exact:rho=0.9,sigma=30"
@@ -103,16 +102,6 @@ def run_one(name: str, text: str, seed: int, scratch: Path) -> dict[str, Any]:
     record["wall_seconds"] = time.perf_counter() - start
     return record
 
-
-def wilson(k: int, n: int) -> list[float]:
-    """Wilson 95 % interval of a binomial proportion."""
-    if n == 0:
-        return [math.nan, math.nan]
-    z = 1.96
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [centre - half, centre + half]
 
 
 def summarise(records: list[dict[str, Any]], names: list[str]) -> list[dict[str, Any]]:

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from _common import OUT, ROOT, machine, write_json
-from design_study import wilson
+from _common import wilson
 
 CANDIDATES = ("lambert", "oren-nayar-tabulated", "pitted")
 PRIORS = {"rho": (0.5, 1.0), "sigma": (10.0, 45.0), "psi": (20.0, 90.0), "coverage": (0.2, 0.8)}

@@ -44,7 +44,7 @@ import numpy as np
 from drivers.errors import DriverError
 
 from .data import RecordingError, RecordingWriter, point_key
-from .protocols import PlannedPoint, Protocol, load, plan
+from .protocols import PlannedPoint, Protocol, extended, load, plan
 from .reduction import (
     CHECK_BLOCK,
     LOW_SIGNAL_SIGMAS,
@@ -57,6 +57,7 @@ from .reduction import (
 __all__ = [
     "RunResult",
     "Progress",
+    "Extension",
     "AcquisitionError",
     "run_protocol",
     "combine_frames",
@@ -123,6 +124,25 @@ class RunResult:
             f"{f' ({self.warm_up_seconds:.0f} s of it warming the lamp)' if self.warm_up_seconds >= 0.5 else ''}; "
             f"recording in {self.folder}"
         )
+
+
+@dataclass(frozen=True)
+class Extension:
+    """What a run's ``extend`` callback decided once every point so far was measured
+    (:func:`run_protocol`).
+
+    Attributes
+    ----------
+    text : str or None
+        Protocol text to append and measure in the same session (``[[block]]`` sections
+        and comments, :func:`gonio.protocols.extended`), or None: the run ends.
+    note : mapping
+        Why (JSON-serialisable): stored with the text in the recording's
+        ``metadata["extensions"]``.
+    """
+
+    text: str | None
+    note: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -195,7 +215,7 @@ def experiment_description(protocol: Protocol, lamp_voltage: float, rig: Any,
     for key in _PORT_KEYS:
         rig_meta.pop(key, None)
     return {
-        "protocol_sha256": hashlib.sha256(protocol.text.encode("utf-8")).hexdigest(),
+        "protocol_sha256": protocol_sha256(protocol),
         "protocol_name": protocol.name,
         "sample": protocol.sample,
         "lamp_voltage": float(lamp_voltage),
@@ -203,6 +223,11 @@ def experiment_description(protocol: Protocol, lamp_voltage: float, rig: Any,
         "instruments": dict(getattr(rig, "identities", {}) or {}),
         "lamp_monitor": bool(getattr(rig, "has_monitor", False)),
     }
+
+
+def protocol_sha256(protocol: Protocol) -> str:
+    """The SHA-256 of the protocol's text (hex): what a resume compares."""
+    return hashlib.sha256(protocol.text.encode("utf-8")).hexdigest()
 
 
 def _check_geometry(protocol: Protocol, the_plan) -> tuple[float, float, float]:
@@ -505,9 +530,9 @@ def _series_missing(camera: Mapping[str, Any]) -> bool:
 class _Run:
     """State of one session of :func:`run_protocol` (what was measured, darks, sample mounted)."""
 
-    def __init__(self, protocol, rig, writer, result, clock, change_sample, resume, session, progress,
+    def __init__(self, protocol, the_plan, rig, writer, result, clock, change_sample, resume, session, progress,
                  max_consecutive_errors):
-        self.protocol, self.rig, self.writer, self.result = protocol, rig, writer, result
+        self.protocol, self.plan, self.rig, self.writer, self.result = protocol, the_plan, rig, writer, result
         self.clock, self.change_sample, self.resume, self.session = clock, change_sample, resume, session
         self.progress, self.max_consecutive_errors = progress, max_consecutive_errors
         self.measured_since_dark: int | None = None
@@ -633,6 +658,40 @@ class _Run:
                 "Fix the instrument and resume the run."
             )
 
+    def return_sample(self) -> None:
+        """After the reference standard, the sample back in the holder, in the mounting of
+        the last planned point (as the run found it)."""
+        if self.on_reference:
+            last = self.plan.points[-1].mounting if self.plan.points else 0
+            self.hold(Job(PlannedPoint(0, "", 0, 0.0, 0.0, 0.0, last), "check"))
+
+    def extend(self, decision: Extension, lamp_voltage: float, warm_up: bool) -> list[Job] | None:
+        """Record an ``extend`` callback's ``decision`` in ``metadata["extensions"]``; when it
+        appends blocks, make the extended protocol the recording's (its text and the
+        experiment's hash, so that a resume continues it) and return the jobs not yet
+        recorded (None: the run ends)."""
+        stored = self.writer.stored_metadata
+        entry = {"instrument_time": self.clock(), "wall_time": _now_iso(), "appended": decision.text,
+                 "note": dict(decision.note)}
+        extensions = list(stored.get("extensions", [])) + [entry]
+        if decision.text is None:
+            self.writer.update(extensions=extensions)
+            return None
+        try:
+            protocol = extended(self.protocol, decision.text)
+        except ValueError as error:
+            raise AcquisitionError(f"the run's extension is not a protocol's continuation: {error}") from error
+        self.protocol, self.plan = protocol, plan(protocol)
+        self.writer.update(
+            extensions=extensions,
+            protocol={**stored["protocol"], "text": protocol.text},
+            experiment={**stored["experiment"], "protocol_sha256": protocol_sha256(protocol)})
+        done = self.writer.done_keys()
+        todo = [job for job in build_jobs(protocol, self.plan, self.session) if point_key(*job.point.key) not in done]
+        if not self.prepared and any(job.refusal is None for job in todo):
+            self.prepare(lamp_voltage, warm_up, self.characterisation_point)
+        return todo
+
     def _rotation(self, job: Job) -> float | None:
         """The rotation the protocol set for the mounting of ``job`` [deg] (None: not set)."""
         if job.kind == "reference" or job.point.mounting < 0:
@@ -726,6 +785,7 @@ def run_protocol(
     clock: Callable[[], float] | None = None,
     progress: Callable[[Progress], None] | None = None,
     max_consecutive_errors: int = 3,
+    extend: Callable[[RunResult], Extension] | None = None,
 ) -> RunResult:
     """Measure every point of a protocol on ``rig`` into the recording ``folder``.
 
@@ -766,6 +826,14 @@ def run_protocol(
         the recording "failed"; it can be resumed once the cause is fixed. A run that
         reaches the end with some failed points is "incomplete" (a resume measures them
         again); "complete" means every planned point was measured or refused.
+    extend : callable, optional
+        Called with the run's :class:`RunResult` (``instrument_seconds`` so far) once every
+        point of the protocol so far is measured, the sample back in its holder and the
+        camera's linearity series taken: an :class:`Extension` with ``[[block]]`` sections to
+        append and measure in the same session (the recording's protocol becomes the
+        extended one, so an interrupted run resumes it), or with ``text=None`` to end the
+        run. Every decision is stored, with its note, in ``metadata["extensions"]``. An
+        adaptive run (:mod:`gonio.adaptive`) chooses its next points this way.
 
     Returns
     -------
@@ -814,18 +882,19 @@ def run_protocol(
     jobs = build_jobs(protocol, the_plan, session)
     todo = [job for job in jobs if point_key(*job.point.key) not in done]
     result = RunResult(folder=Path(folder), skipped=len(jobs) - len(todo))
-    run = _Run(protocol, rig, writer, result, clock, change_sample, resume, session, progress, max_consecutive_errors)
+    run = _Run(protocol, the_plan, rig, writer, result, clock, change_sample, resume, session, progress,
+               max_consecutive_errors)
     try:
-        measurable = [job for job in todo if job.refusal is None]
         run.characterisation_point = _characterisation_point(rig, the_plan)
-        if measurable:
+        if any(job.refusal is None for job in todo):
             run.prepare(lamp_voltage, warm_up, run.characterisation_point)
-        for count, job in enumerate(todo, start=1):
-            run.do(count, len(todo), job)
-        if run.on_reference:
-            last = the_plan.points[-1].mounting if the_plan.points else 0
-            run.hold(Job(PlannedPoint(0, "", 0, 0.0, 0.0, 0.0, last), "check"))  # the sample back, as it was
-        run.characterise_linearity(lamp_voltage, warm_up)
+        while todo is not None:
+            for count, job in enumerate(todo, start=1):
+                run.do(count, len(todo), job)
+            run.return_sample()
+            run.characterise_linearity(lamp_voltage, warm_up)
+            result.instrument_seconds = clock() - run.start_instrument
+            todo = run.extend(extend(result), lamp_voltage, warm_up) if extend is not None else None
     except KeyboardInterrupt:
         run.finish("interrupted")
         raise

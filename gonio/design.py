@@ -62,7 +62,8 @@ from . import models
 from .protocols import Protocol, RigLimits, loads, move_time, plan, travel_seconds
 
 __all__ = ["Design", "design", "design_protocol_text", "expected_widths", "DEFAULT_NOISE", "DEFAULT_CALIBRATION",
-           "greedy_selection", "DEFAULT_ALIGNMENT_SD", "ALIGNMENT_NUISANCE"]
+           "greedy_selection", "DEFAULT_ALIGNMENT_SD", "ALIGNMENT_NUISANCE", "DsCriterion", "candidate_geometries",
+           "information_vectors", "prior_information", "PRIOR_DRAWS", "check_priors"]
 
 #: Relative standard uncertainty of one value on the default (realistic) emulated rig [-]:
 #: the median of its reduced budget (docs/acquisition.md; NIST STARR states 0.15-0.6 % at k=2).
@@ -142,6 +143,10 @@ class Design:
         Whether the protocol measures the reference standard.
     alignment_sd : float
         Prior standard deviation of the rig's alignment errors marginalised [deg].
+    blocks : dict
+        ``{(theta_i, phi_i): [view, ...]}``: the points by lamp direction [deg].
+    reference_at : tuple of float
+        Lamp polar angles the reference standard is read at besides the design's own [deg].
     """
 
     model: str
@@ -158,9 +163,10 @@ class Design:
     reference: bool = True
     alignment_sd: float = DEFAULT_ALIGNMENT_SD
     blocks: dict[tuple[float, float], list[float]] = field(default_factory=dict, repr=False)
+    reference_at: tuple[float, ...] = ()
 
 
-def _candidates(rig: RigLimits, theta_step: float, view_step: float, azimuths: Sequence[float],
+def candidate_geometries(rig: RigLimits, theta_step: float, view_step: float, azimuths: Sequence[float],
                 max_angle: float = 90.0) -> np.ndarray:
     """Every geometry (theta_i, phi_i, view) on the grid that the rig accepts, with lamp and
     camera within ``max_angle`` [deg] of the normal, (K, 3)."""
@@ -252,14 +258,15 @@ def _information(jacobians: np.ndarray, alignment: np.ndarray, noise: float) -> 
     return np.concatenate([jacobians, ones, alignment], axis=2) / noise
 
 
-def _prior_information(widths: np.ndarray, calibration: float, alignment_sd: float, count: int) -> np.ndarray:
+def prior_information(widths: np.ndarray, calibration: float, alignment_sd: float, count: int) -> np.ndarray:
     """The priors' own information: ``12 / width^2`` (a uniform prior's variance),
     ``1 / calibration^2`` and ``1 / alignment_sd^2`` for each of ``count`` alignment errors."""
     return np.diag(np.concatenate([12.0 / widths**2, [1.0 / calibration**2], np.full(count, 1.0 / alignment_sd**2 if count else 0.0)]))
 
 
-def _vectors(model: str, points: np.ndarray, draws: np.ndarray, names: Sequence[str], fixed: Mapping[str, float],
-             widths: np.ndarray, noise: float, alignment: Sequence[str]) -> np.ndarray:
+def information_vectors(model: str, points: np.ndarray, draws: np.ndarray, names: Sequence[str],
+                        fixed: Mapping[str, float], widths: np.ndarray, noise: float,
+                        alignment: Sequence[str]) -> np.ndarray:
     """The information vectors of ``points`` for every prior draw (:func:`_information`)."""
     return _information(_log_jacobians(model, points, draws, names, fixed, widths),
                         _alignment_jacobians(model, points, draws, names, fixed, alignment), noise)
@@ -286,8 +293,8 @@ def expected_widths(model: str, points: Sequence[tuple[float, float, float]],
     centre = np.array([[(at or {}).get(n, 0.5 * (low + high)) for n, (low, high) in priors.items()]])
     geometry = np.asarray(points, float).reshape(-1, 3)
     alignment = ALIGNMENT_NUISANCE if alignment_sd > 0 else ()
-    vectors = _vectors(model, geometry, centre, names, fixed or {}, widths, noise, alignment)[0]
-    prior = _prior_information(widths, calibration, alignment_sd, len(alignment))
+    vectors = information_vectors(model, geometry, centre, names, fixed or {}, widths, noise, alignment)[0]
+    prior = prior_information(widths, calibration, alignment_sd, len(alignment))
     covariance = np.linalg.inv(vectors.T @ vectors + prior)
     return {n: float(2 * 1.96 * math.sqrt(covariance[k, k])) for k, n in enumerate(names)}
 
@@ -307,7 +314,8 @@ def design(model: str, priors: Mapping[str, tuple[float, float]], budget: float,
            calibration: float = DEFAULT_CALIBRATION, theta_step: float = 5.0, view_step: float = 5.0,
            azimuths: Sequence[float] = (0.0,), draws: int = PRIOR_DRAWS, seed: int = 0,
            label: str = "designed sample", reference: bool = True,
-           alignment_sd: float = DEFAULT_ALIGNMENT_SD, max_angle: float = 90.0) -> Design:
+           alignment_sd: float = DEFAULT_ALIGNMENT_SD, max_angle: float = 90.0,
+           reference_at: Sequence[float] = ()) -> Design:
     """Choose geometries for ``model``'s parameters within ``budget`` seconds (module notes).
 
     Parameters
@@ -345,6 +353,10 @@ def design(model: str, priors: Mapping[str, tuple[float, float]], budget: float,
         Largest lamp polar angle and camera angle from the normal considered [deg] (BRDF
         studies often stop at 75-80 deg, where a real sample's texture and the rig's stray
         light start to show, docs/design.md).
+    reference_at : sequence of float
+        Lamp polar angles at which to read the reference standard besides the design's own
+        [deg]: the angles a later adaptive run (:mod:`gonio.adaptive`) may add points at,
+        when it calibrates per incidence. Their readings count in the budget.
 
     Raises
     ------
@@ -357,26 +369,28 @@ def design(model: str, priors: Mapping[str, tuple[float, float]], budget: float,
     spec = models.get(model)
     fixed = dict(fixed or {})
     priors = {name: (float(low), float(high)) for name, (low, high) in priors.items()}
-    _check_priors(spec, priors, fixed)
+    check_priors(spec, priors, fixed)
     names = list(priors)
     widths = np.array([high - low for low, high in priors.values()])
     alignment = ALIGNMENT_NUISANCE if alignment_sd > 0 else ()
-    candidates = _candidates(rig, theta_step, view_step, azimuths, max_angle)
-    vectors = _vectors(model, candidates, _prior_draws(priors, draws, seed), names, fixed, widths, noise, alignment)
-    criterion = _DsCriterion(vectors, _prior_information(widths, calibration, alignment_sd, len(alignment)),
+    candidates = candidate_geometries(rig, theta_step, view_step, azimuths, max_angle)
+    vectors = information_vectors(model, candidates, _prior_draws(priors, draws, seed), names, fixed, widths, noise,
+                                  alignment)
+    criterion = DsCriterion(vectors, prior_information(widths, calibration, alignment_sd, len(alignment)),
                              len(names))
+    reference_at = _checked_reference_angles(reference_at, rig) if reference else ()
     chosen, protocol_seconds = greedy_selection(
         candidates, rig, budget, criterion.gains, criterion.add,
-        lambda points: plan(_protocol(model, points, label, reference)).estimated_seconds)
+        lambda points: plan(_protocol(model, points, label, reference, reference_at)).estimated_seconds)
     if not chosen:
-        shortest = plan(_protocol(model, candidates[:1], label, reference)).estimated_seconds
+        shortest = plan(_protocol(model, candidates[:1], label, reference, reference_at)).estimated_seconds
         raise ValueError(f"budget {budget:g} s: too short for one point ({shortest:.0f} s with "
                          f"{'the reference standard and ' if reference else ''}the darks); give a longer budget")
     ordered = _ordered(candidates[chosen])
     widths_expected = expected_widths(model, ordered, priors, fixed, noise, calibration, alignment_sd=alignment_sd)
     return Design(model, tuple(names), priors, fixed, tuple(map(tuple, ordered.tolist())), protocol_seconds,
                   widths_expected, float(budget), noise, calibration, label, reference, alignment_sd,
-                  _grouped(ordered))
+                  _grouped(ordered), reference_at)
 
 
 def greedy_selection(candidates: np.ndarray, rig: RigLimits, budget: float, gains: Callable[[], np.ndarray],
@@ -414,19 +428,21 @@ def greedy_selection(candidates: np.ndarray, rig: RigLimits, budget: float, gain
     return chosen, seconds
 
 
-class _DsCriterion:
+class DsCriterion:
     """The expected gain of each candidate in ``log det`` of the parameters' information
     with the nuisance (calibration, alignment) marginalised: Ds-optimality (Atkinson,
     Donev & Tobias 2007, section 10.3). With ``F`` the information of everything and
-    ``F_n`` its nuisance block, the gain of a point ``v`` is
+    ``F_n`` its nuisance block (``prior``: the information before any candidate, (P, P) or
+    one per prior draw, (D, P, P)), the gain of a point ``v`` is
     ``log(1 + v^T F^-1 v) - log(1 + v_n^T F_n^-1 v_n)`` per prior draw (the matrix
     determinant lemma); both inverses follow each choice by a Sherman-Morrison update."""
 
     def __init__(self, vectors: np.ndarray, prior: np.ndarray, interest: int) -> None:
         self.vectors, self.interest = vectors, interest
-        draws = vectors.shape[0]
-        self.inverse = np.repeat(np.linalg.inv(prior)[None], draws, axis=0)
-        self.nuisance_inverse = np.repeat(np.linalg.inv(prior[interest:, interest:])[None], draws, axis=0)
+        shape = (vectors.shape[0],) + prior.shape[-2:]
+        prior = np.broadcast_to(prior, shape)  # one information for every draw, or one per draw (D, P, P)
+        self.inverse = np.linalg.inv(prior)
+        self.nuisance_inverse = np.linalg.inv(prior[:, interest:, interest:])
 
     def gains(self) -> np.ndarray:
         """Mean over the draws of each candidate's gain, (K,)."""
@@ -447,7 +463,10 @@ def _rank_one_update(inverse: np.ndarray, v: np.ndarray) -> None:
     inverse -= np.einsum("dp,dq->dpq", fv, fv) / (1.0 + np.einsum("dp,dp->d", v, fv))[:, None, None]
 
 
-def _check_priors(spec, priors: Mapping[str, tuple[float, float]], fixed: Mapping[str, float]) -> None:
+def check_priors(spec, priors: Mapping[str, tuple[float, float]], fixed: Mapping[str, float]) -> None:
+    """Refuse prior ranges (``{name: (low, high)}``) or fixed values that are not the
+    parameters of the model ``spec``, or ranges outside its bounds, naming them
+    (``ValueError``)."""
     if not priors:
         raise ValueError(f"no prior range given: name the parameters of {spec.name!r} to design for, with their "
                          "ranges (e.g. sigma=10:45)")
@@ -492,26 +511,40 @@ def _grouped(points: np.ndarray) -> dict[tuple[float, float], list[float]]:
     return blocks
 
 
-def _protocol(model: str, points: np.ndarray, label: str, reference: bool) -> Protocol:
-    return loads(_blocks_text(model, _grouped(_ordered(points)), label, reference), source="design")
+def _protocol(model: str, points: np.ndarray, label: str, reference: bool,
+              reference_at: Sequence[float] = ()) -> Protocol:
+    return loads(_blocks_text(model, _grouped(_ordered(points)), label, reference, reference_at), source="design")
 
 
-def _reference_text(blocks: Mapping[tuple[float, float], list[float]]) -> str:
-    """The ``[reference]`` section: the standard at each lamp polar angle of ``blocks``, in
-    the plane of incidence, at the first camera angle of :data:`_REFERENCE_VIEWS` the rig
-    accepts."""
+def _checked_reference_angles(angles: Sequence[float], rig: RigLimits) -> tuple[float, ...]:
+    """``reference_at`` as floats, each a lamp polar angle the rig can read the standard at."""
+    rule = rig.geometry_rule
+    out = tuple(float(a) for a in angles)
+    for theta_i in out:
+        if not (math.isfinite(theta_i) and any(rule.refusal(theta_i, 0.0, v) is None for v in _REFERENCE_VIEWS)):
+            raise ValueError(f"reference_at {theta_i:g} deg: the rig cannot read the reference standard at that lamp "
+                             f"angle (camera at {', '.join(f'{v:g}' for v in _REFERENCE_VIEWS)} deg); expected lamp "
+                             "polar angles within its range")
+    return out
+
+
+def _reference_text(blocks: Mapping[tuple[float, float], list[float]], reference_at: Sequence[float] = ()) -> str:
+    """The ``[reference]`` section: the standard at each lamp polar angle of ``blocks`` and
+    of ``reference_at``, in the plane of incidence, at the first camera angle of
+    :data:`_REFERENCE_VIEWS` the rig accepts."""
     rule = RigLimits().geometry_rule
     geometries = []
-    for theta_i in sorted({theta for theta, _ in blocks}):
+    for theta_i in sorted({theta for theta, _ in blocks} | set(reference_at)):
         view = next((v for v in _REFERENCE_VIEWS if rule.refusal(theta_i, 0.0, v) is None), None)
         if view is not None:
             geometries.append(f"[{theta_i:g}, 0, {view:g}]")
     return _REFERENCE.format(geometries=", ".join(geometries))
 
 
-def _blocks_text(model: str, blocks: Mapping[tuple[float, float], list[float]], label: str, reference: bool) -> str:
+def _blocks_text(model: str, blocks: Mapping[tuple[float, float], list[float]], label: str, reference: bool,
+                 reference_at: Sequence[float] = ()) -> str:
     text = _HEADER.format(name=f"design-{model}", description=f"geometries designed for {model} (gonio design)",
-                          label=label) + (_reference_text(blocks) if reference else "")
+                          label=label) + (_reference_text(blocks, reference_at) if reference else "")
     for (theta_i, phi_i), views in blocks.items():
         text += (f"[[block]]\nname = \"theta_i={theta_i:g}, phi_i={phi_i:g}\"\ntheta_i = {theta_i:g}\n"
                  f"phi_i = {phi_i:g}\nview = [{', '.join(f'{v:g}' for v in views)}]\n")
@@ -540,4 +573,8 @@ def design_protocol_text(result: Design) -> str:
         f"# {len(result.points)} points, estimated instrument time {result.seconds:.0f} s (budget {result.budget:.0f} s;",
         "# gonio plan's estimate, lamp warm-up not included). docs/design.md.",
     ]
-    return "\n".join(comment) + "\n" + _blocks_text(result.model, result.blocks, result.label, result.reference)
+    if result.reference_at:
+        comment.append(f"# The reference standard is read at {', '.join(f'{a:g}' for a in result.reference_at)} deg "
+                       "too (--reference-at).")
+    return "\n".join(comment) + "\n" + _blocks_text(result.model, result.blocks, result.label, result.reference,
+                                                   result.reference_at)

@@ -45,7 +45,7 @@ from scipy.optimize import least_squares
 
 from . import models
 from .design import (ALIGNMENT_NUISANCE, DEFAULT_ALIGNMENT_SD, DEFAULT_CALIBRATION, DEFAULT_NOISE, _alignment_jacobians,
-                     _blocks_text, _candidates, _grouped, _ordered, _prior_draws, _protocol, _sample_frame,
+                     _blocks_text, candidate_geometries, _grouped, _ordered, _prior_draws, _protocol, _sample_frame,
                      greedy_selection)
 from .protocols import RigLimits, plan
 
@@ -201,7 +201,7 @@ def discriminate(candidates: Sequence[str], priors: Mapping[str, tuple[float, fl
     for name in names:
         models.get(name)  # an unknown name raises, listing the models
     priors = {k: (float(lo), float(hi)) for k, (lo, hi) in priors.items()}
-    points = _candidates(rig, theta_step, view_step, azimuths, max_angle)
+    points = candidate_geometries(rig, theta_step, view_step, azimuths, max_angle)
     separations = _separations(names, priors, dict(fixed or {}), points, noise, calibration, draws, seed,
                                alignment_sd)
     everything = [s for pairs in separations.values() for s in pairs]

@@ -27,6 +27,7 @@ The file format is documented in docs/protocols.md.
 """
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 import stat
@@ -51,6 +52,7 @@ from .geometry import azimuth_difference
 
 __all__ = [
     "ProtocolError",
+    "extended",
     "RigLimits",
     "Exposure",
     "Darks",
@@ -621,6 +623,35 @@ def loads(text: str, source: str = "<string>") -> Protocol:
         exposure=exposure, darks=darks, blocks=tuple(blocks), reference=reference, checks=checks,
         source=source, text=text, emulated=emulated, mountings=mountings,
     )
+
+
+def extended(protocol: Protocol, text: str) -> Protocol:
+    r"""``protocol`` with ``text`` (``[[block]]`` sections and comments) appended.
+
+    A recording that grows while it is measured (an adaptive run, :mod:`gonio.adaptive`)
+    keeps every point it has: the blocks so far, the reference standard, the exposure and
+    every other setting stay as they are, and the new blocks' points come after the old
+    ones in the plan. A protocol with several mountings of the sample is not extended (its
+    new points would be measured in every mounting, each a remount).
+
+    >>> base = loads('[protocol]\nname = "x"\n[sample]\nlabel = "s"\n[[block]]\ntheta_i = 30\nview = [0]\n')
+    >>> [b.views for b in extended(base, '[[block]]\nname = "more"\ntheta_i = 30\nview = [10, 20]\n').blocks]
+    [(0.0,), (10.0, 20.0)]
+
+    Raises
+    ------
+    ValueError
+        ``text`` changes more than the blocks, or the protocol mounts the sample more than once.
+    """
+    if protocol.mountings.count > 1:
+        raise ValueError(f"{protocol.source}: the protocol mounts the sample {protocol.mountings.count} times; only "
+                         "a protocol with one mounting is extended")
+    grown = loads(protocol.text.rstrip("\n") + "\n" + text, source=protocol.source)
+    same = dataclasses.replace(grown, blocks=protocol.blocks, text=protocol.text)
+    if same != protocol or grown.blocks[:len(protocol.blocks)] != protocol.blocks:
+        raise ValueError(f"{protocol.source}: the appended text changes more than the blocks; expected [[block]] "
+                         "sections only")
+    return grown
 
 
 def _parse_toml(text: str, source: str) -> dict:

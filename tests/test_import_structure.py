@@ -18,11 +18,13 @@ FORBIDDEN = {
     "drivers": ("gonio",),
     "gonio.models": ("gonio.fitting", "gonio.reduction", "gonio.acquisition", "gonio.protocols", "gonio.report",
                      "gonio.cli"),
-    "gonio.fitting": ("gonio.reduction", "gonio.acquisition", "gonio.report", "gonio.cli"),
-    "gonio.reduction": ("gonio.report", "gonio.cli"),
+    "gonio.fitting": ("gonio.reduction", "gonio.acquisition", "gonio.report", "gonio.cli", "gonio.adaptive"),
+    "gonio.reduction": ("gonio.report", "gonio.cli", "gonio.adaptive"),
     "gonio.report": ("gonio.cli",),
-    "gonio.protocols": ("gonio.cli",),
-    "gonio.acquisition": ("gonio.cli",),
+    "gonio.protocols": ("gonio.cli", "gonio.acquisition", "gonio.design", "gonio.adaptive"),
+    "gonio.acquisition": ("gonio.cli", "gonio.design", "gonio.adaptive"),
+    "gonio.design": ("gonio.cli", "gonio.acquisition", "gonio.adaptive"),
+    "gonio.adaptive": ("gonio.cli",),
 }
 
 

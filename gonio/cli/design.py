@@ -3,15 +3,10 @@ from __future__ import annotations
 
 import argparse
 import math
-import re
 from pathlib import Path
 
 from . import CLIError
-from .arguments import name_value_pairs, number
-
-#: Durations ``--budget`` accepts: a number with an optional unit.
-_DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|sec|min|h)?\s*$")
-_UNIT_SECONDS = {None: 1.0, "s": 1.0, "sec": 1.0, "min": 60.0, "h": 3600.0}
+from .arguments import name_value_pairs, number, parse_duration, prior_ranges
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -55,34 +50,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--max-angle", type=float, default=90.0, metavar="DEG",
                         help="largest lamp and camera angle from the normal considered (default 90: the rig's "
                              "limits; 75-80 keeps clear of grazing angles, where a real sample's texture shows)")
+    parser.add_argument("--reference-at", default=None, metavar="DEG[,DEG...]",
+                        help="lamp polar angles to read the reference standard at besides the design's own: those "
+                             "an adaptive run from this protocol may add points at (gonio run --adaptive)")
     parser.add_argument("--label", default="designed sample", help="the protocol's sample label")
     parser.add_argument("--seed", type=int, default=0, help="seed of the prior draws (default 0)")
     parser.set_defaults(func=_run)
 
 
-def parse_duration(text: str) -> float:
-    """Seconds of ``300``, ``300s``, ``5min`` or ``1.5h``.
-
-    >>> parse_duration("5min"), parse_duration("300"), parse_duration("1.5h")
-    (300.0, 300.0, 5400.0)
-    """
-    match = _DURATION.match(text)
-    if not match:
-        raise CLIError(f"--budget {text!r}: expected a duration such as 300s, 5min or 1.5h")
-    return float(match.group(1)) * _UNIT_SECONDS[match.group(2)]
-
-
-def _ranges(items: list[str]) -> dict[str, tuple[float, float]]:
-    ranges = {}
-    for name, span in name_value_pairs(items, "--prior").items():
-        low, colon, high = span.partition(":")
-        try:
-            if not colon:
-                raise ValueError
-            ranges[name] = (float(low), float(high))
-        except ValueError:
-            raise CLIError(f"--prior {name}={span!r}: expected NAME=LOW:HIGH, e.g. sigma=10:45") from None
-    return ranges
+def _angles(text: str | None, what: str) -> tuple[float, ...]:
+    """``"0,55,75"`` as angles [deg]; a :class:`CLIError` naming ``what``."""
+    if text is None:
+        return ()
+    try:
+        return tuple(float(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise CLIError(f"{what} {text!r}: expected angles in degrees separated by commas, e.g. 0,55,75,85") from None
 
 
 def _fixed(items: list[str]) -> dict[str, float]:
@@ -137,9 +120,10 @@ def _run(args: argparse.Namespace) -> int:
         raise CLIError(f"--max-angle {args.max_angle!r}: expected degrees in (0, 90]")
     try:
         if args.discriminate:
-            text, summary = _discrimination(args.discriminate, _ranges(args.prior), budget, common)
+            text, summary = _discrimination(args.discriminate, prior_ranges(args.prior), budget, common)
         else:
-            result = designing.design(args.model, _ranges(args.prior), budget, **common)
+            result = designing.design(args.model, prior_ranges(args.prior), budget, **common,
+                                      reference_at=_angles(args.reference_at, "--reference-at"))
             text = designing.design_protocol_text(result)
             widths = ", ".join(f"{n} {w:.3g}" for n, w in result.widths.items())
             summary = (f"{len(result.points)} points at {len(result.blocks)} lamp direction(s), estimated instrument "

@@ -18,9 +18,17 @@ from gonio.sample_specs import DEFAULT_SAMPLE
 from .samples import SPEC_SYNTAX, parse_sample_spec
 from .paths import check_output_folder
 from .progress import ProgressLine
+from .arguments import name_value_pairs, number, parse_duration, prior_ranges
+
+#: Default instrument time of one batch of an adaptive run [s] (gonio.adaptive.DEFAULT_BATCH_SECONDS).
+DEFAULT_BATCH = 60
+#: The adaptive options, as ``(attribute, option)``: refused without --adaptive.
+_ADAPTIVE_OPTIONS = (("model", "--model"), ("until", "--until"), ("budget", "--budget"), ("batch", "--batch"),
+                     ("prior", "--prior"), ("fix", "--fix"), ("calibration", "--calibration"),
+                     ("alignment", "--alignment"), ("stray_light", "--stray-light"), ("max_angle", "--max-angle"))
 
 if TYPE_CHECKING:  # loaded by the command itself: every gonio command builds this parser
-    from gonio import acquisition, protocols
+    from gonio import acquisition, adaptive, protocols
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``gonio run``."""
@@ -51,7 +59,36 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="emulated rig without a lamp monitor (use [checks] in the protocol; docs/acquisition.md)")
     parser.add_argument("--no-warm-up", action="store_true", help="do not wait for the lamp to stabilise")
     parser.add_argument("--quiet", action="store_true", help="no progress line")
+    _register_adaptive(parser)
     parser.set_defaults(func=_run)
+
+
+def _register_adaptive(parser: argparse.ArgumentParser) -> None:
+    """The options of an adaptive run (docs/design.md, "Adaptive runs")."""
+    group = parser.add_argument_group(
+        "adaptive runs", "after the protocol's points, fit and choose the next batch from the posterior until the "
+                         "target widths or the budget (docs/design.md)")
+    group.add_argument("--adaptive", action="store_true", help="run adaptively (needs --model, --until, --budget)")
+    group.add_argument("--model", help="registered model fitted after each batch (see 'gonio models')")
+    group.add_argument("--until", action="append", default=[], metavar="NAME=WIDTH",
+                       help="stop when the 95 %% interval of NAME is at most WIDTH wide (repeatable; all must hold)")
+    group.add_argument("--budget", metavar="SECONDS|Nmin|Nh",
+                       help="the most instrument time the whole run may take, as gonio plan estimates it")
+    group.add_argument("--batch", default=None, metavar="SECONDS|Nmin",
+                       help=f"instrument time of one batch, at most (default {DEFAULT_BATCH}s)")
+    group.add_argument("--prior", action="append", default=[], metavar="NAME=LOW:HIGH",
+                       help="uniform prior range of a parameter (default: its physical bounds); every parameter not "
+                            "--fix'ed is fitted")
+    group.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE", help="hold a parameter fixed")
+    group.add_argument("--calibration", choices=["per-incidence", "common"], default=None,
+                       help="the fit's calibration (default per-incidence: new points only at the lamp angles the "
+                            "reference standard is read at)")
+    group.add_argument("--alignment", default=None, metavar="all|none|NAMES",
+                       help="the rig's alignment errors the fit frees (default all)")
+    group.add_argument("--stray-light", action=argparse.BooleanOptionalAction, default=None,
+                       help="fit the rig's stray light (default yes)")
+    group.add_argument("--max-angle", type=float, default=None, metavar="DEG",
+                       help="largest lamp and camera angle from the normal for new points (default 90)")
 
 
 @contextmanager
@@ -175,12 +212,12 @@ def _stop_signals_interrupt() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {number: signal.signal(number, interrupt) for number in wanted}
+    previous = {signum: signal.signal(signum, interrupt) for signum in wanted}
     try:
         yield
     finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -190,11 +227,14 @@ def _run(args: argparse.Namespace) -> int:
     check_ports({"--stage": args.stage, "--camera": args.camera, "--lamp": args.lamp})
     _check_lamp_voltage(args.lamp_voltage, emulated=not all((args.stage, args.camera, args.lamp)))
     protocol = protocols.load(args.protocol)
+    settings = adaptive_settings(args, protocol)
+    protocol, extend = _adaptive_start(args, protocol, settings)
     ports = (args.stage, args.camera, args.lamp)
     reflectance = protocol.reference.reflectance if protocol.reference else None
     try:
         with _stop_signals_interrupt():
-            result = _measure(args, protocol, ports, reflectance)
+            result = _measure(args, protocol, ports, reflectance, extend,
+                              {"adaptive": settings.to_json()} if settings else {})
     except KeyboardInterrupt:
         print(f"\ngonio run: interrupted; everything measured is in {args.out}. "
               f"Continue with: gonio run {args.protocol} --out {args.out} --resume")
@@ -227,8 +267,76 @@ def _check_lamp_voltage(voltage: float, emulated: bool) -> None:
                        f"(its nominal voltage is {supply.nominal_voltage_v:g} V)")
 
 
-def _measure(args: argparse.Namespace, protocol, ports, reflectance):
-    """Run the protocol on the rig at ``ports``, or on the emulated rig; the RunResult."""
+def adaptive_settings(args: argparse.Namespace, protocol) -> "adaptive.AdaptiveSettings | None":
+    """The adaptive run's settings from the command line (None: not adaptive); the
+    adaptive options without ``--adaptive``, or a protocol an adaptive run cannot grow,
+    are refused naming them."""
+    given = [option for attribute, option in _ADAPTIVE_OPTIONS if getattr(args, attribute) not in (None, [])]
+    if not args.adaptive:
+        if given:
+            raise CLIError(f"{', '.join(given)}: options of an adaptive run; add --adaptive")
+        return None
+    missing = [option for attribute, option in _ADAPTIVE_OPTIONS[:3] if not getattr(args, attribute)]
+    if missing:
+        raise CLIError(f"--adaptive needs {', '.join(missing)} (e.g. --model oren-nayar --until sigma=0.5 "
+                       "--budget 600s)")
+    from gonio import adaptive, models
+
+    try:
+        spec = models.get(args.model)
+    except (KeyError, ValueError) as error:
+        raise CLIError(f"--model {args.model}: {str(error).strip(chr(39))}") from None
+    fixed = {name: number(name, value, "--fix") for name, value in name_value_pairs(args.fix, "--fix").items()}
+    ranges = prior_ranges(args.prior)
+    unknown = sorted((set(ranges) | set(fixed)) - set(spec.param_names))
+    if unknown:
+        raise CLIError(f"--prior/--fix {unknown}: not parameters of {spec.name}; its parameters are "
+                       f"{list(spec.param_names)}")
+    priors = {p.name: ranges.get(p.name, p.bounds) for p in spec.params if p.name not in fixed}
+    if protocol.mountings.count > 1:
+        raise CLIError(f"{protocol.source}: mounts the sample {protocol.mountings.count} times; an adaptive run "
+                       "takes a protocol with one mounting")
+    calibration = args.calibration or "per-incidence"
+    if calibration == "per-incidence" and protocol.reference is None:
+        raise CLIError(f"{protocol.source}: reads no reference standard, so the fit cannot calibrate per incidence; "
+                       "give --calibration common")
+    try:
+        return adaptive.AdaptiveSettings(
+            spec.name, {n: number(n, v, "--until") for n, v in name_value_pairs(args.until, "--until").items()},
+            parse_duration(args.budget), priors, fixed,
+            parse_duration(args.batch, "--batch") if args.batch else adaptive.DEFAULT_BATCH_SECONDS, calibration,
+            () if args.alignment == "none" else (args.alignment or "all"),
+            True if args.stray_light is None else args.stray_light,
+            max_angle=90.0 if args.max_angle is None else args.max_angle, seed=args.seed)
+    except ValueError as error:
+        raise CLIError(str(error)) from None
+
+
+def _adaptive_start(args: argparse.Namespace, protocol, settings):
+    """The protocol to measure and the run's ``extend`` callback: for a resumed adaptive run
+    the recording's extended protocol; a plain resume of an adaptive recording is refused."""
+    from gonio import adaptive
+    from gonio.data import read_metadata
+
+    metadata = read_metadata(args.out) if args.resume and (Path(args.out) / "metadata.json").is_file() else {}
+    batches = adaptive.appended_batches(metadata)
+    if settings is None:
+        if batches:
+            raise CLIError(f"{args.out}: was run adaptively ({batches} batch(es) appended); resume it with --adaptive "
+                           "and its options (--model, --until, --budget)")
+        return protocol, None
+    if batches:
+        try:
+            protocol = adaptive.resume_protocol(metadata, protocol)
+        except ValueError as error:
+            raise CLIError(str(error)) from None
+    say = None if args.quiet else (lambda text: print(f"gonio run: {text}", file=sys.stderr, flush=True))
+    return protocol, adaptive.AdaptiveRun(args.out, protocol, settings, batches, say)
+
+
+def _measure(args: argparse.Namespace, protocol, ports, reflectance, extend=None, extra_metadata=None):
+    """Run the protocol on the rig at ``ports``, or on the emulated rig; the RunResult.
+    ``extend`` and ``extra_metadata``: an adaptive run's callback and settings."""
     from gonio import acquisition
 
     if all(ports):
@@ -249,8 +357,9 @@ def _measure(args: argparse.Namespace, protocol, ports, reflectance):
             result = acquisition.run_protocol(
                 protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
                 warm_up=not args.no_warm_up, change_sample=prompt,
-                metadata={"rig": {"kind": "hardware", "stage": args.stage, "camera": args.camera, "lamp": args.lamp}},
-                progress=_progress_printer(args.quiet),
+                metadata={"rig": {"kind": "hardware", "stage": args.stage, "camera": args.camera, "lamp": args.lamp},
+                          **(extra_metadata or {})},
+                progress=_progress_printer(args.quiet), extend=extend,
             )
     else:
         options = {"monitor": False} if args.no_monitor else {}
@@ -263,7 +372,7 @@ def _measure(args: argparse.Namespace, protocol, ports, reflectance):
                 protocol, rig, args.out, resume=args.resume, lamp_voltage=args.lamp_voltage,
                 warm_up=not args.no_warm_up,
                 change_sample=lambda which, **how: change_sample(which, reflectance, **how),
-                clock=emulator.control.now, metadata=metadata,
-                progress=_progress_printer(args.quiet),
+                clock=emulator.control.now, metadata={**metadata, **(extra_metadata or {})},
+                progress=_progress_printer(args.quiet), extend=extend,
             )
     return result
