@@ -12,6 +12,11 @@ rho 0.5-1; intervals value +- 1.96 standard errors).
   is the smallest budget whose median measured width meets it (a user with a fixed design
   must choose the budget before measuring; this is the best they could have chosen), in
   recorded instrument time less the lamp's warm-up.
+- **The shipped protocols** (the measured front of the issue "Measurement design"): Fig 16,
+  Fig 16 with every second view, Fig 16 at one incidence (45 deg), Fig 17, Fig 19 and
+  CUReT 205, ``--fixed-seeds`` seeds each, fitted alike (with one common calibration where
+  the protocol reads no reference standard at every incidence: Fig 17 and CUReT 205 read
+  none, so their rho is relative only).
 - **Adaptive runs**: ``gonio run START --adaptive --until sigma=W --budget 900s`` with START
   the design at 300 s reading the reference standard at the lamp angles of the design at
   600 s (``gonio design --reference-at``), ``--seeds`` seeds per target; the recorded time
@@ -20,9 +25,11 @@ rho 0.5-1; intervals value +- 1.96 standard errors).
 The target of the issue "Measurement design": an adaptive run stops within 1.3x of the
 instrument time the best fixed design needed for that width.
 
-Run: ``python benchmarks/adaptive_study.py --seeds 20`` (runs are appended to
+Run: ``python benchmarks/adaptive_study.py --seeds 20`` (``--first-seed`` to share the seeds
+between processes; runs are appended to
 ``docs/benchmarks/adaptive_study.jsonl`` as they finish, so an interrupted study resumes;
-``--part fixed`` or ``--part adaptive`` runs one half, e.g. in two processes); writes
+``--part fixed``, ``--part shipped`` or ``--part adaptive`` runs one part, e.g. in two
+processes); writes
 ``docs/benchmarks/adaptive_study.json`` and ``.png``.
 """
 from __future__ import annotations
@@ -36,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import OUT, machine, wilson, write_json
+from _common import OUT, ROOT, machine, wilson, write_json
 
 MODEL = "oren-nayar-tabulated"
 TRUTH_SPEC = "oren-nayar-exact:rho=0.9,sigma=30"
@@ -51,10 +58,23 @@ ADAPTIVE_BUDGET = 900.0
 RECORDS = OUT / "adaptive_study.jsonl"
 
 
-def settings(target: float, seed: int):
+def settings(target: float, seed: int, calibration: str = "per-incidence"):
     from gonio.adaptive import AdaptiveSettings
 
-    return AdaptiveSettings(MODEL, {"sigma": target}, ADAPTIVE_BUDGET, dict(PRIORS), seed=seed)
+    return AdaptiveSettings(MODEL, {"sigma": target}, ADAPTIVE_BUDGET, dict(PRIORS), seed=seed,
+                            calibration=calibration)
+
+
+def shipped_protocols() -> dict[str, str]:
+    """``{name: protocol text}`` of the shipped protocols and Fig 16's thinned variants."""
+    def read(name: str) -> str:
+        return (ROOT / "protocols" / f"{name}.toml").read_text()
+
+    fig16 = read("oren-nayar-fig16-plaster")
+    return {"Fig 16": fig16, "Fig 16, every second view": fig16.replace("step = 5", "step = 10"),
+            "Fig 16, theta_i = 45 only": fig16.replace("theta_i = [30, 45, 60]", "theta_i = 45"),
+            "Fig 17": read("oren-nayar-fig17-sandpaper"), "Fig 19": read("oren-nayar-fig19-off-plane"),
+            "CUReT 205": read("curet-205")}
 
 
 def start_protocol() -> str:
@@ -72,7 +92,7 @@ def measure(text: str, folder: Path, seed: int, extend=None):
     from gonio.cli.run import emulated_rig
 
     protocol = protocols.loads(text, source="study")
-    reflectance = protocol.reference.reflectance
+    reflectance = protocol.reference.reflectance if protocol.reference else None
     with emulated_rig(TRUTH_SPEC, seed, name=f"adaptive-study-{seed}") as (rig, _, change_sample, metadata):
         return acquisition.run_protocol(protocol, rig, folder, metadata=metadata, extend=extend,
                                         change_sample=lambda which, **how: change_sample(which, reflectance, **how))
@@ -94,6 +114,24 @@ def run_fixed(budget: float, seed: int, scratch: Path) -> dict[str, Any]:
     shutil.rmtree(folder, ignore_errors=True)
     return {"kind": "fixed", "budget": budget, "seed": seed, "points": run.measured,
             "planned_seconds": protocols.plan(protocols.loads(text)).estimated_seconds,
+            "recorded_seconds": run.instrument_seconds - run.warm_up_seconds, "fit": outcome(posterior),
+            "redchi": posterior.redchi, "wall_seconds": time.perf_counter() - start}
+
+
+def run_shipped(name: str, seed: int, scratch: Path) -> dict[str, Any]:
+    from gonio import adaptive, protocols
+
+    text = shipped_protocols()[name]
+    protocol = protocols.loads(text, source=name)
+    calibrated = protocol.reference is not None and {p.theta_i for p in protocols.plan(protocol).points} <= {
+        float(g[0]) for g in protocol.reference.geometries}
+    folder = scratch / f"shipped-{seed}"
+    start = time.perf_counter()
+    run = measure(text, folder, seed)
+    posterior = adaptive.fit_posterior(folder, settings(TARGETS[0], seed, "per-incidence" if calibrated else "common"))
+    shutil.rmtree(folder, ignore_errors=True)
+    return {"kind": "shipped", "protocol": name, "seed": seed, "points": run.measured, "calibrated": calibrated,
+            "planned_seconds": protocols.plan(protocol).estimated_seconds,
             "recorded_seconds": run.instrument_seconds - run.warm_up_seconds, "fit": outcome(posterior),
             "redchi": posterior.redchi, "wall_seconds": time.perf_counter() - start}
 
@@ -126,6 +164,19 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
                                "sigma_width_median": float(np.median([r["fit"]["sigma"]["width"] for r in mine])),
                                "sigma_coverage": sum(r["fit"]["sigma"]["in95"] for r in mine) / len(mine),
                                "points": int(np.median([r["points"] for r in mine]))})
+    shipped_rows = []
+    for name in shipped_protocols():
+        mine = [r for r in records if r["kind"] == "shipped" and r["protocol"] == name]
+        if mine:
+            row = {"protocol": name, "seeds": len(mine), "calibrated": mine[0]["calibrated"],
+                   "points": int(np.median([r["points"] for r in mine])),
+                   "planned_seconds": float(np.median([r["planned_seconds"] for r in mine])),
+                   "recorded_seconds": float(np.median([r["recorded_seconds"] for r in mine]))}
+            for parameter in TRUTH:
+                covered = sum(r["fit"][parameter]["in95"] for r in mine)
+                row[parameter] = {"width_median": float(np.median([r["fit"][parameter]["width"] for r in mine])),
+                                  "coverage": covered / len(mine), "coverage_wilson": wilson(covered, len(mine))}
+            shipped_rows.append(row)
     targets = []
     for target in TARGETS:
         best = next((row for row in fixed_rows if row["sigma_width_median"] <= target), None)
@@ -147,7 +198,7 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
             "best_fixed_seconds": best["recorded_seconds"] if best else None,
             "ratio": seconds / best["recorded_seconds"] if best else None,
         })
-    return {"fixed": fixed_rows, "targets": targets}
+    return {"fixed": fixed_rows, "shipped": shipped_rows, "targets": targets}
 
 
 def chart(summary: dict[str, Any], records: list[dict[str, Any]], path: Path) -> None:
@@ -160,6 +211,11 @@ def chart(summary: dict[str, Any], records: list[dict[str, Any]], path: Path) ->
                color="C1", alpha=0.4, label="fixed designs (each seed)")
     ax.plot([row["recorded_seconds"] for row in summary["fixed"]],
             [row["sigma_width_median"] for row in summary["fixed"]], "s-", color="C1", label="fixed designs (median)")
+    for k, row in enumerate(summary["shipped"]):
+        ax.plot(row["recorded_seconds"], row["sigma"]["width_median"], "D", color="C0",
+                label="shipped protocols (median; coverage)" if k == 0 else None)
+        ax.annotate(f"{row['protocol']} ({row['sigma']['coverage']:.1f})", (row["recorded_seconds"],
+                    row["sigma"]["width_median"]), fontsize=6, xytext=(4, 2), textcoords="offset points")
     for k, target in enumerate(TARGETS):
         mine = [r for r in records if r["kind"] == "adaptive" and r["target"] == target]
         ax.scatter([r["recorded_seconds"] for r in mine], [r["fit"]["sigma"]["width"] for r in mine], s=14,
@@ -179,18 +235,23 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20, help="seeds of the adaptive runs (default 20)")
     parser.add_argument("--fixed-seeds", type=int, default=10, help="seeds of each fixed design (default 10)")
-    parser.add_argument("--part", choices=["fixed", "adaptive", "all"], default="all")
+    parser.add_argument("--part", choices=["fixed", "shipped", "adaptive", "all"], default="all")
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="first seed to run (to share the seeds between two processes)")
     args = parser.parse_args()
     import gonio
 
     gonio.brdf("oren-nayar-exact", 45.0, 0.0, np.array([20.0]), np.array([0.0]), **TRUTH)  # compile first
     records = list(map(json.loads, RECORDS.read_text().splitlines())) if RECORDS.exists() else []
-    done = {(r["kind"], r.get("budget", r.get("target")), r["seed"]) for r in records}
+    done = {(r["kind"], r.get("budget", r.get("target", r.get("protocol"))), r["seed"]) for r in records}
     todo = []
     if args.part in ("fixed", "all"):
-        todo += [("fixed", b, s) for s in range(args.fixed_seeds) for b in FIXED_BUDGETS]
+        todo += [("fixed", b, s) for s in range(args.first_seed, args.fixed_seeds) for b in FIXED_BUDGETS]
+    if args.part in ("shipped", "all"):
+        todo += [("shipped", name, s) for s in range(args.first_seed, args.fixed_seeds)
+                 for name in shipped_protocols()]
     if args.part in ("adaptive", "all"):
-        todo += [("adaptive", t, s) for s in range(args.seeds) for t in TARGETS]
+        todo += [("adaptive", t, s) for s in range(args.first_seed, args.seeds) for t in TARGETS]
     todo = [job for job in todo if job not in done]
     print(f"{len(todo)} runs to do", flush=True)
     start_text = start_protocol()
@@ -199,11 +260,12 @@ def main() -> int:
     try:
         for k, (kind, value, seed) in enumerate(todo, start=1):
             record = (run_fixed(value, seed, scratch) if kind == "fixed"
+                      else run_shipped(value, seed, scratch) if kind == "shipped"
                       else run_adaptive(value, seed, scratch, start_text))
             with RECORDS.open("a") as sink:
                 sink.write(json.dumps(record) + "\n")
             elapsed = time.perf_counter() - begun
-            print(f"[{k}/{len(todo)}] {kind} {value:g} seed {seed}: sigma width {record['fit']['sigma']['width']:.3f}, "
+            print(f"[{k}/{len(todo)}] {kind} {value} seed {seed}: sigma width {record['fit']['sigma']['width']:.3f}, "
                   f"{record['recorded_seconds']:.0f} s (eta {elapsed / k * (len(todo) - k) / 60:.1f} min)", flush=True)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
@@ -212,6 +274,10 @@ def main() -> int:
     for row in summary["fixed"]:
         print(f"fixed {row['budget']:5.0f} s: {row['seeds']} seeds, {row['recorded_seconds']:.0f} s recorded, "
               f"sigma width {row['sigma_width_median']:.3f}, coverage {row['sigma_coverage']:.2f}")
+    for row in summary["shipped"]:
+        print(f"{row['protocol']:<26} {row['seeds']} seeds, {row['recorded_seconds']:.0f} s recorded, sigma width "
+              f"{row['sigma']['width_median']:.3f} (coverage {row['sigma']['coverage']:.2f}), rho width "
+              f"{row['rho']['width_median']:.4f} (coverage {row['rho']['coverage']:.2f})")
     for row in summary["targets"]:
         print(f"target {row['target']:g}: adaptive {row['adaptive_seconds_median']:.0f} s "
               f"({row['reached']}/{row['seeds']} reached, coverage {row['sigma_coverage']:.2f}); best fixed "

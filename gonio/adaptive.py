@@ -323,7 +323,12 @@ class AdaptiveRun:
 
     def __call__(self, result: RunResult) -> Extension:
         settings = self.settings
-        posterior = fit_posterior(self.folder, settings, self.start)
+        try:
+            posterior = fit_posterior(self.folder, settings, self.start)
+        except (ValueError, RuntimeError, np.linalg.LinAlgError) as error:  # the recording is kept whole
+            return self._stop({"batch": self.batches, "settings": settings.to_json()},
+                              f"the fit of the recording so far failed ({type(error).__name__}: {error}); nothing "
+                              "more is chosen. Fit it with gonio fit to see why, or start from a longer protocol")
         self.start, self.last = posterior.start, posterior
         spent = plan(self.protocol).estimated_seconds
         note: dict[str, Any] = {"batch": self.batches, "posterior": posterior.to_json(), "estimated_seconds": spent,

@@ -140,6 +140,18 @@ def test_a_batch_goes_where_the_target_parameter_is_learnt():
     assert widths["rho"]["rho"] <= widths["sigma"]["rho"]
 
 
+def test_a_fit_that_fails_ends_the_run_saying_why(monkeypatch, start_text, tmp_path):
+    """Nothing is lost when the fit fails: the run ends with the reason, the recording whole."""
+    def failing(*args, **kwargs):
+        raise ValueError("3 values for 16 parameters")
+
+    monkeypatch.setattr(adaptive, "fit_posterior", failing)
+    settings = adaptive.AdaptiveSettings(MODEL, {"sigma": 0.1}, 900.0, PRIORS)
+    decision = adaptive.AdaptiveRun(tmp_path, P.loads(start_text), settings)(acquisition.RunResult(tmp_path))
+    assert decision.text is None
+    assert "the fit of the recording so far failed (ValueError: 3 values for 16 parameters)" in decision.note["stopped"]
+
+
 @pytest.mark.parametrize("changes, words", [
     ({"until": {}}, "at least one target"),
     ({"until": {"kappa": 0.1}}, "not a parameter"),
