@@ -146,6 +146,9 @@ class DeviceChannel:
         self.faults = Faults()
         self.lines_processed = 0
         self.last_internal_error: Exception | None = None
+        #: Called with ``(device, simulated time, line, reply)`` after every line (a
+        #: :class:`~drivers.emulator.control.TrafficLog`), or None.
+        self.traffic: Callable[[str, float, object, bytes], None] | None = None
 
     def process(self, line: "str | object") -> bytes:
         """Run one received line through the firmware; return the reply bytes (maybe empty).
@@ -169,6 +172,8 @@ class DeviceChannel:
             if reply and faults.garble > 0:
                 faults.garble -= 1
                 reply = self._garbled(reply)
+            if self.traffic is not None:
+                self.traffic(self.name, self.clock.now(), line, reply)
         if faults.disconnected:
             return b""
         return reply

@@ -63,9 +63,24 @@ def format_addresses(addresses: dict[str, dict[str, str]]) -> str:
     return "\n".join(lines)
 
 
+def _side_channels(rig, args: argparse.Namespace):
+    """The control server (``--control``) and the traffic log (``--log-traffic``), or None each."""
+    from drivers.emulator.control import ControlServer, TrafficLog
+
+    traffic = None
+    if args.log_traffic:
+        traffic = TrafficLog(args.log_traffic)
+        for channel in rig.channels.values():
+            channel.traffic = traffic
+    control = ControlServer(rig, args.control) if args.control is not None else None
+    return control, traffic
+
+
 def _run(args: argparse.Namespace) -> int:
     if not (args.pty or args.tcp):
         raise CLIError("nothing to serve: enable --pty and/or --tcp")
+    if args.control is not None and not 0 <= args.control <= 65535:
+        raise CLIError(f"--control {args.control}: expected a TCP port 0..65535 (0: a free one)")
     rig = build_rig(args)
     symlinks = None
     if args.link_dir:
@@ -76,6 +91,11 @@ def _run(args: argparse.Namespace) -> int:
         addresses = rig.start(pty=args.pty, tcp=args.tcp, tcp_ports=tcp_ports, symlinks=symlinks)
     except OSError as error:
         raise CLIError(f"cannot open the emulator's ports: {error}") from error
+    try:
+        control, traffic = _side_channels(rig, args)
+    except OSError as error:
+        rig.close()
+        raise CLIError(f"cannot open the control port or the traffic log: {error}") from error
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         mode = "real-time" if args.realtime else "fast"
@@ -86,6 +106,10 @@ def _run(args: argparse.Namespace) -> int:
             print("departures from the ideal rig: "
                   + ", ".join(f"{k}={v:.4g}" for k, v in rig.systematics.to_dict().items()))
         print(format_addresses({d: {k: v for k, v in e.items() if k != "url"} for d, e in addresses.items()}))
+        if control is not None:
+            print(f"{'control':<7} tcp  127.0.0.1:{control.port}  (JSON lines, docs/emulator.md)")
+        if traffic is not None:
+            print(f"traffic log: {traffic.path}")
         print("serving; press Ctrl-C to stop", flush=True)
         while not stop.wait(0.2):
             pass
@@ -93,7 +117,11 @@ def _run(args: argparse.Namespace) -> int:
         pass
     finally:
         signal.signal(signal.SIGTERM, previous)
+        if control is not None:
+            control.close()
         rig.close()
+        if traffic is not None:
+            traffic.close()
         print("gonio emulator: stopped", flush=True)
     return 0
 
@@ -136,4 +164,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--name", default="default", help="rig name for gonio-sim:// URLs (default 'default')")
     parser.add_argument("--no-monitor", action="store_true",
                         help="a camera without the lamp monitor option (MON?); see docs/emulator.md")
+    parser.add_argument("--control", type=int, default=None, metavar="PORT",
+                        help="serve the rig's control channel on 127.0.0.1:PORT (0: a free port), JSON lines: "
+                             "inject faults, let time pass, read the true state from another process "
+                             "(docs/emulator.md, 'Control from outside')")
+    parser.add_argument("--log-traffic", default=None, metavar="FILE",
+                        help="append every line the instruments receive and their replies, with simulated and "
+                             "wall time, to FILE (JSON lines)")
     parser.set_defaults(func=_run)
