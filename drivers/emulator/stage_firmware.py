@@ -265,6 +265,67 @@ def trapezoid_profile(t0: float, start: float, end: float, velocity: float, acce
     ))
 
 
+def profile_from_state(t0: float, start: float, speed: float, end: float, velocity: float, acceleration: float,
+                       deceleration: float) -> MotionProfile:
+    """A move to rest at ``end`` [deg] from ``start`` at velocity ``speed`` [deg/s] (signed)
+    at time ``t0`` [s]: what the ESP300 does with a ``PA`` or ``PR`` received while the axis
+    moves, or with ``VA``, ``AC``, ``AG`` changed during a move (manual, ``PA``/``PR``,
+    p. 3-112: usage "MIP", accepted while a motion is in progress).
+
+    Toward the target with room to stop: accelerate (``acceleration``) to ``velocity``, or
+    slow down to it (``deceleration``) when moving faster, cruise, decelerate to rest at
+    ``end``; a shorter distance peaks below ``velocity``. Moving away from the target, or too
+    fast to stop before it: decelerate to rest first, then a rest-to-rest move back
+    (:func:`trapezoid_profile`; the manual's caution against reversing a motion).
+    Position and velocity are continuous at ``t0``.
+
+    >>> profile = profile_from_state(0.0, 10.0, 5.0, 20.0, 5.0, 10.0, 10.0)
+    >>> profile.position(0.0), profile.velocity(0.0), profile.position(profile.end_time)
+    (10.0, 5.0, 20.0)
+    """
+    for name, value in (("t0", t0), ("start", start), ("speed", speed), ("end", end)):
+        _check_motion(name, value, positive=False)
+    for name, value in (("velocity", velocity), ("acceleration", acceleration), ("deceleration", deceleration)):
+        _check_motion(name, value, positive=True)
+    distance = end - start
+    direction = 1.0 if distance >= 0 else -1.0
+    toward = speed * direction  # speed toward the target (negative: away from it)
+    stopping = speed * speed / (2.0 * deceleration)
+    if speed == 0.0:
+        return trapezoid_profile(t0, start, end, velocity, acceleration, deceleration)
+    if toward < 0 or stopping >= abs(distance):  # stop first, then come back (or not at all)
+        t_stop = abs(speed) / deceleration
+        stop_at = start + speed * t_stop / 2.0
+        back = trapezoid_profile(t0 + t_stop, stop_at, end, velocity, acceleration, deceleration)
+        return MotionProfile(((t0, start, speed, -math.copysign(deceleration, speed), t_stop),) + back.segments)
+    return _moving_trapezoid(t0, start, toward, abs(distance), direction, velocity, acceleration, deceleration)
+
+
+def _moving_trapezoid(t0: float, start: float, u0: float, distance: float, direction: float, velocity: float,
+                      acceleration: float, deceleration: float) -> MotionProfile:
+    """The segments of :func:`profile_from_state` toward the target at speed ``u0 > 0`` with
+    room to stop (``u0^2 / 2d <= distance``)."""
+    if u0 > velocity:  # slow down to the new velocity, cruise, stop
+        peak, rate_in = velocity, deceleration
+    else:
+        full = (velocity**2 - u0**2) / (2 * acceleration) + velocity**2 / (2 * deceleration)
+        peak = velocity if distance >= full else math.sqrt(
+            (2 * acceleration * distance + u0**2) * deceleration / (acceleration + deceleration))
+        rate_in = acceleration
+    t_in = abs(peak - u0) / rate_in
+    d_in = (peak**2 - u0**2) / (2 * (rate_in if peak >= u0 else -rate_in))
+    d_out = peak**2 / (2 * deceleration)
+    t_flat = max(distance - d_in - d_out, 0.0) / peak if peak > 0 else 0.0
+    t_out = peak / deceleration
+    p1 = start + direction * d_in
+    p2 = p1 + direction * peak * t_flat
+    return MotionProfile((
+        (t0, start, direction * u0, direction * math.copysign(rate_in, peak - u0), t_in),
+        (t0 + t_in, p1, direction * peak, 0.0, t_flat),
+        (t0 + t_in + t_flat, p2, direction * peak, -direction * deceleration, t_out),
+    ))
+
+
 def crossing_time(profile: MotionProfile, position: float, after: float) -> float | None:
     """First time >= ``after`` at which ``profile`` passes ``position`` [s], None if it never does.
 
@@ -410,6 +471,9 @@ class AxisState:
     units: int = 7
     profile: MotionProfile = field(default=None)  # type: ignore[assignment]
     pending_error: int | None = None  # queued when the current motion ends
+    #: The profile of the move in progress when ``PA`` or ``PR`` started it at ``VA``: such a
+    #: move follows a changed ``VA``, ``AC`` or ``AG`` (any other profile, None: it does not).
+    retimable: MotionProfile | None = None
     setup: dict[str, float] = field(default_factory=dict)  # motor and servo settings (SETUP_SETTINGS)
     torque_reduction: tuple[int, int] = (0, 0)  # QR: idle time [ms], percentage of the current
 
@@ -761,15 +825,18 @@ class Esp300Firmware:
         return None
 
     # -- moves ------------------------------------------------------------------------
-    def _check_move(self, axis: AxisState, target: float, software_limits: bool = True) -> None:
-        """Refuse a move of ``axis`` to the controller position ``target`` [deg] (see docs/protocol.md)."""
+    def _check_move(self, axis: AxisState, target: float, software_limits: bool = True,
+                    while_moving: bool = False) -> None:
+        """Refuse a move of ``axis`` to the controller position ``target`` [deg] (see
+        docs/protocol.md); ``while_moving``: a command the manual accepts during a motion
+        (``PA``, ``PR``: usage "MIP"), which retargets a move ``PA`` or ``PR`` started."""
         n = axis.config.number
         if axis.setup["QM"] == 0:
             raise _EspError(100 * n + 0)
         if not axis.motor_on:
             raise _EspError(100 * n + 13)
-        if axis.moving(self.clock.now()):
-            raise _EspError(27)
+        if axis.moving(self.clock.now()) and not (while_moving and axis.profile is axis.retimable):
+            raise _EspError(27)  # a home search, a jog, a move a limit fault stops: not retargeted
         if software_limits and target > axis.right_limit:
             raise _EspError(100 * n + 6)
         if software_limits and target < axis.left_limit:
@@ -780,33 +847,38 @@ class Esp300Firmware:
             if not self.interlock(tuple(ends)):
                 raise _EspError(100 * n + 29)
 
-    def _start_move(self, axis: AxisState, target: float, velocity: float | None = None) -> None:
-        """Move ``axis`` to the controller position ``target`` [deg] at ``velocity`` (default ``VA``)."""
-        self._check_move(axis, target)
+    def _start_move(self, axis: AxisState, target: float, velocity: float | None = None,
+                    while_moving: bool = False) -> None:
+        """Move ``axis`` to the controller position ``target`` [deg] at ``velocity`` (default
+        ``VA``); ``while_moving``: from its present position and speed if it moves (``PA``,
+        ``PR``, :func:`profile_from_state`)."""
+        self._check_move(axis, target, while_moving=while_moving)
         t = self.clock.now()
         n = axis.config.number
         start = axis.position(t)
+        speed = axis.profile.velocity(t) if axis.moving(t) else 0.0
         end = target - axis.offset + axis.config.repeatability * float(self.rng.standard_normal())
         if n in self.limit_faults:  # injected: a limit switch trips half way
             self.limit_faults.discard(n)
             end = start + 0.5 * (target - axis.offset - start)
             axis.pending_error = 100 * n + (4 if end >= start else 5)
         axis.desired = target
-        axis.profile = trapezoid_profile(t, start, end, velocity or axis.velocity, axis.acceleration,
-                                         axis.deceleration)
+        axis.profile = profile_from_state(t, start, speed, end, velocity or axis.velocity, axis.acceleration,
+                                          axis.deceleration)
+        axis.retimable = axis.profile if velocity is None and axis.pending_error is None else None
 
     def _cmd_PA(self, digits, rest, query):
         axis = self._axis(digits)
         if query:
             return self._out(axis, axis.desired)
-        self._start_move(axis, self._quantity(rest, axis))
+        self._start_move(axis, self._quantity(rest, axis), while_moving=True)
         return None
 
     def _cmd_PR(self, digits, rest, query):
         axis = self._axis(digits)
         if query:
             raise _EspError(6)
-        self._start_move(axis, axis.desired + self._quantity(rest, axis))
+        self._start_move(axis, axis.desired + self._quantity(rest, axis), while_moving=True)
         return None
 
     def _cmd_OR(self, digits, rest, query):
@@ -938,21 +1010,39 @@ class Esp300Firmware:
             self._check_rate(axis, value, axis.config.min_acceleration, axis.max_acceleration, 11)
         return self._setting(digits, rest, query, attribute, check)
 
+    def _retime(self, digits: str, query: bool) -> None:
+        """A move in progress follows a changed ``VA``, ``AC`` or ``AG`` from where it is
+        (the ESP300 takes them during a motion; :func:`profile_from_state`); a home search
+        (its own velocity ``OH``), a jog and a move a limit fault stops keep theirs."""
+        axis = self._axis(digits)
+        t = self.clock.now()
+        if query or not axis.moving(t) or axis.profile is not axis.retimable:
+            return
+        axis.profile = axis.retimable = profile_from_state(
+            t, axis.position(t), axis.profile.velocity(t), axis.target(), axis.velocity, axis.acceleration,
+            axis.deceleration)
+
     def _cmd_VA(self, digits, rest, query):
-        """Velocity of moves [units/s], at most ``VU``."""
-        return self._velocity_command(digits, rest, query, "velocity")
+        """Velocity of moves [units/s], at most ``VU``; a move in progress follows it."""
+        reply = self._velocity_command(digits, rest, query, "velocity")
+        self._retime(digits, query)
+        return reply
 
     def _cmd_OH(self, digits, rest, query):
         """Homing velocity of ``OR`` [units/s], at most ``VU``."""
         return self._velocity_command(digits, rest, query, "homing_velocity")
 
     def _cmd_AC(self, digits, rest, query):
-        """Acceleration of moves [units/s^2], at most ``AU``."""
-        return self._acceleration_command(digits, rest, query, "acceleration")
+        """Acceleration of moves [units/s^2], at most ``AU``; a move in progress follows it."""
+        reply = self._acceleration_command(digits, rest, query, "acceleration")
+        self._retime(digits, query)
+        return reply
 
     def _cmd_AG(self, digits, rest, query):
-        """Deceleration of moves and of ``ST`` [units/s^2], at most ``AU``."""
-        return self._acceleration_command(digits, rest, query, "deceleration")
+        """Deceleration of moves and of ``ST`` [units/s^2], at most ``AU``; a move in progress follows it."""
+        reply = self._acceleration_command(digits, rest, query, "deceleration")
+        self._retime(digits, query)
+        return reply
 
     def _cmd_AE(self, digits, rest, query):
         """E-stop deceleration of ``AB`` [units/s^2], at most ``AU``."""

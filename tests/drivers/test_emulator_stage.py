@@ -9,10 +9,12 @@ import re
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from drivers.emulator.clock import SimClock
 from esp300_helpers import ask, errors
-from drivers.emulator.stage_firmware import Esp300Firmware, move_duration
+from drivers.emulator.stage_firmware import Esp300Firmware, move_duration, profile_from_state
 from drivers.emulator.world import separation_deg
 
 
@@ -144,16 +146,60 @@ def test_tb_reports_code_timestamp_message_fifo_and_buffer_is_ten_deep():
     assert len(errors(fw)) == 10
 
 
-def test_move_while_moving_is_refused_and_stop_decelerates():
+def test_stop_decelerates():
     fw = make_stage()
     ask(fw, "MO;1PA60")
     fw.clock.advance(1.0)
-    ask(fw, "1PA10")
-    assert errors(fw) == [27]
     ask(fw, "1ST")  # at 1 s: v = 10 deg/s, decelerate at 20 deg/s^2 -> 2.5 deg more
     ask(fw, "1WS")
     assert float(ask(fw, "1TP")) == pytest.approx(7.5 + 2.5, abs=2e-3)
     assert ask(fw, "1MD?") == "1\r\n"
+
+
+@pytest.mark.parametrize("command, end, arrival", [
+    ("1PA10", 10.0, 1.5),    # at 1 s: 7.5 deg, 10 deg/s; 2.5 deg is just the stopping distance
+    ("1PR-20", 40.0, 4.5),   # PR from the commanded target (60): 32.5 deg to go at 10 deg/s
+    ("1PA0", 0.0, 3.0),      # behind it: stop at 10 deg (0.5 s), then 10 deg back (1.5 s)
+])
+def test_a_move_received_during_a_move_retargets_it(command, end, arrival):
+    """PA and PR are accepted while the axis moves (ESP300 manual, PA and PR, p. 3-112:
+    usage "MIP"); the axis goes on from where it is, at its speed, to the new target (a
+    reversal stops it first: the manual's caution). VA 10 deg/s, AC = AG 20 deg/s^2."""
+    fw = make_stage()
+    ask(fw, "MO;1PA60")
+    fw.clock.advance(1.0)
+    ask(fw, command)
+    assert errors(fw) == []
+    start = fw.clock.now()
+    ask(fw, "1WS")
+    # 0.02 s: the axis lands within its repeatability (1e-3 deg) of the target; landing just
+    # short of the first case's stopping point takes a small move back (about 0.01 s)
+    assert fw.clock.now() - start == pytest.approx(arrival - 1.0, abs=0.02)
+    assert float(ask(fw, "1TP")) == pytest.approx(end, abs=3e-3)
+    assert ask(fw, "1DP?") == f"{end:.5f}\r\n"
+
+
+def test_velocity_changed_during_a_move_is_followed_from_where_the_axis_is():
+    """VA, AC and AG changed during a motion are followed (the ESP300 takes them during a
+    move): VA 5 at 1 s (7.5 deg, 10 deg/s) slows the axis to 5 deg/s at AG, so it reaches
+    60 deg at 11.5 s instead of 6.5 s."""
+    fw = make_stage()
+    ask(fw, "MO;1PA60")
+    fw.clock.advance(1.0)
+    ask(fw, "1VA5")
+    ask(fw, "1WS")
+    assert fw.clock.now() == pytest.approx(11.5, abs=2e-3)
+    assert float(ask(fw, "1TP")) == pytest.approx(60.0, abs=3e-3)
+    ask(fw, "1PA50;1AC40")  # a change of AC mid-move: the move still ends at its target
+    ask(fw, "1WS")
+    assert float(ask(fw, "1TP")) == pytest.approx(50.0, abs=3e-3) and errors(fw) == []
+
+
+def test_a_home_search_refuses_a_move_until_it_ends():
+    fw = make_stage()
+    ask(fw, "MO;1PA60;1WS;1OR")
+    ask(fw, "1PA10")  # a home search is not a move PA may retarget
+    assert 27 in errors(fw)
 
 
 def test_motor_off_during_move_stops_axis():
@@ -382,3 +428,26 @@ def test_su_reports_the_encoder_resolution_and_accepts_only_it():
     ask(fw, "1SU")
     assert errors(fw) == [101, 37, 9, 38]
     assert ask(fw, "1SU?") == "0.00100\r\n"
+
+
+@settings(max_examples=300, deadline=None)
+@given(start=st.floats(-180, 180), speed=st.floats(-20, 20), end=st.floats(-180, 180),
+       velocity=st.floats(0.01, 20), acceleration=st.floats(0.01, 80), deceleration=st.floats(0.01, 80))
+def test_a_move_from_any_state_is_continuous_bounded_and_ends_at_rest_on_target(start, speed, end, velocity,
+                                                                               acceleration, deceleration):
+    """profile_from_state (a PA/PR or VA/AC/AG during a move): position and velocity go on
+    from the state it starts in, no acceleration exceeds AC or AG, the speed never exceeds
+    the larger of the initial speed and VA, and the axis comes to rest exactly at the target."""
+    profile = profile_from_state(5.0, start, speed, end, velocity, acceleration, deceleration)
+    assert profile.position(5.0) == pytest.approx(start, abs=1e-9)
+    assert profile.velocity(5.0) == pytest.approx(speed, abs=1e-9) or profile.end_time == 5.0
+    assert profile.position(profile.end_time) == pytest.approx(end, abs=1e-6)
+    assert profile.velocity(profile.end_time) == 0.0
+    for t0, p0, v0, a, d in profile.segments:
+        assert d >= 0 and abs(a) <= max(acceleration, deceleration) * (1 + 1e-12)
+        assert max(abs(v0), abs(v0 + a * d)) <= max(abs(speed), velocity) * (1 + 1e-9) + 1e-12
+    joints = [(seg[0] + seg[4], seg[1] + seg[2] * seg[4] + 0.5 * seg[3] * seg[4] ** 2, seg[2] + seg[3] * seg[4])
+              for seg in profile.segments[:-1]]
+    for (t, p, v), following in zip(joints, profile.segments[1:]):  # no jump between segments
+        assert following[0] == pytest.approx(t) and following[1] == pytest.approx(p, abs=1e-6)
+        assert following[2] == pytest.approx(v, abs=1e-6)
