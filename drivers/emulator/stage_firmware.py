@@ -848,16 +848,20 @@ class Esp300Firmware:
                 raise _EspError(100 * n + 29)
 
     def _start_move(self, axis: AxisState, target: float, velocity: float | None = None,
-                    while_moving: bool = False) -> None:
+                    while_moving: bool = False, on_switch: bool = False) -> None:
         """Move ``axis`` to the controller position ``target`` [deg] at ``velocity`` (default
         ``VA``); ``while_moving``: from its present position and speed if it moves (``PA``,
-        ``PR``, :func:`profile_from_state`)."""
+        ``PR``, :func:`profile_from_state`); ``on_switch``: the move ends where the home
+        switch and the encoder's index pulse are, exactly (``OR``: repeatable to one count),
+        instead of within the axis's repeatability of the target."""
         self._check_move(axis, target, while_moving=while_moving)
         t = self.clock.now()
         n = axis.config.number
         start = axis.position(t)
         speed = axis.profile.velocity(t) if axis.moving(t) else 0.0
-        end = target - axis.offset + axis.config.repeatability * float(self.rng.standard_normal())
+        draw = float(self.rng.standard_normal())  # drawn for every move: the seed's sequence stays as it was
+        scatter = 0.0 if on_switch else axis.config.repeatability * draw
+        end = target - axis.offset + scatter
         if n in self.limit_faults:  # injected: a limit switch trips half way
             self.limit_faults.discard(n)
             end = start + 0.5 * (target - axis.offset - start)
@@ -896,7 +900,7 @@ class Esp300Firmware:
                 raise _EspError(100 * axis.config.number + 1)
         previous, axis.offset = axis.offset, axis.home_preset - axis.config.home
         try:
-            self._start_move(axis, axis.home_preset, axis.homing_velocity)
+            self._start_move(axis, axis.home_preset, axis.homing_velocity, on_switch=True)
         except _EspError:
             axis.offset = previous  # a refused home search changes nothing
             raise
