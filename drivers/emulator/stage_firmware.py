@@ -535,7 +535,10 @@ class _EspError(Exception):
 _COMMAND = re.compile(r"^(\d*)([A-Za-z]{2})(.*)$", re.ASCII)
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$", re.ASCII)
 _BLANKS = re.compile(r"[ \t]+")  # manual 3.4.1, p. 3-8: blank spaces are ignored (space and tab)
-_QUERIES_WITHOUT_MARK = {"TP", "TE", "TB", "VE"}
+_QUERIES_WITHOUT_MARK = {"TP", "TE", "TB", "VE", "TS", "TX", "TV", "DV"}
+#: Bit 6 of the TS and TX status characters, set (the manual's examples: ``[P``, ``P``), so
+#: that the character is printable.
+_STATUS_CHARACTER_BASE = 0x40
 
 
 def _stored_size(command: str) -> int:
@@ -784,6 +787,41 @@ class Esp300Firmware:
             raise _EspError(6)
         axis = self._axis(digits)
         return self._out(axis, axis.encoder_reading(self.clock.now()))
+
+    def _cmd_TS(self, digits, rest, query):
+        """Controller status (manual p. 3-142): one character; bits 0-2 axes 1-3 in motion,
+        bit 4 the motor of at least one axis on, bit 6 set (:data:`_STATUS_CHARACTER_BASE`)."""
+        if not query or digits:
+            raise _EspError(6)
+        t = self.clock.now()
+        bits = sum(1 << (n - 1) for n, axis in self.axes.items() if axis.moving(t))
+        bits |= (1 << 4) if any(axis.motor_on for axis in self.axes.values()) else 0
+        return chr(_STATUS_CHARACTER_BASE | bits)
+
+    def _cmd_TX(self, digits, rest, query):
+        """Controller activity (manual p. 3-144): one character; bit 0 a program executing,
+        bit 1 a wait executing, bit 2 manual jog, bit 4 at least one trajectory executing,
+        bit 6 set. A query is answered between commands, so bits 0 and 1 read 0 (a program
+        or a wait holds the line until it ends) and the emulated rig has no front-panel jog."""
+        if not query or digits:
+            raise _EspError(6)
+        t = self.clock.now()
+        moving = any(axis.moving(t) for axis in self.axes.values())
+        return chr(_STATUS_CHARACTER_BASE | ((1 << 4) if moving else 0))
+
+    def _cmd_TV(self, digits, rest, query):
+        """Actual velocity of the axis now (manual p. 3-143) [units/s]; the servo follows
+        the trajectory, so it is the trajectory's velocity."""
+        if not query:
+            raise _EspError(6)
+        axis = self._axis(digits)
+        t = self.clock.now()
+        return self._out(axis, axis.profile.velocity(t))
+
+    def _cmd_DV(self, digits, rest, query):
+        """Desired velocity of the axis's trajectory now (manual p. 3-143, example with
+        ``TV``) [units/s]."""
+        return self._cmd_TV(digits, rest, query)
 
     def _cmd_DP(self, digits, rest, query):
         if not query:

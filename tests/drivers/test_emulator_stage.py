@@ -463,3 +463,19 @@ def test_a_home_search_ends_on_the_switch_to_one_count_whatever_the_seed():
         ask(fw, "MO;1PA30;1WS;1OR;1WS")
         readings.add(ask(fw, "1TP"))
     assert readings == {"0.00000\r\n"}
+
+
+def test_status_activity_and_velocity_queries_follow_the_axes():
+    """TS (manual p. 3-142), TX (p. 3-144), TV and DV (p. 3-143): the status character has
+    bit 6 set, as the manual's examples ('[P', 'P'); bits 0-2 the moving axes, bit 4 motor
+    power; TX bit 4 a trajectory executing; TV/DV the velocity now."""
+    fw = make_stage()
+    assert ask(fw, "TS;TX") == "@\r\n@\r\n"  # nothing moves, motors off
+    ask(fw, "MO;1PA60")
+    fw.clock.advance(1.0)  # axis 1 cruising at VA = 10 deg/s
+    assert ask(fw, "TS?;TX?") == "Q\r\nP\r\n"  # 0x40 | bit 0 | bit 4; 0x40 | bit 4
+    assert ask(fw, "1TV;1DV;2TV") == "10.00000\r\n10.00000\r\n0.00000\r\n"
+    ask(fw, "1WS")
+    assert ask(fw, "TS") == "P\r\n" and ask(fw, "1TV") == "0.00000\r\n"
+    ask(fw, "1TS")
+    assert errors(fw) == [6]  # TS takes no axis
