@@ -322,6 +322,7 @@ class AdaptiveRun:
         self.last: Posterior | None = None
 
     def __call__(self, result: RunResult) -> Extension:
+        """Fit the recording so far and decide: the next batch, or the end of the run."""
         settings = self.settings
         try:
             posterior = fit_posterior(self.folder, settings, self.start)
@@ -340,14 +341,18 @@ class AdaptiveRun:
                 f"{n} {posterior.widths[n]:.4g} <= {w:g}" for n, w in settings.until.items()))
         seconds = min(settings.batch_seconds, settings.budget - spent)
         points, added = next_batch(self.protocol, posterior, settings, seconds) if seconds > 0 else (np.empty((0, 3)), 0.0)
+        still = "still wider than asked: " + ", ".join(f"{n} {w:.4g} > {settings.until[n]:g}" for n, w in wide.items())
         if len(points) == 0:
             return self._stop(note, f"budget spent: {spent:.0f} s of {settings.budget:.0f} s estimated, no point fits "
-                                    f"into the {max(seconds, 0.0):.0f} s left; still wider than asked: "
-                                    + ", ".join(f"{n} {w:.4g} > {settings.until[n]:g}" for n, w in wide.items()))
+                                    f"into the {max(seconds, 0.0):.0f} s left; {still}")
+        return self._append(note, posterior, points, added, still)
+
+    def _append(self, note: dict[str, Any], posterior: Posterior, points: np.ndarray, added: float,
+                still: str) -> Extension:
+        """The next batch as an :class:`Extension`, with the comment and note saying why."""
         self.batches += 1
         why = (f"adaptive batch {self.batches}: {len(points)} points, {added:.0f} s, chosen after {posterior.points} "
-               f"values from the posterior {posterior.summary()};\n"
-               "still wider than asked: " + ", ".join(f"{n} {w:.4g} > {settings.until[n]:g}" for n, w in wide.items()))
+               f"values from the posterior {posterior.summary()};\n{still}")
         text = batch_text(points, self.batches, why)
         self.protocol = extended(self.protocol, text)
         self.say(f"batch {self.batches}: {len(points)} points, {added:.0f} s")
