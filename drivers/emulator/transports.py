@@ -122,6 +122,10 @@ def _reply_bytes(reply: object) -> bytes:
     return reply
 
 
+#: Line time of one piece of a reply streamed in real-time mode [s] (:meth:`DeviceChannel.paced`).
+STREAM_PIECE_S = 0.02
+
+
 class DeviceChannel:
     """One instrument as seen from its serial line(s): firmware + lock + faults + timing.
 
@@ -168,7 +172,9 @@ class DeviceChannel:
             reply = self._run_firmware(line)
             n_in = MAX_LINE if line is LineSplitter.OVERLONG else len(line) + 1  # type: ignore[arg-type]
             self.lines_processed += 1
-            self.clock.advance(transfer_time(n_in + len(reply), self.baudrate))
+            # real time: the reply's own transfer time passes as the transport streams it (:meth:`paced`)
+            n_out = 0 if self.clock.realtime else len(reply)
+            self.clock.advance(transfer_time(n_in + n_out, self.baudrate))
             if reply and faults.garble > 0:
                 faults.garble -= 1
                 reply = self._garbled(reply)
@@ -177,6 +183,24 @@ class DeviceChannel:
         if faults.disconnected:
             return b""
         return reply
+
+    def paced(self, reply: bytes) -> Iterator[bytes]:
+        """The reply in the pieces a transport writes: whole in fast mode; in real-time mode
+        in pieces of :data:`STREAM_PIECE_S` of line time, each released when the line would
+        have carried it, so a long reply (``FRAME?``, 43 s at 115200 baud) arrives byte by
+        byte as on a real line and a client's read timeout sees data flowing."""
+        if not self.clock.realtime or len(reply) <= 1:
+            yield reply
+            return
+        per_piece = max(1, int(STREAM_PIECE_S * self.baudrate / 10))
+        start = time.monotonic()
+        for offset in range(0, len(reply), per_piece):
+            piece = reply[offset:offset + per_piece]
+            due = start + transfer_time(offset + len(piece), self.baudrate)
+            delay = due - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            yield piece
 
     def _run_firmware(self, line: "str | object") -> bytes:
         """The firmware's reply to one line, or its error path's reply, or ``b""``."""
@@ -324,8 +348,8 @@ class PtyTransport(_Worker):
                 data = garble_bytes(data, self._noise)
             for line in splitter.feed(data):
                 reply = reply_to(self.channel, line)
-                if reply:
-                    self._write(garble_bytes(reply, self._noise) if wrong_rate else reply)
+                for piece in self.channel.paced(reply) if reply else ():
+                    self._write(garble_bytes(piece, self._noise) if wrong_rate else piece)
 
     def rate_mismatch(self) -> bool:
         """Whether the check is on and the client's output rate differs from the instrument's."""
@@ -458,11 +482,11 @@ class TcpTransport(_Worker):
                     return
                 for line in splitter.feed(data):
                     reply = reply_to(self.channel, line)
-                    if reply:
-                        try:
-                            conn.sendall(reply)
-                        except OSError:
-                            return
+                    try:
+                        for piece in self.channel.paced(reply) if reply else ():
+                            conn.sendall(piece)
+                    except OSError:
+                        return
 
     def close(self) -> None:
         self._stop.set()

@@ -96,9 +96,9 @@ class Serial(SerialBase):
                 continue
             for line in splitter.feed(data):
                 reply = reply_to(channel, line)  # never raises: the port stays served
-                if reply:
+                for piece in channel.paced(reply) if reply else ():
                     with self._rx_ready:
-                        self._rx.extend(reply)
+                        self._rx.extend(piece)
                         self._rx_ready.notify_all()
 
     # -- data -------------------------------------------------------------------------

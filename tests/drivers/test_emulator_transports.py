@@ -184,6 +184,30 @@ def test_realtime_mode_takes_wall_time():
             assert time.monotonic() - start >= 0.34
 
 
+@pytest.mark.parametrize("transport", ["url", "tcp"])
+def test_a_long_reply_streams_at_the_line_rate_in_real_time(transport):
+    """Real-time mode: a block reply flows as a 115200-baud line carries it (the first bytes
+    within a fraction of a second, the last after its transfer time), instead of arriving
+    in one burst after the whole transfer time (FRAME? gave its first byte after 42.7 s)."""
+    with EmulatedRig(lambert, seed=1, name=f"stream-{transport}", realtime=True, lamp_warm=True) as r:
+        r.start(pty=False, tcp=transport == "tcp")
+        url = r.url("camera") if transport == "url" else r.addresses()["camera"]["tcp"]
+        with open_port(url, "camera") as camera:
+            camera.write(b"EXP 0.01;ROI 0,0,200,100;ACQ;*OPC?\n")
+            assert camera.readline() == b"1\n"
+            start = time.monotonic()
+            camera.write(b"ROI:DATA?\n")  # 40000 bytes of pixels: 3.5 s of line time
+            first = camera.read(1)
+            first_at = time.monotonic() - start
+            rest = b""
+            while len(first + rest) < 40008:
+                rest += camera.read(40008 - len(first + rest))
+            total = time.monotonic() - start
+    assert first == b"#" and first_at < 0.5
+    transfer = 40008 * 10 / 115200  # 3.47 s
+    assert transfer - 0.1 <= total <= transfer + 1.0  # scheduling only adds time
+
+
 def test_two_rigs_with_the_same_name_are_refused():
     with EmulatedRig(lambert, name="dup") as a, EmulatedRig(lambert, name="dup") as b:
         a.start(pty=False)
