@@ -7,11 +7,11 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
 import serial
+from emulator_process import banner
 
 from drivers.emulator.control import ControlServer, TrafficLog
 from drivers.emulator.rig import EmulatedRig
@@ -117,13 +117,7 @@ def test_gonio_emulator_is_controlled_from_another_process(tmp_path):
          "--control", "0", "--log-traffic", str(traffic)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        lines = []
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline:
-            line = process.stdout.readline()
-            lines.append(line)
-            if line.startswith("serving") or not line:
-                break
+        lines = banner(process)
         fields = {tuple(l.split()[:2]): l.split()[2] for l in lines if l.startswith(("camera", "control"))}
         control = Client(int(fields[("control", "tcp")].rsplit(":", 1)[1]))
         start = control("now")["result"]

@@ -4,10 +4,10 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 import serial
+from emulator_process import banner
 
 from gonio.cli import CLIError, build_parser, main
 from gonio.cli.emulator import _port_spec, format_addresses
@@ -38,13 +38,7 @@ def test_gonio_emulator_serves_a_registry_model_and_stops_on_interrupt(tmp_path)
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint,
     )
     try:
-        lines = []
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline:
-            line = process.stdout.readline()
-            lines.append(line)
-            if line.startswith("serving") or not line:
-                break
+        lines = banner(process)
         addresses = {tuple(l.split()[:2]): l.split()[2] for l in lines if l.startswith(("stage", "camera", "lamp"))}
         assert set(addresses) == {(d, k) for d in ("stage", "camera", "lamp") for k in ("pty", "tcp")}
         assert addresses[("stage", "pty")] == str(tmp_path / "gonio-stage")
