@@ -270,12 +270,13 @@ def next_batch(protocol: Protocol, posterior: Posterior, settings: AdaptiveSetti
         return information_vectors(settings.model, points, draws, names, settings.fixed, widths,
                                    posterior.relative_noise, alignment)
 
-    measured = np.array([(p.theta_i, p.phi_i, p.view) for p in plan(protocol).points], float).reshape(-1, 3)
+    planned = plan(protocol)
+    measured = np.array([(p.theta_i, p.phi_i, p.view) for p in planned.points], float).reshape(-1, 3)
     known = vectors(measured)
     information = (prior_information(widths, DEFAULT_CALIBRATION, settings.alignment_sd, len(alignment))[None]
                    + np.einsum("dkp,dkq->dpq", known, known))
     criterion = DsCriterion(vectors(candidates), information, len(settings.until))
-    base = plan(protocol).estimated_seconds
+    base = planned.estimated_seconds
 
     def added_seconds(points: np.ndarray) -> float:
         return plan(extended(protocol, batch_text(points, 0))).estimated_seconds - base

@@ -230,3 +230,12 @@ def test_a_design_reads_the_standard_where_an_adaptive_run_may_go():
     assert {70.0, 80.0} <= angles and {p[0] for p in result.points} <= angles
     with pytest.raises(ValueError, match="reference_at 95 deg"):
         D.design(MODEL, PRIORS, 300.0, reference_at=(95.0,))
+
+
+def test_gonio_design_refuses_reference_angles_it_cannot_read(tmp_path, capsys):
+    for value, words in (("0,fifty", "expected angles in degrees separated by commas"),
+                         ("95", "reference_at 95 deg: the rig cannot read the reference standard")):
+        assert main(["design", "--model", "lambert", "--prior", "rho=0.2:0.9", "--budget", "5min", "--out",
+                     str(tmp_path / "x.toml"), "--reference-at", value]) == 2
+        assert words in capsys.readouterr().err
+        assert not (tmp_path / "x.toml").exists()

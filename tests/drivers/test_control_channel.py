@@ -135,3 +135,10 @@ def test_gonio_emulator_is_controlled_from_another_process(tmp_path):
         if process.poll() is None:
             process.kill()
             process.wait()
+
+
+def test_a_control_port_out_of_range_is_refused_before_anything_starts(capsys):
+    from gonio.cli import main
+
+    assert main(["emulator", "--no-pty", "--tcp", "--control", "70000"]) == 2
+    assert "--control 70000: expected a TCP port 0..65535" in capsys.readouterr().err
