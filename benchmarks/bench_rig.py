@@ -10,7 +10,7 @@ pseudo-terminals and TCP on the loopback interface (``socket://``):
 - ROI measurements per second (``ACQ`` + ``ROI:STAT?`` at a fixed 1 ms exposure) and
   full :meth:`drivers.rig.Rig.measure` calls per second (automatic exposure, dark model,
   lamp readings);
-- the wall time of a 200-geometry sweep in fast mode next to the simulated instrument
+- the wall time of a 200-geometry sweep with the event clock next to the simulated instrument
   time it represents (moves, exposures, line transfers);
 
 and the accuracy of the sweep: a Lambertian sample must read the same radiance at every
@@ -106,8 +106,8 @@ def bench_transport(kind, emu, addresses, records, extra):
         t_roi = rate(roi_measurement, 40)
         t_measure = rate(lambda: rig.measure(), 40)
         for family, method, seconds, notes in [
-            ("query round trip", f"camera EXP? ({label})", t_cam, "115200 baud line; fast mode"),
-            ("query round trip", f"stage 1TP ({label})", t_stage, "19200 baud line; fast mode"),
+            ("query round trip", f"camera EXP? ({label})", t_cam, "115200 baud line; event clock"),
+            ("query round trip", f"stage 1TP ({label})", t_stage, "19200 baud line; event clock"),
             ("ROI measurement", f"ACQ + ROI:STAT? ({label})", t_roi, "1 ms exposure; the emulator renders a full 512x480 frame per ACQ"),
             ("ROI measurement", f"Rig.measure ({label})", t_measure, "auto exposure, dark model, lamp V/I readings"),
         ]:

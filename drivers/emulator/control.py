@@ -38,6 +38,10 @@ __all__ = ["ControlServer", "TrafficLog", "OPERATIONS", "handle_request"]
 OPERATIONS: Mapping[str, tuple[str, ...]] = {
     "now": (),
     "advance": ("seconds",),
+    "pause": (),
+    "resume": (),
+    "set_speed": ("speed",),
+    "clock": (),
     "true_state": (),
     "disconnect": ("device",),
     "reconnect": ("device",),
@@ -52,7 +56,7 @@ OPERATIONS: Mapping[str, tuple[str, ...]] = {
 }
 #: Operations that let time pass or wait: carried out without the lines' locks (a client
 #: may be waiting on the rig meanwhile).
-_UNLOCKED = frozenset({"now", "advance"})
+_UNLOCKED = frozenset({"now", "advance", "pause", "resume", "set_speed", "clock"})
 #: Longest request line [bytes].
 MAX_REQUEST = 4096
 

@@ -246,8 +246,25 @@ class RigControl:
         return self._rig.clock.now()
 
     def advance(self, seconds: float) -> None:
-        """Let simulated time pass (fast mode: jump; real-time mode: sleep)."""
+        """Let simulated time pass (event and wall modes: a jump; real-time mode: a sleep)."""
         self._rig.clock.advance(seconds)
+
+    def pause(self) -> None:
+        """Stop the wall clock's part of simulated time (``wall`` mode; waits on the rig still jump)."""
+        self._rig.clock.pause()
+
+    def resume(self) -> None:
+        """Let the wall clock's part of simulated time run again."""
+        self._rig.clock.resume()
+
+    def set_speed(self, speed: float) -> None:
+        """Simulated seconds per wall second from now on (``wall`` and ``realtime`` modes)."""
+        self._rig.clock.set_speed(speed)
+
+    def clock(self) -> dict:
+        """The clock's mode, speed [sim s per wall s], whether paused, and the time [s]."""
+        clock = self._rig.clock
+        return {"mode": clock.mode, "speed": clock.speed, "paused": clock.paused, "time_s": clock.now()}
 
     # -- faults -----------------------------------------------------------------------
     def _channel(self, device: str) -> DeviceChannel:
@@ -403,8 +420,13 @@ class EmulatedRig:
         degrees; must broadcast.
     seed : int
         Seed of every random process (fixed patterns, noise, repeatability, drift phases).
-    realtime : bool
-        False: fast mode (simulated clock jumps); True: replies with hardware timing.
+    clock_mode : {"event", "wall", "realtime"}
+        How simulated time passes (:mod:`drivers.emulator.clock`): ``event`` (default,
+        reproducible from the seed: time moves only when the instruments say it passes),
+        ``wall`` (the wall clock times ``speed``, jumping ahead when a client waits on the
+        rig) or ``realtime`` (hardware timing: waits sleep).
+    speed : float
+        Simulated seconds per wall second in the ``wall`` and ``realtime`` modes (> 0).
     min_separation_deg : float
         Minimum camera-lamp angle enforced by the stage interlock [deg].
     name : str
@@ -436,7 +458,8 @@ class EmulatedRig:
         typical magnitudes.
     """
 
-    def __init__(self, brdf: Brdf, seed: int = 0, realtime: bool = False, min_separation_deg: float = 5.0,
+    def __init__(self, brdf: Brdf, seed: int = 0, clock_mode: str = "event", speed: float = 1.0,
+                 min_separation_deg: float = 5.0,
                  name: str = "default", lamp_warm: bool = False, motors_on: bool = False,
                  optics: Optics | None = None, ccd_params: CCDParams | None = None,
                  lamp_params: LampParams | None = None, fixed_pattern: bool = True,
@@ -459,7 +482,7 @@ class EmulatedRig:
         self.ccd_params = ccd_params or CCDParams(width=self.optics.width, height=self.optics.height)
         seeds = np.random.SeedSequence(seed).spawn(8)
         rngs = [np.random.default_rng(s) for s in seeds]
-        self.clock = SimClock(realtime=realtime)
+        self.clock = SimClock(clock_mode, speed=speed)
         self.lamp = Lamp(params=lamp_params or LampParams(), seed=int(seeds[0].generate_state(1)[0]))
         if lamp_warm:
             self.lamp.switch(True, t=-3600.0)

@@ -185,18 +185,18 @@ class DeviceChannel:
         return reply
 
     def paced(self, reply: bytes) -> Iterator[bytes]:
-        """The reply in the pieces a transport writes: whole in fast mode; in real-time mode
+        """The reply in the pieces a transport writes: whole in event and wall modes; in real-time mode
         in pieces of :data:`STREAM_PIECE_S` of line time, each released when the line would
-        have carried it, so a long reply (``FRAME?``, 43 s at 115200 baud) arrives byte by
+        have carried it (at the clock's speed), so a long reply (``FRAME?``, 43 s at 115200 baud) arrives byte by
         byte as on a real line and a client's read timeout sees data flowing."""
         if not self.clock.realtime or len(reply) <= 1:
             yield reply
             return
         per_piece = max(1, int(STREAM_PIECE_S * self.baudrate / 10))
-        start = time.monotonic()
+        start, speed = time.monotonic(), self.clock.speed
         for offset in range(0, len(reply), per_piece):
             piece = reply[offset:offset + per_piece]
-            due = start + transfer_time(offset + len(piece), self.baudrate)
+            due = start + transfer_time(offset + len(piece), self.baudrate) / speed
             delay = due - time.monotonic()
             if delay > 0:
                 time.sleep(delay)

@@ -3,6 +3,7 @@ CUReT material as sample."""
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import threading
 
@@ -44,13 +45,33 @@ def build_rig(args: argparse.Namespace):
     return EmulatedRig(
         sample.brdf,
         seed=args.seed,
-        realtime=args.realtime,
+        clock_mode=clock_mode(args),
+        speed=args.speed,
         min_separation_deg=args.min_separation,
         name=args.name,
         lamp_warm=args.lamp_warm,
         monitor=not args.no_monitor,
         systematics=parse_realism(args.realism, args.seed),
     )
+
+
+def clock_mode(args: argparse.Namespace) -> str:
+    """The clock mode asked for: ``--clock`` (default ``wall``), or ``realtime`` for ``--realtime``."""
+    if args.realtime and args.clock not in (None, "realtime"):
+        raise CLIError(f"--realtime and --clock {args.clock} ask for two clocks; give one "
+                       "(--realtime is --clock realtime)")
+    if args.realtime:
+        return "realtime"
+    return args.clock or "wall"
+
+
+def clock_text(mode: str, speed: float) -> str:
+    """The banner's words for the clock, e.g. ``wall clock x1 (jumps while a client waits on the rig)``."""
+    if mode == "event":
+        return "event clock (time passes only with the instruments' events; reproducible from the seed)"
+    if mode == "wall":
+        return f"wall clock x{speed:g} (jumps ahead while a client waits on the rig)"
+    return f"real-time clock x{speed:g} (hardware timing)"
 
 
 def format_addresses(addresses: dict[str, dict[str, str]]) -> str:
@@ -79,6 +100,9 @@ def _side_channels(rig, args: argparse.Namespace):
 def _run(args: argparse.Namespace) -> int:
     if not (args.pty or args.tcp):
         raise CLIError("nothing to serve: enable --pty and/or --tcp")
+    if not (args.speed > 0 and math.isfinite(args.speed)):
+        raise CLIError(f"--speed {args.speed:g}: expected simulated seconds per wall second, a number > 0 "
+                       "(1: real time)")
     if args.control is not None and not 0 <= args.control <= 65535:
         raise CLIError(f"--control {args.control}: expected a TCP port 0..65535 (0: a free one)")
     rig = build_rig(args)
@@ -98,8 +122,8 @@ def _run(args: argparse.Namespace) -> int:
         raise CLIError(f"cannot open the control port or the traffic log: {error}") from error
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
-        mode = "real-time" if args.realtime else "fast"
-        print(f"gonio emulator: sample {args.sample}, seed {args.seed}, {mode} mode, realism {args.realism}")
+        clock = clock_text(rig.clock.mode, rig.clock.speed)
+        print(f"gonio emulator: sample {args.sample}, seed {args.seed}, {clock}, realism {args.realism}")
         if rig.systematics.is_ideal:
             print(IDEAL_RIG_NOTE)
         else:
@@ -146,8 +170,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              f"{DEFAULT_SAMPLE}, the paper's wall plaster, as for gonio demo and gonio run)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random process (default 0)")
     parser.add_argument("--realism", default=DEFAULT_REALISM, metavar=REALISM_SYNTAX, help=REALISM_HELP)
-    parser.add_argument("--realtime", action="store_true",
-                        help="answer with hardware timing (default: fast mode, simulated clock jumps)")
+    parser.add_argument("--clock", choices=("wall", "event", "realtime"), default=None,
+                        help="how simulated time passes (docs/emulator.md, 'Time'): wall (default) follows the "
+                             "wall clock x --speed and jumps ahead while a client waits on the rig, so sleeping "
+                             "and polling clients see the hardware's timing or better; event moves only with "
+                             "the instruments' events (reproducible from the seed; a client's sleep does not "
+                             "count); realtime answers with hardware timing (waits sleep)")
+    parser.add_argument("--speed", type=float, default=1.0, metavar="K",
+                        help="simulated seconds per wall second for the wall and realtime clocks (default 1)")
+    parser.add_argument("--realtime", action="store_true", help="the same as --clock realtime")
     parser.add_argument("--min-separation", type=float, default=5.0, metavar="DEG",
                         help="minimum camera-lamp angle enforced by the stage [deg] (default 5)")
     parser.add_argument("--pty", action=argparse.BooleanOptionalAction, default=True,

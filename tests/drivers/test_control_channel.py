@@ -63,6 +63,26 @@ def test_time_passes_and_the_true_state_is_read_over_the_channel(served):
     assert state["moving"] == [False, False, False] and state["lamp_output"] > 0.9
 
 
+def test_the_wall_clock_is_paused_sped_up_and_read_over_the_channel():
+    rig = EmulatedRig(lambert, seed=4, clock_mode="wall", speed=1.0)
+    server = ControlServer(rig, 0)
+    control = Client(server.port)
+    try:
+        assert control("pause") == {"ok": True, "result": None}
+        held = control("clock")["result"]
+        assert (held["mode"], held["speed"], held["paused"]) == ("wall", 1.0, True)
+        assert control("now")["result"] == held["time_s"]  # paused: the wall clock does not count
+        control("advance", seconds=3.0)
+        assert control("now")["result"] == pytest.approx(held["time_s"] + 3.0)
+        assert control("set_speed", speed=500.0)["ok"] and control("resume")["ok"]
+        assert control("now")["result"] > held["time_s"] + 3.0
+        refused = control("set_speed", speed=-1)
+        assert not refused["ok"] and "speed must be a finite number > 0" in refused["error"]
+    finally:
+        control.close()
+        server.close()
+
+
 def test_faults_injected_from_outside_reach_the_instruments(served):
     rig, control = served
     assert control("camera_fault", active=True)["ok"]
@@ -118,6 +138,7 @@ def test_gonio_emulator_is_controlled_from_another_process(tmp_path):
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         lines = banner(process)
+        assert "wall clock x1 (jumps ahead while a client waits on the rig)" in lines[0]
         fields = {tuple(l.split()[:2]): l.split()[2] for l in lines if l.startswith(("camera", "control"))}
         control = Client(int(fields[("control", "tcp")].rsplit(":", 1)[1]))
         start = control("now")["result"]
@@ -135,6 +156,18 @@ def test_gonio_emulator_is_controlled_from_another_process(tmp_path):
         if process.poll() is None:
             process.kill()
             process.wait()
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--speed", "0"], "--speed 0: expected simulated seconds per wall second, a number > 0"),
+    (["--speed", "nan"], "--speed nan: expected simulated seconds per wall second"),
+    (["--clock", "event", "--realtime"], "--realtime and --clock event ask for two clocks"),
+])
+def test_bad_clock_options_are_refused_before_anything_starts(capsys, argv, words):
+    from gonio.cli import main
+
+    assert main(["emulator", "--no-pty", "--tcp", *argv]) == 2
+    assert words in capsys.readouterr().err
 
 
 def test_a_control_port_out_of_range_is_refused_before_anything_starts(capsys):

@@ -15,7 +15,7 @@ from gonio.cli.emulator import _port_spec, format_addresses
 
 def test_parser_defaults_and_port_specs():
     args = build_parser().parse_args(["emulator", "--sample", "oren-nayar:sigma=30,rho=0.9"])
-    assert (args.seed, args.realtime, args.pty, args.tcp, args.min_separation) == (0, False, True, False, 5.0)
+    assert (args.seed, args.clock, args.speed, args.pty, args.tcp, args.min_separation) == (0, None, 1.0, True, False, 5.0)
     assert _port_spec("5000") == {"stage": 5000, "camera": 5001, "lamp": 5002}
     assert _port_spec("camera=7001") == {"camera": 7001}
     with pytest.raises(CLIError, match="tcp-ports"):

@@ -174,7 +174,7 @@ def test_true_state_tracks_geometry_and_clock(rig):
 
 
 def test_realtime_mode_takes_wall_time():
-    with EmulatedRig(lambert, seed=1, name="realtime-test", realtime=True) as r:
+    with EmulatedRig(lambert, seed=1, name="realtime-test", clock_mode="realtime") as r:
         r.start(pty=False)
         with open_port(r.url("camera"), "camera") as camera:
             start = time.monotonic()
@@ -189,7 +189,7 @@ def test_a_long_reply_streams_at_the_line_rate_in_real_time(transport):
     """Real-time mode: a block reply flows as a 115200-baud line carries it (the first bytes
     within a fraction of a second, the last after its transfer time), instead of arriving
     in one burst after the whole transfer time (FRAME? gave its first byte after 42.7 s)."""
-    with EmulatedRig(lambert, seed=1, name=f"stream-{transport}", realtime=True, lamp_warm=True) as r:
+    with EmulatedRig(lambert, seed=1, name=f"stream-{transport}", clock_mode="realtime", lamp_warm=True) as r:
         r.start(pty=False, tcp=transport == "tcp")
         url = r.url("camera") if transport == "url" else r.addresses()["camera"]["tcp"]
         with open_port(url, "camera") as camera:
