@@ -52,6 +52,7 @@ OPERATIONS: Mapping[str, tuple[str, ...]] = {
     "hit_limit": ("axis",),
     "camera_fault": ("active",),
     "clear_faults": (),
+    "power_cycle_stage": (),
     "remount": ("mounting", "rotation_deg", "spin", "handling_s"),
 }
 #: Operations that let time pass or wait: carried out without the lines' locks (a client

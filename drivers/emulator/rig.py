@@ -314,6 +314,11 @@ class RigControl:
         """An internal camera fault: ``ACQ`` fails with -200 while active."""
         self._rig.camera.fault = bool(active)
 
+    def power_cycle_stage(self) -> None:
+        """Switch the motion controller off and on (as ``RS``; a ``WP`` waiting for a position
+        its axis never passes ends, the lines received meanwhile are lost)."""
+        self._rig.stage.power_cycle()
+
     def clear_faults(self) -> None:
         """Remove every injected line fault, the camera fault and pending limit faults."""
         for channel in self._rig.channels.values():

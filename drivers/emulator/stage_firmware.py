@@ -59,7 +59,9 @@ AXIS_ERRORS = {
     11: "MAXIMUM ACCELERATION EXCEEDED",
     0: "MOTOR TYPE NOT DEFINED",
     13: "MOTOR NOT ENABLED",
+    27: "INVALID TRAJECTORY MODE FOR HOMING",
     29: "DIGITAL I/O INTERLOCK DETECTED",
+    32: "INVALID TRAJECTORY MODE FOR MOVING",
 }
 
 VERSION = "ESP300 Version 3.08 09/09/02"
@@ -140,9 +142,10 @@ MAX_COMMAND_LINE = 80
 
 @dataclass(frozen=True)
 class MotionProfile:
-    """Piecewise constant-acceleration motion: segments ``(t0, p0, v0, a, duration)``."""
+    """Piecewise motion: segments ``(t0, p0, v0, a, duration)`` of constant acceleration, or
+    ``(t0, p0, v0, a0, duration, jerk)`` of constant jerk (an S-curve's, :func:`scurve_profile`)."""
 
-    segments: tuple[tuple[float, float, float, float, float], ...]
+    segments: tuple[tuple[float, ...], ...]
 
     @property
     def start_time(self) -> float:
@@ -150,8 +153,7 @@ class MotionProfile:
 
     @property
     def end_time(self) -> float:
-        t0, _, _, _, d = self.segments[-1]
-        return t0 + d
+        return self.segments[-1][0] + self.segments[-1][4]
 
     def _segment_at(self, t: float):
         for seg in self.segments:
@@ -162,15 +164,16 @@ class MotionProfile:
 
     def position(self, t: float) -> float:
         """Position at time ``t`` [deg] (clamped to the start and end of the motion)."""
-        (t0, p0, v0, a, d), dt = self._segment_at(t)
-        return p0 + v0 * dt + 0.5 * a * dt * dt
+        (t0, p0, v0, a, d, *jerk), dt = self._segment_at(t)
+        cubic = jerk[0] * dt**3 / 6.0 if jerk else 0.0
+        return p0 + v0 * dt + 0.5 * a * dt * dt + cubic
 
     def velocity(self, t: float) -> float:
         """Velocity at time ``t`` [deg/s] (0 after the end)."""
         if t >= self.end_time:
             return 0.0
-        (t0, p0, v0, a, d), dt = self._segment_at(t)
-        return v0 + a * dt
+        (t0, p0, v0, a, d, *jerk), dt = self._segment_at(t)
+        return v0 + a * dt + (0.5 * jerk[0] * dt * dt if jerk else 0.0)
 
 
 def _check_motion(name: str, value: float, positive: bool) -> None:
@@ -265,6 +268,73 @@ def trapezoid_profile(t0: float, start: float, end: float, velocity: float, acce
     ))
 
 
+def _jerk_limited_ramp(speed: float, acceleration: float, jerk: float) -> tuple[float, float]:
+    """Peak acceleration [deg/s^2] and duration [s] of a jerk-limited ramp from rest to ``speed``.
+
+    The acceleration rises at ``jerk`` to at most ``acceleration``, stays, and falls at
+    ``jerk`` to 0 when the velocity reaches ``speed``; a ramp too short to reach
+    ``acceleration`` peaks at ``sqrt(speed jerk)``. Its distance is ``speed * duration / 2``.
+    """
+    peak = min(acceleration, math.sqrt(speed * jerk))
+    return peak, (speed / peak + peak / jerk) if speed > 0 else 0.0
+
+
+def scurve_profile(t0: float, start: float, end: float, velocity: float, acceleration: float,
+                   deceleration: float, jerk: float) -> MotionProfile:
+    """Rest-to-rest S-curve move (``TJ2``) from ``start`` to ``end`` [deg] beginning at ``t0`` [s].
+
+    The trapezoid of :func:`trapezoid_profile` with its corners rounded by a jerk limit
+    [deg/s^3] (manual command ``JK``: the rate of change of the acceleration): up to seven
+    segments of constant jerk; the peak velocity is ``velocity`` or, for a short move, the
+    one whose two ramps cover the distance (solved with :func:`scipy.optimize.brentq`).
+    A large jerk gives the trapezoid back.
+
+    >>> move = scurve_profile(0.0, 0.0, 30.0, 10.0, 20.0, 20.0, 200.0)
+    >>> round(move.end_time, 6), round(move.position(move.end_time), 9)   # trapezoid's 3.5 s + a / jerk
+    (3.6, 30.0)
+    >>> move.velocity(0.0), round(move.velocity(1.8), 9), round(move.position(1.8), 9)
+    (0.0, 10.0, 15.0)
+    """
+    for name, value in (("t0", t0), ("start", start), ("end", end)):
+        _check_motion(name, value, positive=False)
+    for name, value in (("velocity", velocity), ("acceleration", acceleration), ("deceleration", deceleration),
+                        ("jerk", jerk)):
+        _check_motion(name, value, positive=True)
+    distance = abs(end - start)
+    if distance == 0.0:
+        return MotionProfile(((t0, start, 0.0, 0.0, 0.0),))
+
+    def ramps(speed: float) -> float:  # distance of both ramps at peak velocity ``speed``
+        return 0.5 * speed * (_jerk_limited_ramp(speed, acceleration, jerk)[1]
+                              + _jerk_limited_ramp(speed, deceleration, jerk)[1])
+
+    peak = velocity
+    if ramps(velocity) > distance:
+        from scipy.optimize import brentq
+
+        peak = brentq(lambda speed: ramps(speed) - distance, 0.0, velocity, xtol=1e-15, rtol=1e-14)
+    a_up, t_up = _jerk_limited_ramp(peak, acceleration, jerk)
+    a_down, t_down = _jerk_limited_ramp(peak, deceleration, jerk)
+    cruise = max(distance - 0.5 * peak * (t_up + t_down), 0.0) / peak
+    pieces = []  # (duration, jerk) along the direction of motion
+    for rate, ramp_time, sign in ((a_up, t_up, 1.0), (a_down, t_down, -1.0)):
+        corner = rate / jerk
+        pieces += [(corner, sign * jerk), (ramp_time - 2.0 * corner, 0.0), (corner, -sign * jerk)]
+        if sign > 0:
+            pieces.append((cruise, 0.0))
+    direction = 1.0 if end >= start else -1.0
+    segments, t, p, v, a = [], t0, start, 0.0, 0.0
+    for duration, j in pieces:
+        duration = max(duration, 0.0)
+        segments.append((t, p, v, a, duration, direction * j))
+        p += v * duration + 0.5 * a * duration**2 + direction * j * duration**3 / 6.0
+        v += a * duration + 0.5 * direction * j * duration**2
+        a += direction * j * duration
+        t += duration
+    _check_motion("the duration of the move", t, positive=False)
+    return MotionProfile(tuple(segments))
+
+
 def profile_from_state(t0: float, start: float, speed: float, end: float, velocity: float, acceleration: float,
                        deceleration: float) -> MotionProfile:
     """A move to rest at ``end`` [deg] from ``start`` at velocity ``speed`` [deg/s] (signed)
@@ -336,14 +406,18 @@ def crossing_time(profile: MotionProfile, position: float, after: float) -> floa
     1.75
     >>> crossing_time(move, 40.0, 0.0) is None
     True
+    >>> round(crossing_time(scurve_profile(0.0, 0.0, 30.0, 10.0, 20.0, 20.0, 200.0), 15.0, 0.0), 6)
+    1.8
     """
     best = None
-    for t0, p0, v0, a, duration in profile.segments:
+    for t0, p0, v0, a, duration, *jerk in profile.segments:
         lo = max(after - t0, 0.0)
         if lo > duration:
             continue
         c = p0 - position
-        if a == 0.0:
+        if jerk and jerk[0] != 0.0:
+            roots = [r.real for r in np.roots([jerk[0] / 6.0, 0.5 * a, v0, c]) if abs(r.imag) < 1e-9]
+        elif a == 0.0:
             roots = [-c / v0] if v0 != 0.0 else ([lo] if c == 0.0 else [])
         else:
             disc = v0 * v0 - 2.0 * a * c
@@ -439,15 +513,38 @@ SETUP_SETTINGS = {spec.mnemonic: spec for spec in (
     SetupSetting("KS", "real", _constant(0.5), _constant(0.0), _constant(MAX_GAIN)),
     SetupSetting("AF", "real", _constant(0.0), _constant(0.0), _constant(MAX_GAIN)),
     SetupSetting("FP", "integer", _constant(3), _constant(0), _constant(7)),
-    SetupSetting("TJ", "integer", _constant(1), _constant(1), _constant(1)),
+    SetupSetting("TJ", "integer", _constant(1), _constant(1), _constant(6)),
     SetupSetting("ZB", "hex", _constant(0x110), _constant(0), _constant(0xFFFF)),
     SetupSetting("ZH", "hex", _constant(0x24), _constant(0), _constant(0xFFFF)),
+    SetupSetting("ZS", "hex", _constant(0x0), _constant(0), _constant(0xFFFF)),
 )}
 
+#: Home search modes (``OR``, ``OM``; manual command ``OR``): what the search looks for, and
+#: whether it ends on the encoder's index pulse (True: exactly, to one count) or on the
+#: switch's edge (False: within the axis's repeatability).
+HOMING_MODES = {
+    0: ("zero", True),    # the controller's +0 position count
+    1: ("home", True),    # home switch and index pulse (power-on mode)
+    2: ("home", False),   # home switch only
+    3: ("+limit", False),  # positive hardware limit switch
+    4: ("-limit", False),  # negative hardware limit switch
+    5: ("+limit", True),  # positive limit switch and index pulse
+    6: ("-limit", True),  # negative limit switch and index pulse
+}
+DEFAULT_HOMING_MODE = 1
+
+#: Trajectory modes (``TJ``) the emulated controller moves in: 1 trapezoidal, 2 S-curve.
+#: Modes 3 (jog) to 6 (slave to a master axis) are stored; host moves in them are refused.
+TRAJECTORY_TRAPEZOID, TRAJECTORY_SCURVE = 1, 2
+
 #: Stored programs (manual 3.3 "Program execution mode", p. 3-3): up to 100 programs in
-#: 64 kB of program memory.
+#: the program memory, 61440 bytes of the controller's 64 kB (manual command ``XM``).
 MAX_PROGRAMS = 100
-PROGRAM_MEMORY = 64 * 1024
+PROGRAM_MEMORY = 61440
+#: Bits of the first register of ``PH`` (manual p. 3-111) that read 1 on a controller
+#: without an emergency stop pressed: the e-stop inputs of the 100-pin and auxiliary
+#: connectors unlatched (bits 27, 28), as in the manual's example ``18000404H, 4H``.
+_PH_IDLE_BITS = (1 << 27) | (1 << 28)
 
 
 @dataclass
@@ -463,11 +560,13 @@ class AxisState:
     max_velocity: float = 0.0
     max_acceleration: float = 0.0
     homing_velocity: float = 0.0
+    homing_low_velocity: float = 0.0
+    homing_mode: int = DEFAULT_HOMING_MODE
     left_limit: float = 0.0
     right_limit: float = 0.0
     desired: float = 0.0
     offset: float = 0.0  # controller position minus mechanical angle [deg] (DH, OR)
-    home_preset: float = 0.0  # position the home switch is given by OR (DH) [deg]
+    home_preset: float = 0.0  # position a home search gives the point it finds (SH, DH) [deg]
     units: int = 7
     profile: MotionProfile = field(default=None)  # type: ignore[assignment]
     pending_error: int | None = None  # queued when the current motion ends
@@ -483,6 +582,7 @@ class AxisState:
         self.estop_deceleration = c.max_acceleration
         self.max_velocity, self.max_acceleration = c.max_velocity, c.max_acceleration
         self.homing_velocity = c.velocity
+        self.homing_low_velocity = 0.1 * c.velocity
         self.setup = {spec.mnemonic: spec.default(c) for spec in SETUP_SETTINGS.values()}
         self.left_limit, self.right_limit = c.software_limits
         self.desired = c.home
@@ -492,7 +592,8 @@ class AxisState:
     def saved_settings(self) -> dict:
         """The settings ``SM`` saves and ``RS`` restores (manual command ``SM``)."""
         names = ("velocity", "acceleration", "deceleration", "estop_deceleration", "max_velocity",
-                 "max_acceleration", "homing_velocity", "left_limit", "right_limit", "units",
+                 "max_acceleration", "homing_velocity", "homing_low_velocity", "homing_mode", "left_limit",
+                 "right_limit", "units",
                  "torque_reduction")
         saved = {name: getattr(self, name) for name in names}
         saved["setup"] = dict(self.setup)
@@ -535,7 +636,7 @@ class _EspError(Exception):
 _COMMAND = re.compile(r"^(\d*)([A-Za-z]{2})(.*)$", re.ASCII)
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$", re.ASCII)
 _BLANKS = re.compile(r"[ \t]+")  # manual 3.4.1, p. 3-8: blank spaces are ignored (space and tab)
-_QUERIES_WITHOUT_MARK = {"TP", "TE", "TB", "VE", "TS", "TX", "TV", "DV"}
+_QUERIES_WITHOUT_MARK = {"TP", "TE", "TB", "VE", "TS", "TX", "TV", "DV", "PH", "XM"}
 #: Bit 6 of the TS and TX status characters, set (the manual's examples: ``[P``, ``P``), so
 #: that the character is printable.
 _STATUS_CHARACTER_BASE = 0x40
@@ -593,6 +694,10 @@ class Esp300Firmware:
         self.saved: dict[int, dict] = {}  # settings saved by SM, loaded by RS
         self._running_program = False
         self._used_program_memory = 0  # [bytes], see _stored_size
+        #: ``(axis, position [units of the controller, deg])`` of a ``WP`` whose position the
+        #: axis will not pass: the controller waits for it and executes nothing until reset
+        #: (:meth:`power_cycle`); None when it is not waiting.
+        self.waiting_for: tuple[int, float] | None = None
 
     # -- state ------------------------------------------------------------------------
     def _update(self, t: float) -> None:
@@ -639,6 +744,8 @@ class Esp300Firmware:
         A line longer than :data:`MAX_COMMAND_LINE` characters (manual 3.4.1) executes
         nothing and queues error 6.
         """
+        if self.waiting_for is not None:  # in a WP that never ends: the line stays in the input buffer
+            return b""
         if len(line) > MAX_COMMAND_LINE:
             self._push(6)
             return b""
@@ -649,6 +756,8 @@ class Esp300Firmware:
         """Execute (or, in program entry mode, store) ``commands``; return the query replies."""
         replies: list[str] = []
         for command in commands:
+            if self.waiting_for is not None:  # a WP of this line never ends: the rest waits with it
+                break
             command = _BLANKS.sub("", command)
             if not command:
                 continue
@@ -809,6 +918,34 @@ class Esp300Firmware:
         moving = any(axis.moving(t) for axis in self.axes.values())
         return chr(_STATUS_CHARACTER_BASE | ((1 << 4) if moving else 0))
 
+    def _cmd_PH(self, digits, rest, query):
+        """Hardware status (manual p. 3-111): two registers in hexadecimal, ``18000404H, 4H``.
+
+        First register: bits 0-5 the positive limit switch of axes 1-6, bits 8-13 the
+        negative one, 16-21 amplifier faults (none), 27-28 the e-stop inputs unlatched.
+        Second: bits 0-5 the home switch of axes 1-6 (1 on the positive side of the home
+        angle: the level whose edge a home search finds), 8-13 the index pulses (an
+        instant; read 0). An axis prefix is ignored (EPICS sends ``01PH``, bliss ``PH?``).
+        """
+        if not query:
+            raise _EspError(6)
+        t = self.clock.now()
+        limits, homes = _PH_IDLE_BITS, 0
+        for n, axis in self.axes.items():
+            angle = axis.position(t)
+            lo, hi = axis.config.hardware_limits
+            half_count = 0.5 * axis.config.resolution
+            limits |= (1 << (n - 1)) if angle >= hi - half_count else 0
+            limits |= (1 << (n + 7)) if angle <= lo + half_count else 0
+            homes |= (1 << (n - 1)) if angle >= axis.config.home else 0
+        return f"{limits:X}H, {homes:X}H"
+
+    def _cmd_XM(self, digits, rest, query):
+        """Unused program memory [bytes] (manual command ``XM``), of :data:`PROGRAM_MEMORY`."""
+        if not query or digits:
+            raise _EspError(6)
+        return str(PROGRAM_MEMORY - self._used_program_memory)
+
     def _cmd_TV(self, digits, rest, query):
         """Actual velocity of the axis now (manual p. 3-143) [units/s]; the servo follows
         the trajectory, so it is the trajectory's velocity."""
@@ -864,7 +1001,7 @@ class Esp300Firmware:
 
     # -- moves ------------------------------------------------------------------------
     def _check_move(self, axis: AxisState, target: float, software_limits: bool = True,
-                    while_moving: bool = False) -> None:
+                    while_moving: bool = False, homing: bool = False) -> None:
         """Refuse a move of ``axis`` to the controller position ``target`` [deg] (see
         docs/protocol.md); ``while_moving``: a command the manual accepts during a motion
         (``PA``, ``PR``: usage "MIP"), which retargets a move ``PA`` or ``PR`` started."""
@@ -873,8 +1010,10 @@ class Esp300Firmware:
             raise _EspError(100 * n + 0)
         if not axis.motor_on:
             raise _EspError(100 * n + 13)
+        if axis.setup["TJ"] not in (TRAJECTORY_TRAPEZOID, TRAJECTORY_SCURVE):
+            raise _EspError(100 * n + (27 if homing else 32))  # jog and slave modes: no host moves
         if axis.moving(self.clock.now()) and not (while_moving and axis.profile is axis.retimable):
-            raise _EspError(27)  # a home search, a jog, a move a limit fault stops: not retargeted
+            raise _EspError(27)  # a home search, a jog, an S-curve move, a move a limit stops: not retargeted
         if software_limits and target > axis.right_limit:
             raise _EspError(100 * n + 6)
         if software_limits and target < axis.left_limit:
@@ -886,13 +1025,14 @@ class Esp300Firmware:
                 raise _EspError(100 * n + 29)
 
     def _start_move(self, axis: AxisState, target: float, velocity: float | None = None,
-                    while_moving: bool = False, on_switch: bool = False) -> None:
+                    while_moving: bool = False, on_switch: bool = False, homing: bool = False) -> None:
         """Move ``axis`` to the controller position ``target`` [deg] at ``velocity`` (default
         ``VA``); ``while_moving``: from its present position and speed if it moves (``PA``,
         ``PR``, :func:`profile_from_state`); ``on_switch``: the move ends where the home
         switch and the encoder's index pulse are, exactly (``OR``: repeatable to one count),
-        instead of within the axis's repeatability of the target."""
-        self._check_move(axis, target, while_moving=while_moving)
+        instead of within the axis's repeatability of the target; ``homing``: a home search,
+        which goes to its switch whatever the software limits ``SL``/``SR``."""
+        self._check_move(axis, target, software_limits=not homing, while_moving=while_moving, homing=homing)
         t = self.clock.now()
         n = axis.config.number
         start = axis.position(t)
@@ -905,9 +1045,13 @@ class Esp300Firmware:
             end = start + 0.5 * (target - axis.offset - start)
             axis.pending_error = 100 * n + (4 if end >= start else 5)
         axis.desired = target
-        axis.profile = profile_from_state(t, start, speed, end, velocity or axis.velocity, axis.acceleration,
-                                          axis.deceleration)
-        axis.retimable = axis.profile if velocity is None and axis.pending_error is None else None
+        if axis.setup["TJ"] == TRAJECTORY_SCURVE:  # from rest: a retarget of an S-curve move was refused
+            axis.profile = self._rest_to_rest(axis, t, start, end, velocity or axis.velocity)
+            axis.retimable = None
+        else:
+            axis.profile = profile_from_state(t, start, speed, end, velocity or axis.velocity, axis.acceleration,
+                                              axis.deceleration)
+            axis.retimable = axis.profile if velocity is None and axis.pending_error is None else None
 
     def _cmd_PA(self, digits, rest, query):
         axis = self._axis(digits)
@@ -924,24 +1068,57 @@ class Esp300Firmware:
         return None
 
     def _cmd_OR(self, digits, rest, query):
-        """Home search: move to the home switch at the homing velocity ``OH``.
+        """Home search (manual command ``OR``) in mode ``nn`` (0 to 6), or without ``nn`` in the
+        mode set with ``OM`` (power-on: 1), at the homing velocity ``OH``.
 
-        The home switch (the axis's mechanical home) is given the position set with ``DH``
-        (power-on: the home angle itself), from this command on.
+        The search goes to what its mode looks for (:data:`HOMING_MODES`: the controller's
+        zero count, the home switch, a hardware limit switch), past the software limits,
+        and the point found is given the home preset (``SH``, ``DH``; power-on: the home
+        angle) from this command on. It ends there exactly when the mode uses the
+        encoder's index pulse, within the axis's repeatability on a switch's edge alone.
+        Reaching a limit switch is the search's end, not an error.
         """
         axis = self._axis(digits)
         if query:
             raise _EspError(6)
-        if rest:
-            mode = self._number(rest, axis)
-            if mode not in (0, 1, 2, 3, 4, 5, 6):
-                raise _EspError(100 * axis.config.number + 1)
-        previous, axis.offset = axis.offset, axis.home_preset - axis.config.home
+        mode = self._homing_mode(rest, axis) if rest else axis.homing_mode
+        looks_for, on_index = HOMING_MODES[mode]
+        previous, axis.offset = axis.offset, axis.home_preset - self._homing_point(axis, looks_for)
         try:
-            self._start_move(axis, axis.home_preset, axis.homing_velocity, on_switch=True)
+            self._start_move(axis, axis.home_preset, axis.homing_velocity, on_switch=on_index, homing=True)
         except _EspError:
             axis.offset = previous  # a refused home search changes nothing
             raise
+        return None
+
+    def _homing_mode(self, text: str, axis: AxisState) -> int:
+        """A home search mode 0 to 6 (manual commands ``OR``, ``OM``), else x01."""
+        mode = self._number(text, axis)
+        if mode not in HOMING_MODES:
+            raise _EspError(100 * axis.config.number + 1)
+        return int(mode)
+
+    @staticmethod
+    def _homing_point(axis: AxisState, looks_for: str) -> float:
+        """The mechanical angle [deg] a home search looking for ``looks_for`` ends at."""
+        lo, hi = axis.config.hardware_limits
+        return {"zero": -axis.offset, "home": axis.config.home, "+limit": hi, "-limit": lo}[looks_for]
+
+    def _cmd_OM(self, digits, rest, query):
+        """Home search mode of a bare ``OR`` (0 to 6, :data:`HOMING_MODES`; power-on 1)."""
+        axis = self._axis(digits)
+        if query:
+            return str(axis.homing_mode)
+        axis.homing_mode = self._homing_mode(rest, axis)
+        return None
+
+    def _cmd_SH(self, digits, rest, query):
+        """Home preset [units]: the position a home search gives the point it finds (manual
+        command ``SH``; power-on: the home angle). ``DH`` sets it too."""
+        axis = self._axis(digits)
+        if query:
+            return self._out(axis, axis.home_preset)
+        axis.home_preset = self._quantity(rest, axis)
         return None
 
     def _cmd_DH(self, digits, rest, query):
@@ -1007,18 +1184,38 @@ class Esp300Firmware:
     def _cmd_WP(self, digits, rest, query):
         """Wait for position: hold command processing until axis ``xx`` passes ``nn`` [units].
 
-        A real controller waits for ever for a position its axis never reaches; the
-        emulator waits until the axis has stopped instead (every wait stays finite).
+        The wait ends when the trajectory passes ``nn``, or, for ``nn`` within one encoder
+        count of the commanded target, when the move ends there (the servo's trajectory
+        ends at the commanded target; the landing point differs from it by the
+        repeatability), as after ``PA`` then ``WP`` to the same position. For a position the
+        axis will not pass the controller waits as the hardware does: it executes nothing
+        more (the rest of the line, later lines), answers nothing, so a client sees its own
+        read timeout, until the controller is reset (:meth:`power_cycle`, the control
+        channel's ``power_cycle``).
         """
         axis = self._axis(digits)
         if query:
             raise _EspError(6)
-        target = self._quantity(rest, axis) - axis.offset
+        position = self._quantity(rest, axis)
         t = self.clock.now()
-        when = crossing_time(axis.profile, target, t)
-        self.clock.wait_until(axis.profile.end_time if when is None else max(when, t))
+        when = crossing_time(axis.profile, position - axis.offset, t)
+        if when is None and abs(position - axis.desired) <= axis.config.resolution:
+            when = axis.profile.end_time
+        if when is None:
+            self.waiting_for = (axis.config.number, position)
+            return None
+        self.clock.wait_until(max(when, t))
         self._update(self.clock.now())
         return None
+
+    def power_cycle(self) -> None:
+        """Switch the controller off and on: what ends a ``WP`` that waits for ever.
+
+        As ``RS``: the axes stop where they are, power-on settings (or those saved with
+        ``SM``), motors off, the error buffer empty, input received meanwhile lost.
+        """
+        self.waiting_for = None
+        self._cmd_RS("", "", False)
 
     # -- settings ---------------------------------------------------------------------
     def _setting(self, digits: str, rest: str, query: bool, attribute: str,
@@ -1073,6 +1270,11 @@ class Esp300Firmware:
     def _cmd_OH(self, digits, rest, query):
         """Homing velocity of ``OR`` [units/s], at most ``VU``."""
         return self._velocity_command(digits, rest, query, "homing_velocity")
+
+    def _cmd_OL(self, digits, rest, query):
+        """Low homing velocity [units/s] (manual command ``OL``): stored and read back; the
+        emulated search runs at ``OH`` all the way."""
+        return self._velocity_command(digits, rest, query, "homing_low_velocity")
 
     def _cmd_AC(self, digits, rest, query):
         """Acceleration of moves [units/s^2], at most ``AU``; a move in progress follows it."""
@@ -1168,6 +1370,8 @@ class Esp300Firmware:
             return self._format_setup(axis, spec, axis.setup[mnemonic])
         value = self._parse_setup(axis, spec, rest)
         n = axis.config.number
+        if mnemonic == "TJ" and axis.moving(self.clock.now()):
+            raise _EspError(27)  # the trajectory mode cannot change during a motion
         if value > spec.high(axis):
             raise _EspError(100 * n + spec.above_code)
         if not value >= spec.low(axis):
@@ -1270,9 +1474,16 @@ class Esp300Firmware:
         repeatability error (the end is a limit, not a servo target)."""
         t = self.clock.now()
         axis.desired = target
-        axis.profile = trapezoid_profile(t, axis.position(t), target - axis.offset, axis.velocity,
-                                         axis.acceleration, axis.deceleration)
+        axis.profile = self._rest_to_rest(axis, t, axis.position(t), target - axis.offset, axis.velocity)
         axis.pending_error = pending_error
+
+    @staticmethod
+    def _rest_to_rest(axis: AxisState, t: float, start: float, end: float, velocity: float) -> MotionProfile:
+        """A move from rest to rest in the axis's trajectory mode (``TJ``): trapezoidal, or an
+        S-curve with the jerk ``JK``."""
+        if axis.setup["TJ"] == TRAJECTORY_SCURVE:
+            return scurve_profile(t, start, end, velocity, axis.acceleration, axis.deceleration, axis.setup["JK"])
+        return trapezoid_profile(t, start, end, velocity, axis.acceleration, axis.deceleration)
 
     def _cmd_MT(self, digits, rest, query):
         """Move to the hardware travel limit ``+`` or ``-`` at ``VA``, past the software limits.

@@ -254,9 +254,13 @@ def test_instrumentkit_esp301_motion(instrumentkit_esp):
     assert float(axis.position) == pytest.approx(15.0, abs=0.01)
     axis.home = 0.0  # DH0
     assert float(axis.home) == 0.0 and float(axis.position) == pytest.approx(0.0, abs=1e-9)
-    esp.search_for_home(axis=1)
+    esp.search_for_home(axis=1)  # OR0: the +0 count, here where DH0 put it
     axis.wait_for_stop()
-    assert rig.control.true_state().positions_deg[0] == pytest.approx(0.0, abs=0.01)
+    assert rig.control.true_state().positions_deg[0] == pytest.approx(15.0, abs=0.01)
+    esp.search_for_home(axis=1, search_mode=ik.newport.NewportESP301HomeSearchMode.home_index_signals.value)
+    axis.wait_for_stop()  # OR1: the home switch and index, which now reads the DH value 0
+    assert rig.control.true_state().positions_deg[0] == pytest.approx(0.0, abs=1e-9)
+    assert float(axis.position) == 0.0
     with esp.execute_bulk_command():  # ';'-joined on one line
         axis.move(10.0)
         axis.wait_for_stop()
@@ -276,6 +280,25 @@ def test_instrumentkit_esp301_motion(instrumentkit_esp):
     axis.disable()
     esp.reset()
     assert float(esp.axis[0].max_velocity) == 20.0
+
+
+@pytest.mark.parametrize("instrumentkit_esp", ["pty"], indirect=True)
+def test_instrumentkit_relative_move_with_wait_hangs_as_on_the_hardware(instrumentkit_esp):
+    """``move(-5, absolute=False, wait=True)`` sends ``PR-5`` then ``WP-5``: a wait for the
+    absolute position -5, which an axis going from -20 to -25 never passes. A real ESP301
+    waits for ever; the emulator holds the controller the same way, so the client meets its
+    read timeout, and the controller answers again after a power cycle."""
+    rig, ik, esp = instrumentkit_esp
+    axis = esp.axis[0]
+    axis.enable()
+    axis.move(-20.0, absolute=True, wait=True)
+    with pytest.raises(OSError, match="timed out"):
+        axis.move(-5.0, absolute=False, wait=True)
+    assert rig.stage.waiting_for == (1, -5.0)
+    rig.control.advance(5.0)  # the event clock: the client's timeout did not count
+    rig.control.power_cycle_stage()
+    assert rig.stage.waiting_for is None
+    assert float(axis.position) == pytest.approx(-25.0, abs=0.01)
 
 
 @pytest.mark.parametrize("instrumentkit_esp", TRANSPORTS, indirect=True)
