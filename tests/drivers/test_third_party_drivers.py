@@ -25,6 +25,8 @@ import warnings
 import numpy as np
 import pytest
 
+from client_addresses import tcp_port, visa_resource
+
 from drivers.emulator.rig import EmulatedRig
 
 TRANSPORTS = ["pty", "tcp"]
@@ -39,16 +41,6 @@ def lab():
     with EmulatedRig(lambert, seed=11, name="third-party", lamp_warm=True) as rig:
         addresses = rig.start(pty=True, tcp=True)
         yield rig, addresses
-
-
-def tcp_port(address: str) -> int:
-    return int(address.rsplit(":", 1)[1])
-
-
-def visa_resource(address: str, kind: str) -> str:
-    if kind == "pty":
-        return f"ASRL{address}::INSTR"
-    return f"TCPIP::127.0.0.1::{tcp_port(address)}::SOCKET"
 
 
 def serial_port(address: str, baudrate: int, timeout: float):
