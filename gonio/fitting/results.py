@@ -40,6 +40,7 @@ from .priors import Prior, prior_from_dict
 from .rig_errors import RIG_ERROR_NAMES, RigPrediction
 from .evaluation import combine_prediction, evaluated_model
 from .problem import FitProblem, jitter_mode, predict_quantity
+from .validity import ModelValidity
 from .text import digits_to_resolve
 from .truth import known_truth, truth_lines
 from .selection import COMPARISON_FILE, COMPARISON_TEXT, comparison_text, information_criteria
@@ -166,6 +167,9 @@ class FitResult:
     comparison : dict or None
         The model comparison that chose this model, in its JSON form
         (:meth:`gonio.fitting.ModelComparison.to_dict`), when the fit followed one.
+    validity : ModelValidity or None
+        For an approximate model, its error against the exact model at the data and the
+        shift of the optimum it causes (:mod:`gonio.fitting.validity`); None otherwise.
     """
 
     model: str
@@ -186,6 +190,7 @@ class FitResult:
     alignment: tuple[str, ...] = ()
     stray_light: bool = False
     comparison: dict[str, Any] | None = None
+    validity: ModelValidity | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -424,6 +429,7 @@ class FitResult:
             "created": self.created,
             "result_id": self.result_id,
             "comparison": self.comparison,
+            "validity": self.validity.to_dict() if self.validity is not None else None,
             "model": self.model,
             "model_reference": problem.model.reference,
             "quantity": self.dataset.quantity,
@@ -651,6 +657,7 @@ class FitResult:
             gonio_version=data.get("gonio_version", ""),
             adequacy=Adequacy.from_dict(data["adequacy"]) if data.get("adequacy") else None,
             comparison=data.get("comparison"),
+            validity=ModelValidity.from_dict(data["validity"]) if data.get("validity") else None,
         )
 
     # ------------------------------------------------------------------ text

@@ -14,6 +14,7 @@ from .polish import polish, shifted_chain
 from .priors import Prior
 from .problem import FitProblem
 from .results import FitResult
+from .validity import check as check_validity
 
 __all__ = ["fit", "AUTO"]
 
@@ -99,6 +100,7 @@ def fit(
         return FitProblem(name, dataset, fixed, options, noise, alignment, stray_light)
 
     problem, least_squares, all_priors, flags = _least_squares(problem_of, model, jitter, priors, start, seed)
+    validity = check_validity(problem, least_squares, _other_problem(problem, fixed, alignment, stray_light))
     polished = polish(problem, least_squares, all_priors, lambda name: problem_of(name, problem.jitter)) \
         if polish_table else None
     judge = None
@@ -116,7 +118,21 @@ def fit(
             chain, least_squares = shifted_chain(chain, problem, polished.shift), polished.least_squares
         result = FitResult.build(problem, least_squares, chain, used_priors, judge=judge)
     result.flags[:0] = data_notes(dataset.metadata) + flags
+    result.validity = validity
+    if validity is not None and validity.exceeded:
+        result.flags.append(validity.flag(dataset.geometry))
     return result
+
+
+def _other_problem(problem: FitProblem, fixed, alignment, stray_light) -> Callable[..., FitProblem]:
+    """``build(model_name, options, dataset)``: ``problem``'s fit with another model or dataset,
+    the fixed values kept where that model has the parameter (:mod:`gonio.fitting.validity`)."""
+    def build(name: str, options: Mapping[str, Any], dataset: Dataset) -> FitProblem:
+        base = FitProblem(name, dataset, None, options, problem.jitter, alignment, stray_light)
+        known = {spec.name for spec in base.specs}
+        return FitProblem(name, dataset, {k: v for k, v in (fixed or {}).items() if k in known}, options,
+                          problem.jitter, alignment, stray_light)
+    return build
 
 
 def _least_squares(problem_of, model, jitter, priors, start, seed):

@@ -614,7 +614,9 @@ def residual_figure(result: FitResult) -> Figure:
     ``rel_jitter`` x prediction) in quadrature. Bottom: every measured value against the
     model's, with its error bar and the 1:1 line, and the relative difference on the right
     axis scale in the title. The title's chi-square is the fit's own, with the data's
-    covariance where they have one.
+    covariance where they have one. For an approximate model, red crosses in the top row
+    mark ``(exact - approximation) / sigma`` at each value (:func:`_formula_error`): where
+    the data sit on the approximation's map of validity (docs/validity.md).
     """
     data = result.dataset
     problem = result.problem()
@@ -630,7 +632,8 @@ def residual_figure(result: FitResult) -> Figure:
     sources, index = data.incidences()
     panels = len(sources) if 1 < len(sources) <= MAX_RESIDUAL_PANELS else 1
     fig, grid = _fixed_grid(max(7.5, 2.3 * panels + 1.0), 7.6, 2, panels, _RESIDUAL_MARGINS)
-    limit = max(3.5, float(np.nanmax(np.abs(z))) * 1.1) if z.size else 3.5
+    formula = _formula_error(result)
+    limit = max(3.5, float(np.nanmax(np.abs(np.concatenate([z, formula])))) * 1.1) if z.size else 3.5
     first = None
     for k in range(panels):
         ax = fig.add_subplot(grid[0, k], sharey=first)
@@ -638,6 +641,10 @@ def residual_figure(result: FitResult) -> Figure:
         chosen = np.ones(data.n, bool) if panels == 1 else index == k
         _residual_band(ax)
         _residual_points(fig, ax, data, x, z, chosen, legend=panels == 1)
+        shown = chosen & np.isfinite(formula)
+        if shown.any():
+            ax.plot(x[shown], formula[shown], "x", color="tab:red", ms=4, mew=1.0, zorder=4,
+                    label=f"(exact - {result.model}) / sigma: the formula's own error")
         ax.set_xlim(-90, 90)
         ax.set_ylim(-limit, limit)
         if panels > 1:
@@ -649,7 +656,7 @@ def residual_figure(result: FitResult) -> Figure:
                       "signed viewing angle theta_r [deg] (in plane; + source side)", fontsize=8)
         ax.grid(alpha=0.3)
     first.set_ylabel(f"(data - model) / {noise_label} [-]", fontsize=8)
-    if panels == 1 and first.get_legend_handles_labels()[0]:
+    if (panels == 1 or np.isfinite(formula).any()) and first.get_legend_handles_labels()[0]:
         first.legend(fontsize=8, ncol=2, loc="upper left")
     _measured_against_model(fig.add_subplot(grid[1, :]), data, model, sigma, index, sources)
     chi2 = float(np.dot(whitened, whitened))
@@ -658,6 +665,16 @@ def residual_figure(result: FitResult) -> Figure:
     fig.suptitle(f"Residuals at the posterior median: chi2{correlated} = {chi2:.1f} for {data.n} points",
                  fontsize=10, y=1.0 - 0.08 / fig.get_figheight(), va="top")
     return fig
+
+
+def _formula_error(result: FitResult) -> np.ndarray:
+    """``(exact - approximation) / sigma`` at each value the fit's validity check compared
+    (:mod:`gonio.fitting.validity`), NaN elsewhere and for a model that is not an
+    approximation: what the exact model would add to each residual."""
+    error = np.full(result.dataset.n, np.nan)
+    if result.validity is not None:
+        error[result.validity.checked] = -np.asarray(result.validity.error_sd, float)
+    return error
 
 
 def _residual_band(ax: Axes) -> None:

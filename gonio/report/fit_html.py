@@ -63,7 +63,10 @@ FIGURES: tuple[ReportFigure, ...] = (
     ReportFigure("fit-residuals.png", "Residuals", "residual_figure",
                  "Normalised residuals, one panel per incidence (about 68 % should fall in the dark band and 95 % "
                  "within the light one), and every measured value against the model's at its geometry with the "
-                 "1:1 line: a misfit the data figure's scale hides shows here.", 0.08),
+                 "1:1 line: a misfit the data figure's scale hides shows here. For an approximate model (oren-nayar, "
+                 "its qualitative and numerical forms, Wolff's polynomial Fresnel factor), red crosses: the "
+                 "approximation's own departure from the exact model at each value, in its uncertainties "
+                 "(docs/validity.md).", 0.08),
     ReportFigure("fit-corner.png", "Posterior", "corner_figure",
                  "One- and two-dimensional marginal posteriors of the free parameters.", 0.18),
     ReportFigure("fit-traces.png", "Chain", "trace_figure",
