@@ -84,6 +84,13 @@ RESULT_FORMAT = "gonio-fit-result"
 _PILE_FRACTION = 0.05
 # Pairs with |correlation| above this are reported as nearly degenerate.
 _STRONG_CORRELATION = 0.95
+# What to do about a strong correlation whose cause is known (docs/validity.md).
+_DEGENERACY_ADVICE = {
+    frozenset(("rho", "scale")): (
+        ": relative radiance without a reference standard fixes rho x scale, and rho only through the "
+        "interreflection's rho^2; measure a reference standard ([reference] in the protocol, docs/acquisition.md) "
+        "for a prior on scale, or quote rho x scale"),
+}
 # The plain-text summary lists correlations above this (as lmfit does, at 0.1).
 _REPORTED_CORRELATION = 0.1
 
@@ -765,7 +772,8 @@ def _posterior_flags(problem: FitProblem, posterior: Mapping[str, Any]) -> list[
             if math.isfinite(r) and abs(r) > _STRONG_CORRELATION:
                 notes.append(
                     f"{names[i]} and {names[j]} are strongly correlated in the posterior (r = {r:+.3f}): "
-                    "the data constrain mainly a combination of them"
+                    "the data constrain mainly a combination of them" + _DEGENERACY_ADVICE.get(
+                        frozenset((names[i], names[j])), "")
                 )
     return notes
 

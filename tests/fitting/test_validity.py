@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -111,3 +112,20 @@ def test_gonio_fit_prints_the_warning_and_writes_the_check(tmp_path, capsys):
     assert "departs from oren-nayar-exact" in out.out + out.err
     saved = json.loads((tmp_path / "fit" / "result.json").read_text())
     assert saved["validity"]["bias_sd"]["sigma"] < -BIAS_LIMIT
+
+
+def test_rho_and_a_free_scale_are_flagged_with_what_to_measure():
+    """Relative radiance without a standard: prediction = scale x f_r cos(theta_i), so rho
+    and scale trade against each other (rho enters otherwise only through the
+    interreflection's rho^2); the correlation flag says what breaks the degeneracy."""
+    theta_r, phi_r = np.abs(VIEWS), np.where(VIEWS < 0, 180.0, 0.0)
+    brdf = gonio.brdf("oren-nayar-tabulated", 45.0, 0.0, theta_r, phi_r, rho=0.8, sigma=25.0)
+    radiance = 2.0 * brdf * np.cos(np.radians(45.0))
+    noisy = radiance * (1 + 0.003 * np.random.default_rng(4).standard_normal(radiance.size))
+    data = Dataset(45.0, 0.0, theta_r, phi_r, noisy, 0.003 * radiance, quantity="radiance")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a short chain: the correlation shows long before convergence
+        result = fit(data, "oren-nayar-tabulated", seed=2, n_walkers=16, max_steps=1500, polish_table=False)
+    flag = next(flag for flag in result.flags if "rho and scale are strongly correlated" in flag)
+    assert "reference standard" in flag
+    assert not any("reference standard" in other for other in result.flags if "rho and sigma" in other)
