@@ -15,7 +15,7 @@ by more than 0.5 standard errors or a value 3 uncertainties off); then, at sigma
 theta_i 45 deg, relative noise from 0.1 % to 30 %: where the flag stops.
 
 Writes docs/benchmarks/validity_check.json and validity_check.png. Run:
-``python benchmarks/validity_check.py`` (about a minute).
+``python benchmarks/validity_check.py`` (about 2.5 minutes).
 """
 from __future__ import annotations
 
@@ -98,7 +98,7 @@ def chart(rows: list[dict], path) -> None:
         ax.set_xscale("symlog", linthresh=1.0)
         ax.set_yscale("symlog", linthresh=1.0)
         ax.set_xlabel(f"measured shift of {name} [standard errors] (approximation - exact fit)")
-        ax.set_ylabel(f"shift predicted by the check [standard errors]")
+        ax.set_ylabel("shift predicted by the check [standard errors]")
         ax.set_title(f"{name} [{unit}]", fontsize=10)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
