@@ -173,3 +173,15 @@ def test_a_geometry_whose_quadrature_set_is_empty_evaluates():
     empty array; any geometry must evaluate (KvDDN 1999, eq 14-15: the BRDF is >= 0)."""
     value = float(PITTED(71.0, 0.0, 89.0, 0.0, rho=0.0, psi=0.01171875, coverage=1.0))
     assert value >= 0.0
+
+
+def test_the_monte_carlo_error_covers_a_lit_part_no_sample_found():
+    """At a grazing source no sample of 1e4 may land in the lit part of the cavity: the
+    estimate is then the diffuse term alone (0.037 against the closed form's 0.286), and its
+    standard error must say so instead of reading 1e-19 (benchmarks/validity_atlas.py)."""
+    import gonio
+
+    estimate = monte_carlo_brdf(89.99, 15.0, 0.0, rho=0.9, psi=45.0, coverage=1.0, samples=10_000, seed=665)
+    closed = float(gonio.brdf("pitted", 89.99, 0.0, 15.0, 0.0, rho=0.9, psi=45.0, coverage=1.0))
+    assert estimate.value < 0.2 * closed  # the lit part was missed ...
+    assert abs(closed - estimate.value) < 3.0 * estimate.standard_error  # ... and the error bar says so
