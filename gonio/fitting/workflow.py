@@ -1,6 +1,7 @@
 """One call from data to a complete fit result: :func:`fit`."""
 from __future__ import annotations
 
+import contextlib
 from typing import Any, Callable, Mapping, Sequence
 
 from gonio.models import Model
@@ -16,10 +17,12 @@ from .problem import FitProblem
 from .results import FitResult
 from .validity import check as check_validity
 
-__all__ = ["fit", "AUTO"]
+__all__ = ["fit", "AUTO", "BLAS_THREADS"]
 
 #: ``jitter`` value that adds an extra-noise term only where the verdict asks for it.
 AUTO = "auto"
+#: BLAS threads during a fit (:func:`fit`'s ``blas_threads``).
+BLAS_THREADS = 1
 
 
 def fit(
@@ -40,6 +43,7 @@ def fit(
     alignment: str | Sequence[str] | None = None,
     stray_light: bool = False,
     polish_table: bool = True,
+    blas_threads: int | None = BLAS_THREADS,
 ) -> FitResult:
     """Fit a registered model to a dataset: least squares, then (optionally) MCMC.
 
@@ -82,6 +86,14 @@ def fit(
         much). False keeps the table's fit: the same widths, a slightly different optimum,
         in a fraction of the time (the exact model at grazing geometries takes a minute or
         more); an adaptive run's decisions use it (:mod:`gonio.adaptive`).
+    blas_threads : int or None
+        Threads the BLAS library (OpenBLAS, MKL) may use during the fit
+        (:func:`threadpoolctl.threadpool_limits`; default 1, None: as the process has it).
+        A fit's matrix products (the whitening of correlated data, a few hundred to a few
+        thousand values) gain nothing from threads, a threaded BLAS spins between calls
+        and takes the cores other work needs, and a product's rounding, so the chain,
+        depends on the thread count; with one thread the same seed and data give the same
+        chain on any machine (docs/fitting.md, "Performance").
 
     Returns
     -------
@@ -96,6 +108,17 @@ def fit(
     >>> round(result.best_values()["rho"], 3)
     0.5
     """
+    import scipy.linalg  # noqa: F401  (loads scipy's own BLAS now, so that the limit reaches it too)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=blas_threads, user_api="blas") if blas_threads else contextlib.nullcontext():
+        return _fit(dataset, model, fixed, priors, mcmc, jitter, options, start, n_walkers, max_steps, tau_multiple,
+                    rhat_limit, seed, progress, alignment, stray_light, polish_table)
+
+
+def _fit(dataset, model, fixed, priors, mcmc, jitter, options, start, n_walkers, max_steps, tau_multiple, rhat_limit,
+         seed, progress, alignment, stray_light, polish_table) -> FitResult:
+    """:func:`fit`'s work, with its BLAS threads set."""
     def problem_of(name: str | Model, noise: str | None) -> FitProblem:
         return FitProblem(name, dataset, fixed, options, noise, alignment, stray_light)
 
