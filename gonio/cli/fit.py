@@ -139,11 +139,12 @@ def check_result_folder(out: Path, overwrite: bool, argument: str = "--out") -> 
 
 def result_file_names() -> tuple[str, ...]:
     """Every file name a fit result folder may hold from FitResult.save and write_report."""
-    from gonio.fitting.results import CHAIN_FILE, INFERENCE_DATA_FILE, RESULT_FILE, SUMMARY_FILE
+    from gonio.fitting.results import CHAIN_FILE, COVARIANCE_FILE, INFERENCE_DATA_FILE, RESULT_FILE, SUMMARY_FILE
     from gonio.fitting.selection import COMPARISON_FILE, COMPARISON_TEXT
     from gonio.report.fit_html import REPORT_FILES  # the names without matplotlib
 
-    return (RESULT_FILE, CHAIN_FILE, INFERENCE_DATA_FILE, SUMMARY_FILE, COMPARISON_FILE, COMPARISON_TEXT) + REPORT_FILES
+    return (RESULT_FILE, CHAIN_FILE, COVARIANCE_FILE, INFERENCE_DATA_FILE, SUMMARY_FILE, COMPARISON_FILE,
+            COMPARISON_TEXT) + REPORT_FILES
 
 
 def remove_stale_results(out: Path, written: tuple[str, ...]) -> list[Path]:

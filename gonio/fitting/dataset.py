@@ -241,11 +241,12 @@ class Dataset:
         )
 
     # ------------------------------------------------------------------ persistence
-    def to_dict(self) -> dict[str, Any]:
-        """Plain-Python form (lists), for JSON."""
+    def to_dict(self, covariance: bool = True) -> dict[str, Any]:
+        """Plain-Python form (lists), for JSON; ``covariance=False`` leaves the covariance
+        out (a fit result writes it to a binary file of its own)."""
         out: dict[str, Any] = {name: getattr(self, name).tolist() for name in CSV_COLUMNS}
         out.update(quantity=self.quantity, label=self.label, metadata=dict(self.metadata))
-        if self.covariance is not None:
+        if covariance and self.covariance is not None:
             out["covariance"] = self.covariance.tolist()
         return out
 

@@ -45,12 +45,18 @@ from .text import digits_to_resolve
 from .truth import known_truth, truth_lines
 from .selection import COMPARISON_FILE, COMPARISON_TEXT, comparison_text, information_criteria
 
-__all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE", "SUMMARY_FILE", "INFERENCE_DATA_FILE", "RESULT_FORMAT",
+__all__ = ["FitResult", "RESULT_FILE", "CHAIN_FILE", "COVARIANCE_FILE", "SUMMARY_FILE", "INFERENCE_DATA_FILE",
+           "RESULT_FORMAT",
            "is_fit_result", "EXIT_BAD_INPUT", "EXIT_NOT_CONVERGED", "EXIT_INADEQUATE",
            "EXIT_NOISE_UNDERSTATED", "verdict_exit_code"]
 
 RESULT_FILE = "result.json"
 CHAIN_FILE = "chain.npz"
+#: The data's covariance matrix (N x N doubles), beside result.json rather than in it: as
+#: JSON text it made result.json 554 MB for 4708 values.
+COVARIANCE_FILE = "covariance.npz"
+#: The version of result.json: 2 keeps the covariance in :data:`COVARIANCE_FILE`.
+RESULT_FORMAT_VERSION = 2
 #: Largest number of posterior draws (walkers x steps) in an InferenceData / posterior.nc.
 INFERENCE_DRAWS = 8000
 #: Most replicated datasets in posterior.nc's posterior_predictive group (the last steps of
@@ -431,7 +437,7 @@ class FitResult:
         problem = self.problem()
         out: dict[str, Any] = {
             "format": "gonio-fit-result",
-            "format_version": 1,
+            "format_version": RESULT_FORMAT_VERSION,
             "gonio_version": self.gonio_version,
             "created": self.created,
             "result_id": self.result_id,
@@ -463,7 +469,7 @@ class FitResult:
             "flags": self.flags,
             "adequacy": self.adequacy.to_dict() if self.adequacy is not None else None,
             "discrepancy": self.discrepancy,
-            "dataset": self.dataset.to_dict(),
+            "dataset": self._dataset_record(),
         }
         if self.mcmc is not None:
             m = self.mcmc
@@ -495,10 +501,19 @@ class FitResult:
         """Names of the files :meth:`save` writes for this result (chain only with MCMC, the
         comparison's files only after a comparison)."""
         return ((RESULT_FILE, SUMMARY_FILE) + ((CHAIN_FILE, INFERENCE_DATA_FILE) if self.mcmc is not None else ())
+                + ((COVARIANCE_FILE,) if self.dataset.covariance is not None else ())
                 + ((COMPARISON_FILE, COMPARISON_TEXT) if self.comparison is not None else ()))
 
+    def _dataset_record(self) -> dict[str, Any]:
+        """The dataset for result.json: its covariance named by file, not written out."""
+        record = self.dataset.to_dict(covariance=False)
+        if self.dataset.covariance is not None:
+            record["covariance_file"] = COVARIANCE_FILE
+        return record
+
     def save(self, directory: str | Path) -> Path:
-        """Write ``chain.npz`` and ``posterior.nc`` (with MCMC), ``comparison.json`` and
+        """Write ``chain.npz`` and ``posterior.nc`` (with MCMC), ``covariance.npz`` (data with a
+        covariance), ``comparison.json`` and
         ``comparison.txt`` (after a model comparison), ``summary.txt`` and, last,
         ``result.json`` into a folder.
 
@@ -532,6 +547,10 @@ class FitResult:
                      names=np.array(self.free), burn_in=np.array(self.mcmc.burn_in), thin=np.array(self.mcmc.thin))
             write_atomic(directory / CHAIN_FILE, buffer.getvalue())
             self._write_inference_data(directory / INFERENCE_DATA_FILE)
+        if self.dataset.covariance is not None:
+            buffer = io.BytesIO()
+            np.savez(buffer, covariance=self.dataset.covariance, result_id=np.array(self.result_id))
+            write_atomic(directory / COVARIANCE_FILE, buffer.getvalue())
         if self.comparison is not None:
             comparison = {**_clean(self.comparison), "result_id": self.result_id}
             write_atomic(directory / COMPARISON_FILE, json.dumps(comparison, indent=1, allow_nan=False))
@@ -647,7 +666,7 @@ class FitResult:
             ls[key] = _nan(ls[key])
         return cls(
             model=data["model"],
-            dataset=Dataset.from_dict(data["dataset"]),
+            dataset=_load_dataset(path, data),
             fixed={k: float(v) for k, v in data["fixed"].items()},
             free=tuple(data["free"]),
             options=dict(data["options"]),
@@ -779,6 +798,19 @@ def _posterior_flags(problem: FitProblem, posterior: Mapping[str, Any]) -> list[
 
 
 # ---------------------------------------------------------------------- summary text
+def _load_dataset(path: Path, data: Mapping[str, Any]) -> Dataset:
+    """The dataset of a result.json at ``path``, its covariance read from the file it names
+    (format 2) or from the record itself (format 1)."""
+    record = dict(data["dataset"])
+    name = record.pop("covariance_file", None)
+    if name is not None:
+        covariance_path = path.parent / name
+        with np.load(covariance_path) as arrays:
+            record["covariance"] = arrays["covariance"]
+            _check_same_save(path, data.get("result_id"), covariance_path, str(arrays["result_id"]))
+    return Dataset.from_dict(record)
+
+
 def _check_same_save(result_path: Path, result_id: str | None, other: Path, other_id: str | None) -> None:
     """Refuse a file of another save beside ``result.json`` (a save interrupted between files,
     :meth:`FitResult.save`); files written before results carried an id pass."""
