@@ -1,5 +1,11 @@
-"""Shared fixtures: geometry sets used by the model-independent tests."""
+"""Shared fixtures: geometry sets used by the model-independent tests, and the benchmark
+scripts loaded as modules for the tests of their core functions."""
 from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
@@ -34,3 +40,16 @@ def fast_models() -> list[str]:
 @pytest.fixture(params=gonio.models.available())
 def model_name(request) -> str:
     return request.param
+
+
+def benchmark_script(name: str) -> ModuleType:
+    """``benchmarks/<name>.py`` imported as the module ``name`` (registered in
+    ``sys.modules`` while it runs, which dataclasses need)."""
+    root = Path(__file__).resolve().parents[1] / "benchmarks"
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))  # the scripts import their _common
+    spec = importlib.util.spec_from_file_location(name, root / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module

@@ -3,24 +3,20 @@ posterior shift and spread ratio against the Monte Carlo error it quotes beside 
 the verdict changes (docs/calibration.md, "The same seeds under both samplers")."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import stats
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "calibration_paired.py"
+from tests.conftest import benchmark_script
+
 
 
 @pytest.fixture(scope="module")
 def paired():
-    spec = importlib.util.spec_from_file_location("calibration_paired", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return benchmark_script("calibration_paired")
 
 
 def record(seed: int, median: float, sd: float, ess: float, *, arm: str = "closed-form", in68: bool = True,

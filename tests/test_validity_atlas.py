@@ -2,23 +2,17 @@
 within 1/5/10 %, and the NaN/negative/reciprocity checks, on tiny grids."""
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "validity_atlas.py"
+from tests.conftest import benchmark_script
+
 
 
 @pytest.fixture(scope="module")
 def atlas():
-    spec = importlib.util.spec_from_file_location("validity_atlas", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look the module up while the class is made
-    spec.loader.exec_module(module)
-    return module
+    return benchmark_script("validity_atlas")
 
 
 @pytest.fixture(scope="module")
