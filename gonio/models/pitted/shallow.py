@@ -158,12 +158,13 @@ def monte_carlo_brdf(
     cos_i = np.cos(np.radians(theta_i))
     values = orifice_radiance(points, theta_i, theta_r, epsilon, rho, psi) / cos_i
     pit = float(values.mean())
-    error = max(float(values.std(ddof=1) / np.sqrt(values.size)), _rare_lit_error(values, rho, cos_i))
+    diffuse_only = rho / np.pi * float(diffuse_irradiance(rho, psi))  # a sample no direct light reaches
+    error = max(float(values.std(ddof=1) / np.sqrt(values.size)), _rare_lit_error(values, diffuse_only, rho, cos_i))
     flat = (1.0 - coverage) * rho / np.pi
     return MonteCarloEstimate(coverage * pit + flat, coverage * error, int(samples), int(seed))
 
 
-def _rare_lit_error(values: np.ndarray, rho: float, cos_i: float) -> float:
+def _rare_lit_error(values: np.ndarray, diffuse_only: float, rho: float, cos_i: float) -> float:
     """Floor of the standard error where few samples see the lit part of the cavity [1/sr].
 
     At a grazing source or view the lit-and-visible part of the orifice can be so small that
@@ -176,6 +177,6 @@ def _rare_lit_error(values: np.ndarray, rho: float, cos_i: float) -> float:
     not mean no uncertainty. Decision: this floor, rather than refusing the geometry.
     """
     n = values.size
-    lit = int(np.count_nonzero(values > values.min()))
+    lit = int(np.count_nonzero(values > diffuse_only * (1.0 + 1e-9)))
     fraction = (lit + 1.0) / (n + 2.0)
     return float(rho / (np.pi * cos_i) * np.sqrt(fraction * (1.0 - fraction) / n))
