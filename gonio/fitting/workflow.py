@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import importlib
 from typing import Any, Callable, Mapping, Sequence
 
 from gonio.models import Model
@@ -16,6 +17,7 @@ from .priors import Prior
 from .problem import FitProblem
 from .results import FitResult
 from .validity import check as check_validity
+from .validity import regime_flags
 
 __all__ = ["fit", "AUTO", "BLAS_THREADS"]
 
@@ -108,8 +110,9 @@ def fit(
     >>> round(result.best_values()["rho"], 3)
     0.5
     """
-    import scipy.linalg  # noqa: F401  (loads scipy's own BLAS now, so that the limit reaches it too)
     from threadpoolctl import threadpool_limits
+
+    importlib.import_module("scipy.linalg")  # loads scipy's own BLAS now, so that the limit reaches it too
 
     with threadpool_limits(limits=blas_threads, user_api="blas") if blas_threads else contextlib.nullcontext():
         return _fit(dataset, model, fixed, priors, mcmc, jitter, options, start, n_walkers, max_steps, tau_multiple,
@@ -124,6 +127,7 @@ def _fit(dataset, model, fixed, priors, mcmc, jitter, options, start, n_walkers,
 
     problem, least_squares, all_priors, flags = _least_squares(problem_of, model, jitter, priors, start, seed)
     validity = check_validity(problem, least_squares, _other_problem(problem, fixed, alignment, stray_light))
+    flags += regime_flags(problem, all_priors)
     polished = polish(problem, least_squares, all_priors, lambda name: problem_of(name, problem.jitter)) \
         if polish_table else None
     judge = None

@@ -129,3 +129,18 @@ def test_rho_and_a_free_scale_are_flagged_with_what_to_measure():
     flag = next(flag for flag in result.flags if "rho and scale are strongly correlated" in flag)
     assert "reference standard" in flag
     assert not any("reference standard" in other for other in result.flags if "rho and sigma" in other)
+
+
+@pytest.mark.parametrize("standard, flagged", [(True, False), (False, True)])
+def test_a_free_scale_without_a_standard_is_flagged_before_sampling(standard, flagged):
+    """The scale axis of benchmarks/validity_fits.py: with a reference standard (a normal
+    prior on scale) the fit is silent; without one it is flagged whatever the chain does."""
+    from gonio.fitting.priors import Normal
+
+    theta_r, phi_r = np.abs(VIEWS), np.where(VIEWS < 0, 180.0, 0.0)
+    brdf = gonio.brdf("oren-nayar-tabulated", 45.0, 0.0, theta_r, phi_r, rho=0.8, sigma=25.0)
+    radiance = brdf * np.cos(np.radians(45.0))
+    data = Dataset(45.0, 0.0, theta_r, phi_r, radiance, 0.003 * radiance, quantity="radiance")
+    priors = {"scale": Normal(1.0, 0.01)} if standard else None
+    result = fit(data, "oren-nayar-tabulated", priors=priors, mcmc=False, polish_table=False)
+    assert any("without a reference standard" in flag for flag in result.flags) is flagged
