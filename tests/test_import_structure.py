@@ -25,6 +25,8 @@ FORBIDDEN = {
     "gonio.acquisition": ("gonio.cli", "gonio.design", "gonio.adaptive"),
     "gonio.design": ("gonio.cli", "gonio.acquisition", "gonio.adaptive"),
     "gonio.adaptive": ("gonio.cli",),
+    "gonio.vision": ("gonio.cli", "gonio.fitting", "gonio.report", "gonio.acquisition"),
+    "gonio.export": ("gonio.cli", "gonio.report", "gonio.acquisition"),
 }
 
 

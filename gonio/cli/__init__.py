@@ -27,7 +27,7 @@ import gonio
 
 #: Sub-command modules in the order ``gonio --help`` lists them.
 SUBCOMMANDS = ("demo", "models", "figures", "plan", "design", "run", "reduce", "fit", "report", "render", "emulator",
-               "textons", "curet", "tables")
+               "textons", "curet", "tables", "export")
 
 #: Exit codes: bad input, internal error, interrupted (128 + SIGINT).
 EXIT_BAD_INPUT = 2
