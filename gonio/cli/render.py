@@ -32,33 +32,20 @@ def parse_direction(text: str) -> tuple[float, float]:
     return values[0], values[1] if len(values) == 2 else 0.0
 
 
-def _fit_brdfs(folder: Path, draws: int) -> tuple[Callable, list[Callable], float | None, str]:
-    """The fitted model at its best values, at up to ``draws`` posterior draws, its albedo
-    parameter and a title."""
-    import gonio
-    from gonio.fitting.results import FitResult
+def _fit_brdfs(folder: str, draws: int) -> tuple[Callable, list[Callable], float | None, str]:
+    """The fitted material (:func:`gonio.export.material_of`): its BRDF at the posterior
+    medians, at up to ``draws`` posterior draws, its albedo parameter and a title."""
+    from gonio.export import material_of
 
-    result = FitResult.load(folder)
-    names = {p.name for p in gonio.models.get(result.model).params}
-
-    def brdf_of(values: dict) -> Callable:
-        params = {k: v for k, v in values.items() if k in names}
-        return lambda ti, pi, tr, pr: gonio.brdf(result.model, ti, pi, tr, pr, **params, **result.options)
-
-    best = result.best_values()
-    samples = result.samples() if result.mcmc is not None else np.empty((0, len(result.free)))
-    pick = np.linspace(0, len(samples) - 1, min(draws, len(samples))).astype(int) if len(samples) else []
-    drawn = [brdf_of(dict(best, **dict(zip(result.free, samples[k])))) for k in pick]
-    return brdf_of(best), drawn, best.get("rho"), f"fitted {result.model} ({folder})"
+    material = material_of(folder, max_draws=draws)
+    rows = range(len(material.draws)) if material.draws is not None else ()
+    drawn = [lambda ti, pi, tr, pr, k=k: material.draw_brdf(ti, pi, tr, pr, np.array([k]))[0] for k in rows]
+    return material.brdf, drawn, material.values.get("rho"), material.source
 
 
 def _sources(args: argparse.Namespace) -> tuple[Callable, list[Callable], float | None, str]:
     if Path(args.source).is_dir():
-        from gonio.fitting.results import is_fit_result
-
-        if not is_fit_result(args.source):
-            raise CLIError(f"{args.source}: a folder without a gonio fit result (result.json)")
-        return _fit_brdfs(Path(args.source), args.draws)
+        return _fit_brdfs(args.source, args.draws)
     import gonio
 
     sample = parse_sample_spec(args.source)
