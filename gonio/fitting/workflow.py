@@ -115,12 +115,14 @@ def fit(
     importlib.import_module("scipy.linalg")  # loads scipy's own BLAS now, so that the limit reaches it too
 
     with threadpool_limits(limits=blas_threads, user_api="blas") if blas_threads else contextlib.nullcontext():
-        return _fit(dataset, model, fixed, priors, mcmc, jitter, options, start, n_walkers, max_steps, tau_multiple,
-                    rhat_limit, seed, progress, alignment, stray_light, polish_table)
+        return _fit(dataset, model, fixed=fixed, priors=priors, mcmc=mcmc, jitter=jitter, options=options, start=start,
+                    n_walkers=n_walkers, max_steps=max_steps, tau_multiple=tau_multiple, rhat_limit=rhat_limit,
+                    seed=seed, progress=progress, alignment=alignment, stray_light=stray_light,
+                    polish_table=polish_table)
 
 
-def _fit(dataset, model, fixed, priors, mcmc, jitter, options, start, n_walkers, max_steps, tau_multiple, rhat_limit,
-         seed, progress, alignment, stray_light, polish_table) -> FitResult:
+def _fit(dataset, model, *, fixed, priors, mcmc, jitter, options, start, n_walkers, max_steps, tau_multiple,
+         rhat_limit, seed, progress, alignment, stray_light, polish_table) -> FitResult:
     """:func:`fit`'s work, with its BLAS threads set."""
     def problem_of(name: str | Model, noise: str | None) -> FitProblem:
         return FitProblem(name, dataset, fixed, options, noise, alignment, stray_light)
