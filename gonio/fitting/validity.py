@@ -179,22 +179,26 @@ class ModelValidity:
                    [int(i) for i in data["checked"]], data["advice"])
 
 
-def checked_values(theta_i: np.ndarray, theta_r: np.ndarray, limit: int = MAX_CHECKED) -> np.ndarray:
-    """Indices of the values to compare: all of them up to ``limit``; beyond, the quarter of
-    ``limit`` most grazing (largest ``max(theta_i, theta_r)``) and an even sample of the rest.
+def checked_values(theta_i: np.ndarray, theta_r: np.ndarray, limit: int = MAX_CHECKED) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the values to compare and the number of values each stands for: all of
+    them (weight 1) up to ``limit``; beyond, the quarter of ``limit`` most grazing (largest
+    ``max(theta_i, theta_r)``, weight 1) and an even sample of the rest (each weighted by
+    the values of the rest it stands for).
 
-    >>> checked_values(np.zeros(5), np.arange(5.0)).tolist()
+    >>> checked_values(np.zeros(5), np.arange(5.0))[0].tolist()
     [0, 1, 2, 3, 4]
-    >>> checked_values(np.zeros(10), np.arange(10.0), limit=4).tolist()
-    [0, 4, 8, 9]
+    >>> index, weight = checked_values(np.zeros(10), np.arange(10.0), limit=4)
+    >>> index.tolist(), weight.tolist()
+    ([0, 4, 8, 9], [3.0, 3.0, 3.0, 1.0])
     """
     n = len(theta_i)
     if n <= limit:
-        return np.arange(n)
+        return np.arange(n), np.ones(n)
     grazing = np.argsort(-np.maximum(theta_i, theta_r), kind="stable")[: limit // 4]
     rest = np.setdiff1d(np.arange(n), grazing)
     sample = rest[np.linspace(0, len(rest) - 1, limit - len(grazing)).round().astype(int)]
-    return np.union1d(grazing, sample)
+    index = np.union1d(grazing, sample)
+    return index, np.where(np.isin(index, grazing), 1.0, len(rest) / len(sample))
 
 
 def check(problem, least_squares, build_problem: Callable[..., Any]) -> ModelValidity | None:
@@ -260,16 +264,13 @@ def check(problem, least_squares, build_problem: Callable[..., Any]) -> ModelVal
 
 
 def _checked_with_weights(data) -> tuple[np.ndarray, np.ndarray]:
-    """The values to compare and the number of values each stands for (module notes)."""
+    """The values to compare and the number of values each stands for (module notes):
+    correlated values all together, independent ones by :func:`checked_values`."""
     n = data.n
-    if n <= MAX_CHECKED or data.covariance is not None:
+    if data.covariance is not None:
         return np.arange(n), np.ones(n)
     theta_i, theta_r = (np.broadcast_to(np.asarray(a, float), (n,)) for a in (data.theta_i, data.theta_r))
-    checked = checked_values(theta_i, theta_r, MAX_CHECKED)
-    grazing = set(np.argsort(-np.maximum(theta_i, theta_r), kind="stable")[: MAX_CHECKED // 4].tolist())
-    sampled = np.array([i not in grazing for i in checked])
-    weights = np.where(sampled, (n - len(grazing)) / max(int(sampled.sum()), 1), 1.0)
-    return checked, weights
+    return checked_values(theta_i, theta_r, MAX_CHECKED)
 
 
 def _prediction_jacobian(problem, values: Mapping[str, float], free: list[str]) -> list[np.ndarray]:
