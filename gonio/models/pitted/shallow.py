@@ -171,12 +171,17 @@ def _rare_lit_error(values: np.ndarray, diffuse_only: float, rho: float, cos_i: 
     no sample lands in it: the estimate is then the diffuse term alone, and the samples'
     own scatter says its error is zero although the lit part it missed may carry most of
     the BRDF (found by benchmarks/validity_atlas.py: -93 % with a standard error of 1e-19).
-    Each lit sample adds at most ``rho / (pi cos theta_i)`` (primary irradiance m.i <= 1),
-    so the error is at least that times the standard error of the lit fraction, taken with
-    one more hit and one more miss than counted (``(k + 1) / (n + 2)``) so that no hits do
-    not mean no uncertainty. Decision: this floor, rather than refusing the geometry.
+    The floor is the part of the error that the lit fraction's uncertainty carries: the
+    mean contribution of a lit sample (at most ``rho / (pi cos theta_i)``, primary
+    irradiance m.i <= 1, when none was lit) times the standard error of the lit fraction,
+    taken with one more hit and one more miss than counted (``(k + 1) / (n + 2)``) so that
+    no hits do not mean no uncertainty. Where many samples are lit the samples' own scatter
+    already holds this part and exceeds the floor. Decision: this floor, rather than
+    refusing the geometry.
     """
     n = values.size
-    lit = int(np.count_nonzero(values > diffuse_only * (1.0 + 1e-9)))
-    fraction = (lit + 1.0) / (n + 2.0)
-    return float(rho / (np.pi * cos_i) * np.sqrt(fraction * (1.0 - fraction) / n))
+    lit = values > diffuse_only * (1.0 + 1e-9)
+    k = int(np.count_nonzero(lit))
+    contribution = float(np.mean(values[lit]) - diffuse_only) if k else rho / (np.pi * cos_i)
+    fraction = (k + 1.0) / (n + 2.0)
+    return float(contribution * np.sqrt(fraction * (1.0 - fraction) / n))
