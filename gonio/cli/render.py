@@ -79,7 +79,8 @@ def _render_shape(args, brdf, drawn, albedo, title, out: Path) -> list[Path]:
         rows.append(row)
         arrays.update({f"{name}_{k}": image for name, image in row.items()})
     fig = shape_figure(f"{args.shape}: {title}", rows, args.light, albedo)
-    return _write(fig, arrays | {"lights_deg": np.array(args.light), "view_deg": np.array(args.view)}, out)
+    arrays |= {"lights_deg": np.array(args.light), "view_deg": np.array(args.view), "normals": normals, "mask": mask}
+    return write_figure_and_arrays(fig, arrays, out)
 
 
 def _render_map(args, brdf, albedo, title, out: Path) -> list[Path]:
@@ -93,10 +94,12 @@ def _render_map(args, brdf, albedo, title, out: Path) -> list[Path]:
     model = vision.reflectance_map(brdf, vision.direction(*light), p, q)
     flat = vision.reflectance_map(lambert, vision.direction(*light), p, q)
     fig = reflectance_map_figure(f"reflectance map: {title}", p, q, model, flat, light, albedo)
-    return _write(fig, {"p": p, "q": q, "model": model, "lambert": flat, "light_deg": np.array(light)}, out)
+    arrays = {"p": p, "q": q, "model": model, "lambert": flat, "light_deg": np.array(light)}
+    return write_figure_and_arrays(fig, arrays, out)
 
 
-def _write(fig, arrays: dict, out: Path) -> list[Path]:
+def write_figure_and_arrays(fig, arrays: dict, out: Path) -> list[Path]:
+    """Write ``PREFIX.png`` (the figure) and ``PREFIX.npz`` (the arrays), each whole or absent."""
     from gonio.files import write_atomic
 
     png, npz = out.with_name(out.name + ".png"), out.with_name(out.name + ".npz")
