@@ -55,6 +55,10 @@ LEFT_OUT = {
     "phong": _EMPIRICAL,
     "lambert+phong": _EMPIRICAL,
     "kvd": "a phenomenological series: its coefficients describe the data, not a surface's structure",
+    "fujii-oren-nayar": (_EMPIRICAL + " (a renderer's form of the qualitative Oren-Nayar model, Fujii 2012: r mixes "
+                         "a Lambertian and a shaped term and is not a slope statistic)"),
+    "eon": (_EMPIRICAL + " (Fujii's form with an energy-preserving multiple-scattering lobe, Portsmouth, Kutz & "
+            "Hill 2025: a renderer's model, r is not a slope statistic)"),
 }
 
 #: Surfaces a model follows within this relative rms (polar angles <= 80 deg) are those a

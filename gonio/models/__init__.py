@@ -30,6 +30,8 @@ MODEL_MODULES = (
     "torrance_sparrow",
     "pitted.model",
     "wolff",
+    "fujii",
+    "eon",
 )
 
 for _module in MODEL_MODULES:
