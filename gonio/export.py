@@ -1,8 +1,9 @@
-"""BRDF files other tools read (MERL binary, tidy CSV), with their uncertainty.
+"""BRDF files other tools read (MERL binary, tidy CSV, ASTM E1392 rows), with their uncertainty.
 
 :func:`export` writes the BRDF of a material, given as a model spec
 (``oren-nayar:sigma=30,rho=0.9``) or as a fit result (a folder written by
 :meth:`gonio.fitting.FitResult.save`, or the :class:`~gonio.fitting.FitResult` itself),
+or, for ``astm``, the measured rows of a recording (a folder written by ``gonio run``),
 in one of :data:`FORMATS`:
 
 ``merl``
@@ -14,6 +15,11 @@ in one of :data:`FORMATS`:
     A tidy table, one row per geometry of a grid (:data:`DEFAULT_GRID`), with the
     posterior's median, 95 % interval and standard deviation of a fit as columns
     (:func:`write_csv`).
+``astm``
+    Rows in the terms of ASTM E1392: incident angle, scatter polar angle and azimuth,
+    BRDF and cosine-corrected BRDF with their standard uncertainty, under a header naming
+    the sample, source, receiver, wavelength, polarization and dates (:mod:`gonio.export_astm`,
+    :func:`write_astm`, :func:`write_astm_recording`); side-car ``FILE.uncertainty.npz``.
 
 What is exported is the material's BRDF [1/sr]: the fitted model with the material's
 parameters only (``rho``, ``sigma``, ...), not the measured quantity of the fit (the
@@ -36,26 +42,33 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass
+import time
+import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from gonio import models
+from gonio.export_astm import astm_text, geometry_columns, is_recording, model_header, npz_bytes, recording_rows
+from gonio.export_astm import value_columns
 from gonio.files import write_atomic
 from gonio.sample_specs import parse_model_spec
 
 __all__ = ["export", "FORMATS", "MERL_SHAPE", "MERL_SCALE", "MERL_INVALID", "MERL_DRAWS", "CSV_DRAWS",
            "DEFAULT_GRID", "RANGE_MARGIN_DEG", "Material", "material_of", "merl_geometry", "csv_geometry",
-           "parse_grid", "sidecar_path", "write_merl", "write_csv"]
+           "parse_grid", "sidecar_path", "write_merl", "write_csv", "write_astm", "write_astm_recording",
+           "MERL_WARN_SECONDS", "MERL_VALID_CELLS", "merl_seconds", "merl_time_warning", "SlowExportWarning"]
 
 #: The formats :func:`export` writes.
-FORMATS = ("merl", "csv")
+FORMATS = ("merl", "csv", "astm")
 #: Cells of a MERL file: theta_h, theta_d, phi_d.
 MERL_SHAPE = (90, 90, 180)
 #: The factors a MERL reader multiplies the stored red, green and blue values by.
 MERL_SCALE = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
+#: Cells of a MERL file with both directions above the horizon (:func:`merl_geometry`).
+MERL_VALID_CELLS = 1_096_216
 #: The stored value of a cell whose incidence or view lies below the horizon (negative:
 #: invalid to every MERL reader).
 MERL_INVALID = -1.0
@@ -73,6 +86,10 @@ DEFAULT_GRID: dict[str, np.ndarray] = {
 RANGE_MARGIN_DEG = 5.0
 #: Geometries evaluated at once for posterior draws (draws x cells of temporaries).
 _CHUNK_ELEMENTS = 2**22
+#: A MERL export estimated to take longer than this warns before it starts [s].
+MERL_WARN_SECONDS = 30.0
+#: The time a rate measurement of :func:`merl_seconds` aims at [s].
+_TIMING_SECONDS = 0.1
 
 
 @dataclass
@@ -97,6 +114,9 @@ class Material:
         for a model spec.
     source : str
         What was exported (the spec, or the fit folder and model).
+    about : dict
+        A fit's provenance: its data's label, quantity and points, the recording it came
+        from, when it was made, its id, and whether it converged and is adequate.
     """
 
     model: str
@@ -106,6 +126,7 @@ class Material:
     names: tuple[str, ...] = ()
     theta_range: tuple[tuple[float, float], tuple[float, float]] | None = None
     source: str = ""
+    about: dict[str, Any] = field(default_factory=dict)
 
     def brdf(self, theta_i, phi_i, theta_r, phi_r) -> np.ndarray:
         """The exported values' BRDF [1/sr] at angles [deg]."""
@@ -145,9 +166,13 @@ def material_of(source: Any, max_draws: int = CSV_DRAWS, seed: int = 0) -> Mater
     if Path(text).is_dir():
         from gonio.fitting import FitResult
 
+        if is_recording(text) and not (Path(text) / "result.json").is_file():
+            raise ValueError(f"{text} is a recording (gonio run), not a model or a fit: --format astm exports its "
+                             f"measured rows; merl and csv export a model or a fit (fit it first: gonio fit {text})")
         if not (Path(text) / "result.json").is_file():
-            raise ValueError(f"{text}: a folder without result.json is not a fit result; expected a fit folder "
-                             "(gonio fit --out) or a model spec MODEL[:key=value,...]")
+            raise ValueError(f"{text}: a folder that is neither a fit result (no result.json) nor a recording (no "
+                             "metadata.json and points.csv); expected a fit folder (gonio fit --out), a recording "
+                             "folder (gonio run --out, astm only) or a model spec MODEL[:key=value,...]")
         return _material_of_fit(FitResult.load(text), max_draws, seed, text)
     try:
         name, values = parse_model_spec(text)
@@ -175,8 +200,11 @@ def _material_of_fit(result: Any, max_draws: int, seed: int, where: str) -> Mate
     data = result.dataset
     theta_range = ((float(np.min(data.theta_i)), float(np.max(data.theta_i))),
                    (float(np.min(data.theta_r)), float(np.max(data.theta_r))))
+    about = {"label": data.label, "quantity": data.quantity, "points": int(data.n),
+             "recording": data.metadata.get("recording"), "created": result.created, "result_id": result.result_id,
+             "converged": result.converged, "adequate": result.adequate}
     return Material(model.name, values, dict(result.options), draws, names, theta_range,
-                    source=f"fit {where} ({model.name})")
+                    source=f"fit {where} ({model.name})", about=about)
 
 
 def within_data(material: Material, theta_i, theta_r, margin: float = RANGE_MARGIN_DEG) -> np.ndarray:
@@ -212,8 +240,10 @@ def within_data(material: Material, theta_i, theta_r, margin: float = RANGE_MARG
 
 
 # ---------------------------------------------------------------------- MERL geometry
-def merl_geometry() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The incidence and view [deg] of every MERL cell, and which lie above the horizon.
+def merl_geometry(cells: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                             np.ndarray]:
+    """The incidence and view [deg] of every MERL cell (or of ``cells``), and which lie
+    above the horizon.
 
     Cell (i, j, k) is sampled at its centre in index space:
     theta_h = ((i + 0.5) / 90)^2 * 90 deg, theta_d = j + 0.5 deg, phi_d = k + 0.5 deg,
@@ -221,11 +251,16 @@ def merl_geometry() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.
     floor(sqrt(theta_h / 90 deg) * 90), floor(theta_d), floor(phi_d)) maps this point back
     to (i, j, k), away from any cell edge.
 
+    Parameters
+    ----------
+    cells : array of int, optional
+        Flat indices of cells in file order; all cells when None.
+
     Returns
     -------
     theta_i, phi_i, theta_r, phi_r : ndarray
         Flat arrays of 1,458,000 angles [deg] in file order (phi_d fastest, then
-        theta_d, then theta_h).
+        theta_d, then theta_h), or one per index of ``cells``.
     valid : ndarray of bool
         Both directions strictly above the horizon.
 
@@ -236,16 +271,15 @@ def merl_geometry() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.
     rotated by theta_h about y (and phi_h about z), the outgoing one its mirror image
     about the half vector h = (sin theta_h, 0, cos theta_h): w_o = 2 (w_i . h) h - w_i.
     """
-    n_h, n_d, n_p = MERL_SHAPE
-    theta_h = np.radians(((np.arange(n_h) + 0.5) / n_h) ** 2 * 90.0)[:, None, None]
-    theta_d = np.radians(np.arange(n_d) + 0.5)[None, :, None]
-    phi_d = np.radians(np.arange(n_p) + 0.5)[None, None, :]
+    i, j, k = np.ogrid[:MERL_SHAPE[0], :MERL_SHAPE[1], :MERL_SHAPE[2]] if cells is None else \
+        np.unravel_index(np.asarray(cells, int), MERL_SHAPE)
+    theta_h = np.radians(((i + 0.5) / MERL_SHAPE[0]) ** 2 * 90.0)
+    theta_d, phi_d = np.radians(j + 0.5), np.radians(k + 0.5)
     dx, dy, dz = np.sin(theta_d) * np.cos(phi_d), np.sin(theta_d) * np.sin(phi_d), np.cos(theta_d)
     ch, sh = np.cos(theta_h), np.sin(theta_h)
     wi = np.broadcast_arrays(dx * ch + dz * sh, dy, -dx * sh + dz * ch)
-    cos_d = np.broadcast_to(np.cos(theta_d), MERL_SHAPE)
-    half = (np.broadcast_to(sh, MERL_SHAPE), 0.0, np.broadcast_to(ch, MERL_SHAPE))
-    wo = [2.0 * cos_d * h - w for h, w in zip(half, wi)]
+    cos_d = np.cos(theta_d)
+    wo = [2.0 * cos_d * h - w for h, w in zip((sh, 0.0, ch), wi)]
     valid = ((wi[2] > 0) & (wo[2] > 0)).reshape(-1)
     theta_i, phi_i = _polar(wi)
     theta_r, phi_r = _polar(wo)
@@ -386,7 +420,7 @@ def write_merl(material: Material, out: Path, draws: int = MERL_DRAWS,
     arrays.update(_sidecar_fields(material, draws))
     side = sidecar_path(out)
     write_atomic(out, merl_bytes(brdf, valid))
-    write_atomic(side, _npz_bytes(arrays))
+    write_atomic(side, npz_bytes(arrays))
     return [out, side]
 
 
@@ -417,31 +451,30 @@ def _percent(say: Callable[[str], None]) -> Callable[[int, int], None]:
     return report
 
 
-def _sidecar_fields(material: Material, draws: int) -> dict[str, Any]:
-    """The side-car's scalar fields and its JSON description."""
+#: What a side-car's ``sample_point`` says, by the format it belongs to.
+_SAMPLE_POINTS = {
+    "merl": "cell centre in index space: theta_h = ((i + 0.5)/90)^2 90 deg, theta_d = j + 0.5 deg, phi_d = k + 0.5 "
+            "deg, phi_h = 0",
+    "astm": "the row's angles: theta_i, phi_i, theta_s, phi_s of the ASTM file, row by row",
+}
+
+
+def _sidecar_fields(material: Material, draws: int, layout: str = "merl") -> dict[str, Any]:
+    """The side-car's scalar fields and its JSON description (``layout``: the format it
+    belongs to, a key of :data:`_SAMPLE_POINTS`)."""
     n = 0 if material.draws is None else min(draws, material.draws.shape[0])
     description = {
-        "format": "gonio-merl-uncertainty", "source": material.source, "model": material.model,
+        "format": f"gonio-{layout}-uncertainty", "source": material.source, "model": material.model,
         "values": material.values, "options": material.options, "brdf_unit": "1/sr",
         "has_posterior": material.draws is not None, "n_draws": n,
         "theta_range_deg": material.theta_range, "margin_deg": RANGE_MARGIN_DEG,
-        "sample_point": "cell centre in index space: theta_h = ((i + 0.5)/90)^2 90 deg, theta_d = j + 0.5 deg, "
-                        "phi_d = k + 0.5 deg, phi_h = 0",
+        "sample_point": _SAMPLE_POINTS[layout],
         "sd": "posterior standard deviation of the BRDF [1/sr]" if n else "absent: no posterior (a model spec or a "
               "least-squares fit); the values are exact for the model and parameters named",
     }
     return {"has_posterior": np.bool_(n > 0), "n_draws": np.int64(n), "margin_deg": np.float64(RANGE_MARGIN_DEG),
             "theta_range_deg": np.array(material.theta_range if material.theta_range else np.full((2, 2), np.nan)),
             "description": np.array(json.dumps(description))}
-
-
-def _npz_bytes(arrays: Mapping[str, Any]) -> bytes:
-    """An uncompressed ``.npz`` archive of ``arrays`` as bytes (written atomically)."""
-    import io
-
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    return buffer.getvalue()
 
 
 def write_csv(material: Material, out: Path, grid: Mapping[str, Any] | None = None,
@@ -483,6 +516,128 @@ def _cell(name: str, value: float) -> str:
     return str(int(value)) if name == "within_data" else repr(float(value))
 
 
+def write_astm(material: Material, out: Path, grid: Mapping[str, Any] | None = None,
+               progress: Callable[[str], None] | None = None) -> list[Path]:
+    """Write ASTM E1392 rows of a model spec or a fit on ``grid`` (:func:`parse_grid`), and
+    the side-car ``out.uncertainty.npz``.
+
+    Columns (:mod:`gonio.export_astm`): ``theta_i``, ``phi_i``, ``theta_s``, ``phi_s``
+    [deg], ``brdf`` [1/sr] (with a posterior its median over the draws, else the model at
+    the exported values), ``u_brdf`` (with a posterior: its standard deviation over the
+    draws), ``cc_brdf`` and ``u_cc_brdf`` (times cos theta_s), and for a fit
+    ``within_data`` (:func:`within_data`). The side-car holds, in row order,
+    ``brdf_at_values`` (the model at the exported values) and with a posterior ``median``,
+    ``sd``, ``p2_5`` and ``p97_5`` [1/sr], with the fields of a MERL side-car
+    (``has_posterior``, ``n_draws``, ``theta_range_deg``, ``margin_deg``, ``description``).
+
+    Returns
+    -------
+    list of Path
+        The rows, then the side-car.
+    """
+    say = progress or (lambda message: None)
+    axes = parse_grid(grid)
+    geometry = csv_geometry(axes)
+    say(f"evaluating {material.model} at {geometry[0].size:,} geometries")
+    arrays: dict[str, Any] = {"brdf_at_values": material.brdf(*geometry)}
+    brdf, sd = arrays["brdf_at_values"], None
+    if material.draws is not None:
+        stats = _draw_statistics(material, geometry, True, None)
+        arrays.update(stats)
+        brdf, sd = stats["median"], stats["sd"]
+    columns = geometry_columns(*geometry)
+    columns.update(value_columns(brdf, sd, columns["theta_s"]))
+    if material.theta_range is not None:
+        columns["within_data"] = within_data(material, geometry[0], geometry[2]).astype(int)
+        arrays["within_data"] = columns["within_data"].astype(bool)
+    n = 0 if material.draws is None else int(material.draws.shape[0])
+    side = sidecar_path(out)
+    arrays.update(_sidecar_fields(material, n, "astm"))
+    write_atomic(out, astm_text(model_header(material, axes, n, side.name), columns))
+    write_atomic(side, npz_bytes(arrays))
+    return [out, side]
+
+
+def write_astm_recording(folder: str | Path, out: Path, progress: Callable[[str], None] | None = None) -> list[Path]:
+    """Write ASTM E1392 rows of a recording's measured geometries, and the side-car.
+
+    The rows and the header come from :func:`gonio.export_astm.recording_rows` (the
+    recording reduced as ``gonio reduce --brdf`` does); the side-car
+    ``out.uncertainty.npz`` holds the values' ``covariance`` [1/sr^2] and every component
+    ``u_<name>`` of ``u_brdf`` [1/sr].
+
+    Returns
+    -------
+    list of Path
+        The rows, then the side-car.
+    """
+    (progress or (lambda message: None))(f"reducing the recording {folder}")
+    side = sidecar_path(out)
+    header, columns, arrays = recording_rows(folder, side.name)
+    write_atomic(out, astm_text(header, columns))
+    write_atomic(side, npz_bytes(arrays))
+    return [out, side]
+
+
+# ---------------------------------------------------------------------- MERL time
+def merl_seconds(material: Material, draws: int = MERL_DRAWS) -> float:
+    """Estimated time [s] of a MERL export of ``material`` with ``draws`` posterior draws.
+
+    The model (and, with a posterior, the draws) is timed on up to 4096 valid MERL cells
+    (the valid ones among 8192 cells evenly spaced in file order), in batches that double
+    until one takes :data:`_TIMING_SECONDS`, after one small untimed batch (tables and
+    compiled code load once per process); the rate is extrapolated to the
+    :data:`MERL_VALID_CELLS` valid cells.
+
+    Returns
+    -------
+    float
+        Seconds; a rough figure (within a factor of about 2), enough to warn.
+    """
+    *angles, valid = merl_geometry(np.linspace(0, np.prod(MERL_SHAPE) - 1, 8192).astype(int))
+    geometry = tuple(a[valid][:4096] for a in angles)
+    total = _seconds_per_cell(material.brdf, geometry) * MERL_VALID_CELLS
+    if material.draws is not None:
+        rows = np.arange(min(draws, material.draws.shape[0]))
+        total += _seconds_per_cell(lambda *g: material.draw_brdf(*g, rows), geometry) * MERL_VALID_CELLS
+    return total
+
+
+def _seconds_per_cell(function: Callable[..., np.ndarray], geometry: tuple[np.ndarray, ...]) -> float:
+    """Seconds per geometry of ``function`` of flat angle arrays [deg] (see :func:`merl_seconds`)."""
+    function(*(a[:8] for a in geometry))
+    n = 16
+    while True:
+        start = time.perf_counter()
+        function(*(a[:n] for a in geometry))
+        elapsed = time.perf_counter() - start
+        if elapsed >= _TIMING_SECONDS or n >= geometry[0].size:
+            return elapsed / n
+        n = min(2 * n, geometry[0].size)
+
+
+def merl_time_warning(material: Material, draws: int = MERL_DRAWS) -> str | None:
+    """The warning a MERL export of ``material`` gives before it starts, or None when it is
+    estimated to take at most :data:`MERL_WARN_SECONDS` (:func:`merl_seconds`)."""
+    seconds = merl_seconds(material, draws)
+    if seconds <= MERL_WARN_SECONDS:
+        return None
+    hint = (" Export its table instead: oren-nayar-tabulated (same parameters), which takes seconds."
+            if material.model == "oren-nayar-exact" else "")
+    with_draws = f" with {min(draws, material.draws.shape[0])} posterior draws" if material.draws is not None else ""
+    return (f"a MERL export of {material.model}{with_draws} is estimated to take about {_duration(seconds)} (its "
+            f"{MERL_VALID_CELLS:,} cells above the horizon at the rate measured just now).{hint}")
+
+
+def _duration(seconds: float) -> str:
+    """``seconds`` as a rounded duration in s, minutes or hours."""
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} minutes"
+    return f"{seconds / 3600:.1f} hours"
+
+
 # ---------------------------------------------------------------------- entry point
 def check_out(out: str | Path, overwrite: bool = False) -> Path:
     """The output path, refused when its folder is missing or it exists (unless ``overwrite``)."""
@@ -496,32 +651,42 @@ def check_out(out: str | Path, overwrite: bool = False) -> Path:
     return out
 
 
+class SlowExportWarning(UserWarning):
+    """An export estimated to take longer than :data:`MERL_WARN_SECONDS`."""
+
+
 def export(source: Any, format: str, out: str | Path, grid: Mapping[str, Any] | None = None,
            draws: int | None = None, overwrite: bool = False, seed: int = 0,
-           progress: Callable[[str], None] | None = None) -> list[Path]:
-    """Write the BRDF of a model spec or a fit in a format other tools read.
+           progress: Callable[[str], None] | None = None, warn: Callable[[str], None] | None = None) -> list[Path]:
+    """Write the BRDF of a model spec, a fit or (astm) a recording in a format other tools read.
 
     Parameters
     ----------
     source : str, path or FitResult
         A model spec ``MODEL[:key=value,...]`` (e.g. ``oren-nayar:sigma=30,rho=0.9``), a
-        fit folder (``gonio fit --out``) or a :class:`gonio.fitting.FitResult`.
-    format : {'merl', 'csv'}
+        fit folder (``gonio fit --out``) or a :class:`gonio.fitting.FitResult`; for
+        ``astm`` also a recording folder (``gonio run --out``).
+    format : {'merl', 'csv', 'astm'}
         See the module docstring and ``docs/export.md``.
     out : path
-        The file to write; its folder must exist. A MERL export also writes
-        ``out.uncertainty.npz`` (:func:`write_merl`).
+        The file to write; its folder must exist. MERL and ASTM exports also write
+        ``out.uncertainty.npz`` (:func:`write_merl`, :func:`write_astm`).
     grid : mapping, optional
-        CSV only: axes replacing those of :data:`DEFAULT_GRID` (:func:`parse_grid`).
+        CSV and ASTM of a spec or a fit: axes replacing those of :data:`DEFAULT_GRID`
+        (:func:`parse_grid`).
     draws : int, optional
         Most posterior draws used (default :data:`MERL_DRAWS` for merl, :data:`CSV_DRAWS`
-        for csv).
+        for csv and astm).
     overwrite : bool
         Replace existing files.
     seed : int
         Seed of the choice of posterior draws.
     progress : callable, optional
         Called with a line of text at each stage of long work.
+    warn : callable, optional
+        Called with the warning of a MERL export estimated to take longer than
+        :data:`MERL_WARN_SECONDS` (:func:`merl_time_warning`), before it starts; without
+        it the warning is a :class:`SlowExportWarning`.
 
     Returns
     -------
@@ -531,8 +696,10 @@ def export(source: Any, format: str, out: str | Path, grid: Mapping[str, Any] | 
     Raises
     ------
     ValueError
-        Unknown format, unknown model, bad parameter, a grid for merl, an output folder
-        that does not exist or a file that exists, naming what was wrong.
+        Unknown format, unknown model, bad parameter, a grid for merl or a recording, a
+        folder that is neither a fit nor a recording, a recording without a reference
+        standard, an output folder that does not exist or a file that exists, naming what
+        was wrong.
 
     Examples
     --------
@@ -541,16 +708,40 @@ def export(source: Any, format: str, out: str | Path, grid: Mapping[str, Any] | 
     >>> [p.name for p in export("lambert:rho=0.5", "csv", folder / "lambert.csv")]
     ['lambert.csv']
     """
+    _check_request(source, format, grid, draws)
+    paths = [check_out(out, overwrite)]
+    if format != "csv":
+        paths.append(check_out(sidecar_path(out), overwrite))
+    if format == "astm" and _is_recording_source(source):
+        return write_astm_recording(source, paths[0], progress)
+    count = draws if draws is not None else (MERL_DRAWS if format == "merl" else CSV_DRAWS)
+    material = material_of(source, count, seed)
+    if format == "merl":
+        message = merl_time_warning(material, count)
+        if message is not None and warn is not None:
+            warn(message)
+        elif message is not None:
+            warnings.warn(message, SlowExportWarning, stacklevel=2)
+        return write_merl(material, paths[0], count, progress)
+    if format == "astm":
+        return write_astm(material, paths[0], grid, progress)
+    return write_csv(material, paths[0], grid, progress)
+
+
+def _is_recording_source(source: Any) -> bool:
+    """Whether ``source`` names a recording folder (and not a fit folder)."""
+    return (isinstance(source, (str, os.PathLike)) and is_recording(source)
+            and not (Path(source) / "result.json").is_file())
+
+
+def _check_request(source: Any, format: str, grid: Mapping[str, Any] | None, draws: int | None) -> None:
+    """Refuse an unknown format, a grid for merl or a recording, and too few draws."""
     if format not in FORMATS:
         raise ValueError(f"format {format!r} is unknown; expected one of {', '.join(FORMATS)}")
     if format == "merl" and grid is not None:
-        raise ValueError("grid: the MERL format has its own fixed grid; a grid applies to csv only")
-    count = draws if draws is not None else (MERL_DRAWS if format == "merl" else CSV_DRAWS)
-    if count < 2:
-        raise ValueError(f"draws = {count}: expected at least 2 posterior draws for a standard deviation")
-    material = material_of(source, count, seed)
-    paths = [check_out(out, overwrite)]
-    if format == "merl":
-        paths.append(check_out(sidecar_path(out), overwrite))
-        return write_merl(material, paths[0], count, progress)
-    return write_csv(material, paths[0], grid, progress)
+        raise ValueError("grid: the MERL format has its own fixed grid; a grid applies to csv and astm only")
+    if format == "astm" and _is_recording_source(source) and (grid is not None or draws is not None):
+        raise ValueError(f"{os.fspath(source)} is a recording: its rows are its measured geometries; grid and draws "
+                         "apply to model specs and fits only")
+    if draws is not None and draws < 2:
+        raise ValueError(f"draws = {draws}: expected at least 2 posterior draws for a standard deviation")

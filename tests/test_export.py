@@ -255,3 +255,219 @@ def test_an_existing_file_is_not_replaced_without_overwrite(tmp_path, capsys):
 def test_cli_names_a_missing_folder(tmp_path, capsys):
     assert main(["export", SPEC, "--format", "csv", "--out", str(tmp_path / "nope" / "x.csv")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------- ASTM E1392 rows
+# The reader below follows docs/export.md ("ASTM E1392 rows"): lines "# key: JSON value",
+# then a line of comma-separated column names, then one comma-separated row per geometry;
+# angles in deg, phi_s measured from the plane of incidence (0 on its specular side, 180 on
+# the source's side), so that gonio's view azimuth is phi_r = phi_i + phi_s + 180 deg;
+# cc_brdf = brdf cos(theta_s).
+ASTM_ANGLES = ["theta_i", "phi_i", "theta_s", "phi_s"]
+RECORDED = """
+[protocol]
+name = "astm-export"
+[sample]
+label = "matte tile"
+[reference]
+label = "diffuse standard"
+reflectance = 0.99
+reflectance_uncertainty = 0.005
+geometries = [[30, 0, -10], [60, 0, -10]]
+[[block]]
+theta_i = [30, 60]
+view = [-50, -20, 0, 20, 45]
+"""
+
+
+def read_astm(path):
+    """The ``# key: JSON`` header and the table (a dict of float columns) of an ASTM export."""
+    header, lines = {}, []
+    for line in path.read_text().splitlines():
+        if line.startswith("#"):
+            key, _, value = line[1:].partition(":")
+            header[key.strip()] = json.loads(value)
+        else:
+            lines.append(line.split(","))
+    names = lines[0]
+    table = np.array(lines[1:], float)
+    return header, {name: table[:, n] for n, name in enumerate(names)}
+
+
+def gonio_view_azimuth(t):
+    """gonio's phi_r [deg] of a row, from the documented convention."""
+    return t["phi_i"] + t["phi_s"] + 180.0
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """A calibrated recording of an emulated oren-nayar sample (idealised rig, to be quick)."""
+    from tests.emulated_recording import record
+
+    return record(tmp_path_factory.mktemp("astm") / "rec", RECORDED, "oren-nayar:sigma=25,rho=0.8", seed=5)
+
+
+def test_astm_of_a_spec_equals_the_model_at_every_row(tmp_path):
+    out = tmp_path / "plaster.astm"
+    assert [p.name for p in export(SPEC, "astm", out)] == ["plaster.astm", "plaster.astm.uncertainty.npz"]
+    header, t = read_astm(out)
+    assert header["format"] == "gonio astm-e1392 1" and header["data"] == "model" and header["measured"] is False
+    assert list(t) == ASTM_ANGLES + ["brdf", "cc_brdf"] == header["columns"]
+    assert header["units"] == ["deg"] * 4 + ["1/sr"] * 2 and header["rows"] == 18 * 18 * 13
+    assert header["polarization"].startswith("unpolarized") and header["wavelength_nm"] is None
+    assert ((t["phi_s"] > -180) & (t["phi_s"] <= 180)).all()
+    model = gonio.brdf("oren-nayar", t["theta_i"], t["phi_i"], t["theta_s"], gonio_view_azimuth(t), sigma=30.0,
+                       rho=0.9)
+    np.testing.assert_allclose(t["brdf"], model, rtol=RTOL, atol=0)
+    # cos theta_s computed here and by the writer from the same angles: rounding only
+    np.testing.assert_allclose(t["cc_brdf"], t["brdf"] * np.cos(np.radians(t["theta_s"])), rtol=1e-12, atol=1e-300)
+    # phi_s = 180 is the source's side: Oren-Nayar back-scatters (sec. 4), so the retro
+    # row is brighter than the specular-side row at theta_i = theta_s = 45 deg
+    at = (t["theta_i"] == 45) & (t["theta_s"] == 45)
+    assert t["brdf"][at & (t["phi_s"] == 180)][0] > 1.2 * t["brdf"][at & (t["phi_s"] == 0)][0]
+    with np.load(str(out) + ".uncertainty.npz") as side:
+        assert not bool(side["has_posterior"]) and int(side["n_draws"]) == 0 and "sd" not in side.files
+        np.testing.assert_array_equal(side["brdf_at_values"], t["brdf"])
+
+
+def test_astm_of_a_fit_has_the_posterior_median_and_its_uncertainty(fit_folder, tmp_path):
+    out = tmp_path / "fit.astm"
+    assert main(["export", str(fit_folder), "--format", "astm", "--out", str(out), "--grid", "dphi=0:180:90"]) == 0
+    header, t = read_astm(out)
+    assert header["data"] == "fit" and list(t) == ASTM_ANGLES + ["brdf", "u_brdf", "cc_brdf", "u_cc_brdf",
+                                                                "within_data"]
+    assert header["fit"]["points"] == 16 and "posterior median" in header["brdf_column"]
+    with np.load(str(out) + ".uncertainty.npz") as side:
+        median, sd, low, high = (side[k] for k in ("median", "sd", "p2_5", "p97_5"))
+        at_values = side["brdf_at_values"]
+    # the file's values are the side-car's, written with 17 digits: equal when read back
+    np.testing.assert_array_equal(t["brdf"], median)
+    np.testing.assert_array_equal(t["u_brdf"], sd)
+    assert (low <= t["brdf"]).all() and (t["brdf"] <= high).all() and (t["u_brdf"] > 0).all()
+    model = gonio.brdf("oren-nayar", t["theta_i"], t["phi_i"], t["theta_s"], gonio_view_azimuth(t), **header["values"])
+    np.testing.assert_allclose(at_values, model, rtol=RTOL, atol=0)
+    # 1 % noise on 16 values: known to about a percent; the median of the BRDF sits within
+    # a few standard deviations of the BRDF at the median parameters
+    inside = t["within_data"] == 1
+    assert 1e-4 < np.median(t["u_brdf"][inside] / t["brdf"][inside]) < 0.1
+    assert np.all(np.abs(t["brdf"] - model) <= 3 * t["u_brdf"])
+    np.testing.assert_allclose(t["u_cc_brdf"], t["u_brdf"] * np.cos(np.radians(t["theta_s"])), rtol=1e-12)
+    assert inside.any() and (~inside).any()
+
+
+def test_astm_of_a_recording_equals_the_reduced_rows(recording, tmp_path):
+    from gonio import reduction
+    from gonio.data import read_metadata
+
+    out = tmp_path / "rec.astm"
+    assert main(["export", str(recording), "--format", "astm", "--out", str(out)]) == 0
+    header, t = read_astm(out)
+    expected = reduction.reduce_recording(recording).brdf()
+    assert header["data"] == "measured" and header["rows"] == expected.n == 10
+    for name, column in (("theta_i", "theta_i"), ("phi_i", "phi_i"), ("theta_s", "theta_r"), ("brdf", "value"),
+                         ("u_brdf", "sigma")):
+        np.testing.assert_array_equal(t[name], getattr(expected, column))  # 17 digits: exact
+    np.testing.assert_allclose(np.mod(gonio_view_azimuth(t) - expected.phi_r + 180, 360) - 180, 0, atol=1e-9)
+    np.testing.assert_allclose(t["cc_brdf"], expected.value * np.cos(np.radians(expected.theta_r)), rtol=1e-12)
+    assert (t["repeats"] == 1).all() and set(t["low_signal"]) <= {0, 1}
+    with np.load(str(out) + ".uncertainty.npz") as side:
+        np.testing.assert_array_equal(side["covariance"], expected.covariance)
+        parts = [side[name] for name in side.files if name.startswith("u_")]
+    np.testing.assert_allclose(np.sqrt(np.sum(np.square(parts), axis=0)), t["u_brdf"], rtol=1e-9)
+    meta = read_metadata(recording)
+    instruments = meta["experiment"]["instruments"]
+    assert header["incident_beam"]["source"] == instruments["lamp"]
+    assert header["receiver"]["detector"] == instruments["camera"]
+    assert header["receiver"]["solid_angle_sr"] == meta["rig"]["aperture_sr"][1]
+    assert header["measured_at"]["started"] == meta["started"] and header["measured_at"]["status"] == "complete"
+    assert header["sample"]["label"] == "matte tile"
+    assert header["reference_standard"]["label"] == "diffuse standard"
+    assert header["reference_standard"]["reflectance_uncertainty"] == 0.005
+    assert header["wavelength_nm"] == 550.0 and "unpolarized" in header["polarization"]
+    assert "IDEALISED" in header["instrument"]["note"]  # the idealised rig is named as such
+
+
+def test_astm_refuses_what_it_cannot_export(recording, tmp_path):
+    neither = tmp_path / "notes"
+    neither.mkdir()
+    (neither / "readme.txt").write_text("not gonio's\n")
+    cases = [((SPEC, "astm-e1392"), ["format", "'astm-e1392'", "merl", "csv", "astm"]),
+             ((neither, "astm"), ["notes", "neither a fit result", "nor a recording", "result.json", "points.csv"]),
+             ((recording, "merl"), ["is a recording", "--format astm", "gonio fit"]),
+             ((recording, "csv"), ["is a recording", "--format astm"])]
+    for (source, fmt), words in cases:
+        with pytest.raises(ValueError) as caught:
+            export(source, fmt, tmp_path / "x.astm")
+        for word in words:
+            assert word in str(caught.value), (source, fmt, word)
+    with pytest.raises(ValueError, match="measured geometries; grid and draws"):
+        export(recording, "astm", tmp_path / "x.astm", grid={"dphi": "0"})
+    assert not (tmp_path / "x.astm").exists()
+
+
+def test_astm_refuses_a_recording_without_reference_standard(tmp_path):
+    from tests.emulated_recording import record
+
+    text = RECORDED.split("[reference]")[0] + "[[block]]\ntheta_i = 30\nview = [0, 20]\n"
+    folder = record(tmp_path / "relative", text, "lambert:rho=0.5", seed=1)
+    with pytest.raises(ValueError, match="no reference standard") as caught:
+        export(folder, "astm", tmp_path / "x.astm")
+    assert "relative" in str(caught.value) and not (tmp_path / "x.astm").exists()
+
+
+def test_astm_does_not_replace_a_file_without_overwrite(tmp_path, capsys):
+    out = tmp_path / "mine.astm"
+    side = tmp_path / "mine.astm.uncertainty.npz"
+    side.write_text("not gonio's\n")  # the side-car alone is enough to refuse
+    assert main(["export", "lambert:rho=0.5", "--format", "astm", "--out", str(out)]) == 2
+    assert "exists" in capsys.readouterr().err and side.read_text() == "not gonio's\n" and not out.exists()
+    assert main(["export", "lambert:rho=0.5", "--format", "astm", "--out", str(out), "--overwrite"]) == 0
+    np.testing.assert_allclose(read_astm(out)[1]["brdf"], 0.5 / np.pi, rtol=1e-12)
+
+
+# ---------------------------------------------------------------------- MERL time warning
+def test_merl_valid_cells_count_matches_the_cells_above_the_horizon():
+    from gonio.export import MERL_VALID_CELLS
+
+    w_in, w_out = cell_directions()
+    assert MERL_VALID_CELLS == int(((w_in[..., 2] > 0) & (w_out[..., 2] > 0)).sum())
+
+
+def test_merl_time_estimate_is_the_measured_rate_times_the_cells(monkeypatch, fit_folder):
+    from gonio import export as module
+
+    monkeypatch.setattr(module, "_seconds_per_cell", lambda function, geometry: 1e-3)
+    spec = module.material_of("oren-nayar-exact:sigma=20")
+    assert module.merl_seconds(spec) == pytest.approx(1e-3 * module.MERL_VALID_CELLS, rel=1e-12)
+    fit = module.material_of(str(fit_folder))  # the values, then the draws
+    assert module.merl_seconds(fit) == pytest.approx(2e-3 * module.MERL_VALID_CELLS, rel=1e-12)
+    message = module.merl_time_warning(spec)
+    assert "18 minutes" in message and "oren-nayar-tabulated" in message and "oren-nayar-exact" in message
+    monkeypatch.setattr(module, "_seconds_per_cell", lambda function, geometry: 1e-8)
+    assert module.merl_time_warning(spec) is None
+
+
+def test_merl_export_warns_before_it_starts(monkeypatch, tmp_path, capsys):
+    from gonio import export as module
+
+    monkeypatch.setattr(module, "_seconds_per_cell", lambda function, geometry: 1e-4)  # 110 s
+    out = tmp_path / "l.binary"
+    assert main(["export", "lambert:rho=0.5", "--format", "merl", "--out", str(out), "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert "warning: a MERL export of lambert is estimated to take about 110 s" in captured.err
+    with pytest.warns(module.SlowExportWarning, match="estimated to take"):
+        export("lambert:rho=0.5", "merl", tmp_path / "m.binary")
+    # up front: the warning comes before the writing starts
+    events = []
+    monkeypatch.setattr(module, "write_merl", lambda *args, **kwargs: events.append("write") or [])
+    export("lambert:rho=0.5", "merl", tmp_path / "n.binary", warn=events.append)
+    assert len(events) == 2 and events[0].startswith("a MERL export") and events[1] == "write"
+
+
+def test_merl_time_estimate_of_the_exact_model_is_minutes():
+    """The real rate, measured on a few hundred cells (about 0.3 s): the exact model's
+    MERL export takes minutes (about 1 ms per cell), the closed form's well under 30 s."""
+    from gonio.export import MERL_WARN_SECONDS, material_of, merl_seconds, merl_time_warning
+
+    assert merl_seconds(material_of("oren-nayar-exact")) > 5 * MERL_WARN_SECONDS
+    assert merl_time_warning(material_of("oren-nayar")) is None
