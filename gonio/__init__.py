@@ -7,6 +7,7 @@ The public entry points (DESIGN.md, "Public API contract")::
     gonio.models.get("oren-nayar")                # Model: .name, .params, .reference
     gonio.brdf("oren-nayar", 45, 0, 30, 180, rho=0.9, sigma=30)   # [1/sr]
     gonio.fit_recording("plaster", models=["lambert", "oren-nayar"])  # as 'gonio fit' (docs/api.md)
+    gonio.fit_many(["a.csv", "b.csv"], ["lambert", "oren-nayar"], out="batch", workers=2)  # docs/batch.md
 
 Angles are in degrees everywhere in the public interface.
 """
@@ -18,7 +19,7 @@ import numpy as np
 
 from . import geometry, models, radiometry
 
-__all__ = ["__version__", "brdf", "models", "geometry", "radiometry", "fit_recording", "load_data"]
+__all__ = ["__version__", "brdf", "models", "geometry", "radiometry", "fit_recording", "load_data", "fit_many"]
 
 
 def _installed_version() -> str:
@@ -46,6 +47,10 @@ def __getattr__(name: str) -> Any:
         from . import analysis
 
         return getattr(analysis, name)
+    if name == "fit_many":  # batch fits (gonio.batch, docs/batch.md)
+        from .batch import fit_many
+
+        return fit_many
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

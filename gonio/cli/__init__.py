@@ -26,8 +26,8 @@ from typing import NoReturn
 import gonio
 
 #: Sub-command modules in the order ``gonio --help`` lists them.
-SUBCOMMANDS = ("demo", "models", "figures", "plan", "design", "run", "reduce", "fit", "report", "render", "emulator",
-               "textons", "curet", "tables", "export")
+SUBCOMMANDS = ("demo", "models", "figures", "plan", "design", "run", "reduce", "fit", "fit_batch", "report", "render",
+               "stereo", "emulator", "textons", "curet", "tables", "export")
 
 #: Exit codes: bad input, internal error, interrupted (128 + SIGINT).
 EXIT_BAD_INPUT = 2
