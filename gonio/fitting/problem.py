@@ -63,6 +63,9 @@ _JITTER_DESCRIPTION = "extra noise added in quadrature to the measurement uncert
 _REL_JITTER_DESCRIPTION = "extra noise proportional to the prediction, added in quadrature to the uncertainties"
 #: The extra-noise parameter of each jitter mode.
 NOISE_PARAMETERS = {"absolute": "jitter", "relative": "rel_jitter"}
+#: Most predictions (rows x values) the batch methods hold at once: 32 MB of doubles per
+#: temporary (chi_square_batch, pointwise_log_likelihood_batch, replicated_data).
+BATCH_ELEMENTS = 2**22
 
 
 def jitter_mode(jitter: bool | str | None) -> str | None:
@@ -536,6 +539,10 @@ class FitProblem:
         (the stated covariance, or sigma, and the extra noise added independently, which
         gives exactly their summed covariance). Shape (D, N): the posterior predictive
         draws of ``posterior.nc``."""
+        return np.concatenate([self._replicated_rows(block, rng) for block in self._row_blocks(vectors)])
+
+    def _replicated_rows(self, vectors: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """:meth:`replicated_data` of one block of rows."""
         values = self.batch_values(vectors)
         predicted = self._batch_prediction(values)
         z = rng.standard_normal(predicted.shape)
@@ -581,7 +588,18 @@ class FitProblem:
         numpy.ndarray
             Shape (W,).
         """
+        return np.concatenate([self._chi_square_rows(block) for block in self._row_blocks(vectors)])
+
+    def _row_blocks(self, vectors: Any) -> list[np.ndarray]:
+        """``vectors`` (free parameters, shape (D, n_free)) in blocks of rows whose
+        predictions hold at most :data:`BATCH_ELEMENTS` values: the batch methods' memory
+        stays bounded for any number of values (one block, as before, up to 4e6 values)."""
         vectors = np.asarray(vectors, float).reshape(-1, self.ndim)
+        rows = max(1, BATCH_ELEMENTS // max(self.dataset.n, 1))
+        return [vectors[start:start + rows] for start in range(0, max(len(vectors), 1), rows)]
+
+    def _chi_square_rows(self, vectors: np.ndarray) -> np.ndarray:
+        """:meth:`chi_square_batch` of one block of rows."""
         if self._cholesky is not None and self.jitter:
             return np.array([self._chi_square_of(vector) for vector in vectors])
         values = self.batch_values(vectors)
@@ -659,7 +677,10 @@ class FitProblem:
         """:meth:`pointwise_log_likelihood` of every row of ``vectors``, shape (W, N): one
         model evaluation for all rows, except for correlated errors with a free extra
         noise (one covariance per row)."""
-        vectors = np.asarray(vectors, float).reshape(-1, self.ndim)
+        return np.concatenate([self._pointwise_rows(block) for block in self._row_blocks(vectors)])
+
+    def _pointwise_rows(self, vectors: np.ndarray) -> np.ndarray:
+        """:meth:`pointwise_log_likelihood_batch` of one block of rows."""
         if self._cholesky is not None and self.jitter:
             return np.array([self.pointwise_log_likelihood(v) for v in vectors]).reshape(-1, self.dataset.n)
         values = self.batch_values(vectors)

@@ -62,6 +62,11 @@ INFERENCE_DRAWS = 8000
 #: Most replicated datasets in posterior.nc's posterior_predictive group (the last steps of
 #: the chain, every walker).
 PREDICTIVE_DRAWS = 1000
+#: Most values (draws x data values) of each pointwise group of posterior.nc
+#: (log_likelihood, posterior_predictive): 128 MB of doubles. With many values the draws
+#: are thinned further, down to one step of every walker, so the file and the memory that
+#: writes it grow linearly with the data, not with draws x data.
+POINTWISE_ELEMENTS = 2**24
 SUMMARY_FILE = "summary.txt"
 #: Draws x geometries evaluated at once by FitResult.posterior_predictive.
 _PREDICTIVE_ELEMENTS = 2**16
@@ -564,8 +569,10 @@ class FitResult:
         """The posterior as an ArviZ ``InferenceData`` (walkers as chains, after burn-in and
         thinning), with the pointwise log-likelihood for PSIS-LOO and the observed values.
 
-        At most :data:`INFERENCE_DRAWS` draws in all: a large ensemble is thinned further
-        (every k-th step), so that ``posterior.nc`` stays a few megabytes.
+        At most :data:`INFERENCE_DRAWS` draws in all, and at most
+        :data:`POINTWISE_ELEMENTS` draws x values in each pointwise group: a large ensemble
+        or a large dataset is thinned further (every k-th step, at least one step), so that
+        ``posterior.nc`` stays within a few hundred megabytes for any number of values.
         """
         from .diagnostics import inference_data
 
@@ -576,14 +583,15 @@ class FitResult:
         if self.mcmc is None:
             raise ValueError("no posterior: the fit ran without MCMC")
         m = self.mcmc
-        kept = max(1, (m.n_steps - m.burn_in + m.thin - 1) // m.thin)
-        thin = m.thin * max(1, math.ceil(kept * m.n_walkers / INFERENCE_DRAWS))
+        most = min(INFERENCE_DRAWS, POINTWISE_ELEMENTS // max(self.dataset.n, 1))
+        thin = max(m.thin, math.ceil((m.n_steps - m.burn_in) / max(1, most // m.n_walkers)))
         chain = m.chain[m.burn_in :: thin]
         problem = self.problem()
         pointwise = problem.pointwise_log_likelihood_batch(chain.reshape(-1, len(self.free))).reshape(
             chain.shape[:2] + (self.dataset.n,))
         # replicated data of the last steps, at most PREDICTIVE_DRAWS in all (arviz.plot_ppc)
-        steps = max(1, min(chain.shape[0], PREDICTIVE_DRAWS // chain.shape[1]))
+        predictive_draws = min(PREDICTIVE_DRAWS, POINTWISE_ELEMENTS // max(self.dataset.n, 1))
+        steps = max(1, min(chain.shape[0], predictive_draws // chain.shape[1]))
         recent = chain[-steps:]
         rng = np.random.default_rng(0 if not self.result_id else int(self.result_id[:8], 16))
         predictive = problem.replicated_data(recent.reshape(-1, len(self.free)), rng).reshape(

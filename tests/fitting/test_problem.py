@@ -252,3 +252,28 @@ def test_batch_pointwise_likelihood_equals_one_walker_at_a_time(case):
     vectors = np.column_stack([rng.uniform(*starts[name], 4) for name in problem.free])
     np.testing.assert_allclose(problem.pointwise_log_likelihood_batch(vectors),
                                [problem.pointwise_log_likelihood(v) for v in vectors], rtol=1e-11, atol=1e-10)
+
+
+@pytest.mark.parametrize("case", [0, 4, 7, 8])
+def test_the_batch_methods_in_blocks_of_rows_equal_one_block(case, monkeypatch):
+    """Bounded memory for any number of values: with blocks of one or two rows the
+    chi-square, pointwise log-likelihood and replicated data equal those of one block (the
+    replicated data as a distribution: the same noise stream, drawn block by block)."""
+    import gonio.fitting.problem as problem_module
+
+    model, data, fixed, jitter = _batch_cases()[case]
+    problem = FitProblem(model, data, fixed, jitter=jitter)
+    rng = np.random.default_rng(case)
+    starts = {"rho": (0.5, 0.95), "sigma": (5.0, 45.0), "ir_weight": (0.2, 1.0), "scale": (1.5, 2.5),
+              "jitter": (0.0, 0.02), "rel_jitter": (0.0, 0.05)}
+    vectors = np.column_stack([rng.uniform(*starts[name], 5) for name in problem.free])
+    whole = (problem.chi_square_batch(vectors), problem.pointwise_log_likelihood_batch(vectors))
+    monkeypatch.setattr(problem_module, "BATCH_ELEMENTS", 2 * data.n)
+    assert len(problem._row_blocks(vectors)) == 3
+    np.testing.assert_allclose(problem.chi_square_batch(vectors), whole[0], rtol=1e-12)
+    np.testing.assert_allclose(problem.pointwise_log_likelihood_batch(vectors), whole[1], rtol=1e-12)
+    replicated = problem.replicated_data(np.repeat(vectors[:1], 400, axis=0), np.random.default_rng(0))
+    assert replicated.shape == (400, data.n)
+    predicted = problem.predict(problem.values(vectors[0]))
+    spread = np.std(replicated - predicted, axis=0)
+    assert np.all(np.abs(np.mean(replicated - predicted, axis=0)) < 5 * spread / np.sqrt(400))

@@ -153,3 +153,18 @@ def test_overwrite_replaces_only_a_result_gonio_can_read_whole(tmp_path):
                  "--out", str(tmp_path / "real")]) == 0
     assert main(["fit", str(tmp_path / "data.csv"), "--model", "lambert", "--no-mcmc", "--quiet",
                  "--out", str(tmp_path / "real"), "--overwrite"]) == 0
+
+
+def test_posterior_file_thins_its_draws_to_bound_the_pointwise_groups(minnaert_result, tmp_path, monkeypatch):
+    """posterior.nc grows with the data, not with draws x data: with a budget of 40 draws
+    x values per pointwise group the log-likelihood and the replicated data keep at most
+    that many draws (at least one step of every walker), and ArviZ reads the file."""
+    import gonio.fitting.results as results_module
+
+    n = minnaert_result.dataset.n
+    monkeypatch.setattr(results_module, "POINTWISE_ELEMENTS", 40 * n)
+    arrays = minnaert_result._inference_arrays()
+    walkers = minnaert_result.mcmc.n_walkers
+    assert arrays["log_likelihood"].shape[0] * walkers <= max(40, walkers)
+    assert arrays["predictive"].shape[0] * walkers <= max(40, walkers)
+    assert arrays["chain"].shape[0] == arrays["log_likelihood"].shape[0]
