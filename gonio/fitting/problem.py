@@ -43,6 +43,7 @@ value)), so chi^2 = r^T C^-1 r and the Gaussian log-likelihood is
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -112,6 +113,37 @@ def predict_quantity(
     brdf = model(ti, pi_, tr, pr, **params, **dict(options or {}))
     normal = model(ti, pi_, np.zeros_like(tr), pi_, **params, **dict(options or {})) if quantity == "normalised_radiance" else None
     return combine_prediction(quantity, brdf, normal, np.cos(np.radians(ti)), float(values.get("scale", 1.0)))
+
+
+@dataclass
+class FloorPoints:
+    """The measurements a model's linear form does not describe exactly (where eq 33's
+    floor can act), evaluated with the model itself: their chi-square for many parameter
+    rows at once (independent errors).
+
+    Attributes
+    ----------
+    fast : FrozenModel
+        The model at these points' geometry (``Model.at``).
+    value, sigma : numpy.ndarray, shape (M,)
+        Their values and standard uncertainties.
+    cos_i : numpy.ndarray or None
+        cos(theta_i) for radiance data (prediction = scale BRDF cos theta_i); None for BRDF.
+    """
+
+    fast: Any
+    value: np.ndarray
+    sigma: np.ndarray
+    cos_i: np.ndarray | None = None
+
+    def chi_square(self, params: Mapping[str, Any], scale: Any = 1.0) -> np.ndarray:
+        """Sum over the points of ((prediction - value) / sigma)^2 for parameters given as
+        (W, 1) columns or floats; shape (W,) (NaN where a prediction is undefined)."""
+        predicted = np.asarray(self.fast.unchecked(**params), float)
+        if self.cos_i is not None:
+            predicted = predicted * self.cos_i * scale
+        z = (predicted - self.value) / self.sigma
+        return np.sum(np.atleast_2d(z) ** 2, axis=-1)
 
 
 class QuadraticChiSquare:
@@ -303,19 +335,35 @@ class FitProblem:
         #: Number of model evaluations so far (for benchmarks).
         self.evaluations = 0
 
-    def _quadratic_chi_square(self) -> tuple[Any, QuadraticChiSquare] | None:
-        """(linear form, :class:`QuadraticChiSquare`) when the prediction is linear in the
-        form's coefficients at every measurement for every parameter value (BRDF or
-        radiance data, no free extra noise, a model with an exact LinearForm there), else
-        None. Not with rig errors that change the prediction."""
+    def _quadratic_chi_square(self) -> tuple[Any, QuadraticChiSquare, FloorPoints | None] | None:
+        """(linear form, :class:`QuadraticChiSquare`, :class:`FloorPoints` or None) when
+        the prediction is linear in the form's coefficients for every parameter value (BRDF
+        or radiance data, no free extra noise, a model with a LinearForm), else None. Not
+        with rig errors that change the prediction.
+
+        Points where the form is not exact (eq 33's floor can act there) are taken point by
+        point: with independent errors the sufficient statistics cover the exact points and
+        :class:`FloorPoints` evaluates the model at the others; with correlated errors
+        (whitening mixes the points) such a point turns the linear path off."""
         if self.jitter or self.dataset.quantity not in ("brdf", "radiance") or self.has_rig_errors:
             return None
         form = self._fast.linear_form()
-        if form is None or not np.all(form.exact) or not np.all(np.isfinite(form.terms)):
+        if form is None:
+            return None
+        exact = np.ones(self.dataset.n, bool) if form.exact is None else np.asarray(form.exact, bool).reshape(-1)
+        if not exact.any() or not np.all(np.isfinite(form.terms[:, exact])):
             return None
         terms = form.terms * self._cos_i if self.dataset.quantity == "radiance" else form.terms
-        whitened = np.stack([self.whiten(t)[0] for t in terms])
-        return form, QuadraticChiSquare(whitened, self.whiten(np.asarray(self.dataset.value, float))[0])
+        if exact.all():
+            whitened = np.stack([self.whiten(t)[0] for t in terms])
+            return form, QuadraticChiSquare(whitened, self.whiten(np.asarray(self.dataset.value, float))[0]), None
+        if self._cholesky is not None:
+            return None
+        sigma, value = self.dataset.sigma, np.asarray(self.dataset.value, float)
+        rest = ~exact
+        floor = FloorPoints(self.model.at(*(g[rest] for g in self.dataset.geometry), **self.options), value[rest],
+                            sigma[rest], self._cos_i[rest] if self.dataset.quantity == "radiance" else None)
+        return form, QuadraticChiSquare(terms[:, exact] / sigma[exact], value[exact] / sigma[exact]), floor
 
     @property
     def has_rig_errors(self) -> bool:
@@ -625,19 +673,21 @@ class FitProblem:
         place) gives each free model parameter as a (W, 1) column, the fixed ones stay
         floats; for radiance the coefficients are multiplied by the scale.
         """
-        form, chi_square = self._linear
+        form, chi_square, floor = self._linear
         params = dict(self._linear_fixed)
         for name, k in self._linear_free:
             params[name] = vectors[:, k:k + 1]
         coefficients = np.empty((vectors.shape[0], chi_square.terms.shape[0]))
         for k, c in enumerate(form.coefficients(**params)):  # (W, 1) columns or floats
             coefficients[:, k:k + 1] = c
-        if self._scale_column is not None:
-            coefficients *= vectors[:, self._scale_column:self._scale_column + 1]
-        elif self.dataset.quantity == "radiance":
-            coefficients *= self._set_values.get("scale", 1.0)
+        scale = (vectors[:, self._scale_column:self._scale_column + 1] if self._scale_column is not None
+                 else self._set_values.get("scale", 1.0))
+        if self.dataset.quantity == "radiance":
+            coefficients *= scale
         self.evaluations += vectors.shape[0]
         out = chi_square(coefficients)
+        if floor is not None:
+            out += floor.chi_square(params, scale)
         out *= -0.5
         out += self._log_normalisation
         if not np.isfinite(out).all():

@@ -277,3 +277,29 @@ def test_the_batch_methods_in_blocks_of_rows_equal_one_block(case, monkeypatch):
     predicted = problem.predict(problem.values(vectors[0]))
     spread = np.std(replicated - predicted, axis=0)
     assert np.all(np.abs(np.mean(replicated - predicted, axis=0)) < 5 * spread / np.sqrt(400))
+
+
+@pytest.mark.parametrize("quantity", ["brdf", "radiance"])
+def test_grazing_points_keep_the_linear_path_point_by_point(quantity):
+    """At theta_i = 75 deg eq 33's floor can act, so the linear form is not exact there.
+    With independent errors the sufficient statistics still take the other points and the
+    model itself those: the batch likelihood equals one walker at a time, and the problem
+    stays vectorised. With correlated errors such a point turns the linear path off."""
+    from .synthetic import synthetic_dataset
+
+    geometry = in_plane_angles(np.repeat([30.0, 75.0], 9), np.tile(np.linspace(-80, 80, 9), 2))
+    truth = {"rho": 0.9, "sigma": 45.0} | ({"scale": 2.0} if quantity == "radiance" else {})
+    data = synthetic_dataset("oren-nayar", truth, 0.01, geometry=geometry, quantity=quantity)
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0})
+    form = problem._fast.linear_form()
+    assert not np.all(form.exact) and np.any(form.exact)  # the grazing points are not exact
+    assert problem._linear is not None and problem._linear[2] is not None and problem.vectorised
+    rng = np.random.default_rng(5)
+    starts = {"rho": (0.2, 1.0), "sigma": (5.0, 80.0), "scale": (1.5, 2.5)}
+    vectors = np.column_stack([rng.uniform(*starts[name], 40) for name in problem.free])
+    np.testing.assert_allclose(problem.log_likelihood_batch(vectors), [problem.log_likelihood(v) for v in vectors],
+                               rtol=1e-11, atol=1e-9)
+    n = data.n
+    covariance = np.diag(data.sigma**2) + 0.1 * np.outer(data.sigma, data.sigma) * (1 - np.eye(n))
+    correlated = Dataset(*data.geometry, data.value, data.sigma, quantity=quantity, covariance=covariance)
+    assert FitProblem("oren-nayar", correlated, {"ir_weight": 1.0})._linear is None
