@@ -109,7 +109,8 @@ class LogTable:
         return self.values[node]
 
     def prepare(self, theta_i, phi_i, theta_r, phi_r) -> Callable[[float], tuple[np.ndarray, ...]]:
-        """Geometries [rad] -> function of s returning the interpolated logs (flattened)."""
+        """Geometries [rad] -> function of s returning the interpolated logs (flattened);
+        its ``rows(s_array)`` gives them for many coordinates at once, shape (C, W, m)."""
         ti, pi_, tr, pr = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_i, phi_i, theta_r, phi_r)))
         theta_i, theta_r = np.ascontiguousarray(ti.ravel()), np.ascontiguousarray(tr.ravel())
         delta_phi = np.ascontiguousarray((pr - pi_).ravel())
@@ -134,4 +135,19 @@ class LogTable:
                 sums += weight * column(node)
             return tuple(sums)
 
+        def rows(s: np.ndarray) -> np.ndarray:
+            """The logs at every coordinate of ``s`` (shape (W,)): shape (C, W, m), each row
+            the bits ``evaluate`` gives after its first call (the same columns, summed in
+            the same order)."""
+            s = np.asarray(s, float).reshape(-1)
+            first, weights = axis_stencil(s_axis, s)
+            sums = np.zeros((self.values.shape[-1], s.size, theta_i.shape[0]))
+            for offset in range(4):
+                nodes = first + offset
+                for node in np.unique(nodes):
+                    chosen = nodes == node
+                    sums[:, chosen, :] += weights[chosen, offset][None, :, None] * column(int(node))[:, None, :]
+            return sums
+
+        evaluate.rows = rows  # type: ignore[attr-defined]
         return evaluate

@@ -63,15 +63,31 @@ class OrenNayarTable:
             if sigma == 0.0:  # footnote 10: Lambert, exactly (as the exact model does)
                 return np.full(shape, 1.0 / math.pi), np.zeros(shape)
             log_f1, log_f2 = logs(float(sigma_coordinate(sigma)))
-            f1, f2 = np.exp(log_f1), np.exp(log_f2)  # pi f1 and pi (f2 + F2_FLOOR f1)
-            # the floor is removed exactly; rounding can leave -1e-20 where f2 = 0
-            f2 -= F2_FLOOR * f1
-            np.maximum(f2, 0.0, out=f2)
-            f1 *= 1.0 / math.pi
-            f2 *= 1.0 / math.pi
+            f1, f2 = _from_logs(log_f1, log_f2)
             return f1.reshape(shape), f2.reshape(shape)
 
+        def rows(sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """(f1, f2) for every sigma of a 1-D array (W,): shape (W,) + the geometry's."""
+            sigma = np.asarray(sigma, float).reshape(-1)
+            log_f1, log_f2 = logs.rows(sigma_coordinate(sigma))
+            f1, f2 = _from_logs(log_f1, log_f2)
+            smooth = sigma == 0.0  # footnote 10: Lambert, exactly
+            f1[smooth], f2[smooth] = 1.0 / math.pi, 0.0
+            return f1.reshape(sigma.shape + shape), f2.reshape(sigma.shape + shape)
+
+        components.rows = rows  # type: ignore[attr-defined]
         return components
+
+
+def _from_logs(log_f1: np.ndarray, log_f2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """f1, f2 [1/sr] from the tabulated logs of pi f1 and pi (f2 + F2_FLOOR f1)."""
+    f1, f2 = np.exp(log_f1), np.exp(log_f2)
+    # the floor is removed exactly; rounding can leave -1e-20 where f2 = 0
+    f2 -= F2_FLOOR * f1
+    np.maximum(f2, 0.0, out=f2)
+    f1 *= 1.0 / math.pi
+    f2 *= 1.0 / math.pi
+    return f1, f2
 
 
 _TABLE: list[OrenNayarTable] = []
@@ -132,15 +148,43 @@ def tabulated_components(theta_i, phi_i, theta_r, phi_r, sigma: float) -> tuple[
 
 def _prepare(theta_i, phi_i, theta_r, phi_r):
     components = table().prepare(theta_i, phi_i, theta_r, phi_r)
+    shape = np.broadcast_shapes(*(np.shape(a) for a in (theta_i, phi_i, theta_r, phi_r)))
 
-    def evaluate(rho: float, sigma: float) -> np.ndarray:
-        f1, f2 = components(sigma)
-        f1 *= rho  # fresh arrays from components(): updated in place
-        f2 *= rho * rho
-        f1 += f2
-        return f1
+    def evaluate(rho, sigma) -> np.ndarray:
+        """rho f1 + rho^2 f2; parameters scalars or arrays broadcasting against the
+        geometry (the sampler's walkers as (W, 1) columns take one call for all)."""
+        if np.ndim(sigma) == 0:
+            f1, f2 = components(float(sigma))
+        else:
+            f1, f2 = _components_of_array(components, np.asarray(sigma, float), shape)
+        if np.ndim(rho) == 0 and f1.shape == shape:
+            f1 *= rho  # fresh arrays from components(): updated in place
+            f2 *= rho * rho
+            f1 += f2
+            return f1
+        return rho * f1 + rho * rho * f2
 
     return evaluate
+
+
+def _components_of_array(components, sigma: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(f1, f2) for an array of sigma broadcasting against the geometry's ``shape``: one
+    row per leading entry when sigma is constant along the geometry (``components.rows``),
+    else one evaluation per distinct sigma."""
+    full = np.broadcast_shapes(sigma.shape, shape)
+    trailing = sigma.shape[sigma.ndim - len(shape):] if len(shape) else ()
+    if sigma.ndim >= len(shape) and all(n == 1 for n in trailing):
+        lead = sigma.shape[:sigma.ndim - len(shape)]
+        f1, f2 = components.rows(sigma.reshape(-1))
+        return f1.reshape(lead + shape), f2.reshape(lead + shape)
+    sigma = np.broadcast_to(sigma, full)
+    f1, f2 = np.empty(full), np.empty(full)
+    for value in np.unique(sigma):
+        chosen = sigma == value
+        one = components(float(value))
+        f1[chosen] = np.broadcast_to(one[0], full)[chosen]
+        f2[chosen] = np.broadcast_to(one[1], full)[chosen]
+    return f1, f2
 
 
 OREN_NAYAR_TABULATED = register(
@@ -157,5 +201,6 @@ OREN_NAYAR_TABULATED = register(
         ),
         description="exact V-cavity rough diffuse model from a precomputed table (fast)",
         prepare=_prepare,
+        broadcasts_params=True,
     )
 )
