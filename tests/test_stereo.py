@@ -222,3 +222,24 @@ def test_bad_stereo_requests_are_refused_naming_why(argv, words, capsys, tmp_pat
     np.savez(tmp_path / "bad.npz", images=np.zeros((3, 4, 4)))
     assert main(argv) == 2
     assert words in capsys.readouterr().err
+
+
+def test_gonio_stereo_inverts_a_fit_and_its_posterior(tmp_path):
+    """A fit folder as the model: its posterior medians are inverted and its draws widen
+    the regions (docs/vision.md)."""
+    from gonio.fitting import Dataset, fit
+
+    ti, tr, pr = (a.ravel() for a in np.meshgrid([0.0, 30.0, 60.0], np.arange(0.0, 81.0, 10.0), [0.0, 90.0, 180.0],
+                                                  indexing="ij"))
+    value = gonio.brdf("oren-nayar-tabulated", ti, 0.0, tr, pr, rho=0.8, sigma=30.0)
+    data = Dataset(ti, 0.0, tr, pr, value * (1 + 0.01 * np.random.default_rng(0).standard_normal(value.size)),
+                   0.01 * value)
+    fit(data, "oren-nayar-tabulated", seed=0, n_walkers=16, max_steps=1500, polish_table=False).save(tmp_path / "fit")
+    argv = ["stereo", "oren-nayar-tabulated:sigma=30,rho=0.8", "--model", str(tmp_path / "fit"), "--size", "25",
+            "--add-noise", "0.01"]
+    assert main([*argv, "--draws", "4", "--out", str(tmp_path / "with")]) == 0
+    assert main([*argv, "--draws", "0", "--out", str(tmp_path / "without")]) == 0
+    with_draws, without = (json.loads((tmp_path / f"{name}.json").read_text())["results"]["model"]
+                           for name in ("with", "without"))
+    assert with_draws["median_error_deg"] < 2.0
+    assert with_draws["median_cone_deg"] >= without["median_cone_deg"]
