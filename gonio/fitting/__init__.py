@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from .dataset import CSV_COLUMNS, QUANTITIES, Dataset
 from .least_squares import LeastSquaresResult, fit_least_squares
+from .least_squares_batch import ManyLeastSquaresResult, least_squares_many
 from .mcmc import ConvergenceWarning, McmcResult, sample_posterior
 from .priors import LogUniform, Normal, Prior, Uniform, parse_prior
 from .problem import FitProblem, predict_quantity
@@ -36,6 +37,8 @@ __all__ = [
     "parse_prior",
     "LeastSquaresResult",
     "fit_least_squares",
+    "ManyLeastSquaresResult",
+    "least_squares_many",
     "McmcResult",
     "ConvergenceWarning",
     "sample_posterior",
