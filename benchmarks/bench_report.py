@@ -10,24 +10,15 @@
    revision :data:`PREVIOUS_REVISION` (one artist per incidence, one posterior draw set per
    model band, a constrained layout pass) read from git, is timed in the same run on the
    same fits up to ``--previous-max`` measurements (default 1,000: at 10,000 it takes
-   minutes). ``write_report`` is timed drawing every figure in this process
-   (``processes=1``, the reference) and with a worker drawing part of them
-   (``processes=2``, :mod:`gonio.report.workers`: in this process the fork server is
-   started by the first call and warm afterwards), and the ``gonio report`` command
-   (a fresh process each time, the fork server starting cold while the command reads
-   the result and imports matplotlib) with ``GONIO_REPORT_PROCESSES`` 1 and 2,
-   alternately. Target (issue "Fast inference"): a 10,000-point fit's report within
-   2 s; the ratio to the 200-point report says whether the cost grows with the data.
+   minutes). ``write_report`` is timed in this process, and so is the ``gonio report``
+   command (a fresh process each time). Target (issue "Fast inference"): a 10,000-point
+   fit's report within 2 s; the ratio to the 200-point report says whether the cost
+   grows with the data.
 
 2. **``gonio fit`` of the Fig 16 recording with ``--report``.** The shipped protocol is run
    on the embedded emulator (``gonio run protocols/oren-nayar-fig16-plaster.toml``), then
    ``gonio fit REC --model oren-nayar --fix ir_weight=1 --report --quiet`` is timed as a
-   command (wall time of the process; CPU time of it, its fork server and the report
-   workers, adopted as orphans by this process: Linux ``PR_SET_CHILD_SUBREAPER``), as it
-   comes (the report drawn by two worker processes forked from a fork server started
-   before the fit) and with
-   ``GONIO_REPORT_PROCESSES=1`` (the report drawn in the command's process: the
-   reference), alternately, and again phase by phase (in one process) in a fresh interpreter
+   command (wall and CPU time of the process), and again phase by phase in a fresh interpreter
    (``--phases``, the same steps as ``gonio.cli.fit``): start-up of the command line, the
    heavy imports (scipy.optimize and emcee, which imports scipy.stats; ArviZ's numpy core
    arviz_stats.base with h5netcdf; matplotlib for the report), the reduction of the
@@ -47,8 +38,16 @@
    after the work, with the final garbage collection and after ``gc.freeze()`` (what
    ``gonio.cli.run`` does), in a process that has loaded what the command loads.
 
+3. **The report workers** (``--workers-decision``): the fork-server report workers that
+   ``gonio fit --report`` used by default (``gonio.report.workers``, removed since),
+   against one process, on the default path, same run, alternating, on a quiet machine
+   (:func:`default_path_decision`), timed on the code of :data:`WORKERS_REVISION`, the
+   last revision that had them. The result is merged into report.json
+   (``report_workers_decision``).
+
 Medians of ``--repeats`` runs. Writes docs/benchmarks/report.json and report.png.
-Run: ``python benchmarks/bench_report.py [--repeats N] [--previous-max N]``.
+Run: ``python benchmarks/bench_report.py [--repeats N] [--previous-max N]``, or
+``python benchmarks/bench_report.py --workers-decision [--repeats N]``.
 """
 from __future__ import annotations
 
@@ -144,46 +143,36 @@ def _cpu_with_children() -> float:
     return now.user + now.system + now.children_user + now.children_system
 
 
-def time_write_report(result, repeats: int, processes: int = 1) -> tuple[float, float | None, float]:
+def time_write_report(result, repeats: int) -> tuple[float, float, float]:
     """Median wall time, median CPU time and least wall time [s] of write_report (figures,
-    PNG files and HTML) into a scratch folder, drawn by ``processes`` processes. On a
-    shared machine the CPU time and the least wall time are what other jobs inflate
-    least. The CPU time is that of this process alone (None with workers: they are
-    children of the fork server, which lives on between calls; the ``gonio report``
-    command's CPU time, workers included, is measured by :func:`report_command`)."""
+    PNG files and HTML) into a scratch folder. On a shared machine the CPU time and the
+    least wall time are what other jobs inflate least."""
     from gonio.report.fit_report import write_report
 
     wall, cpu = [], []
     for _ in range(repeats):
         with tempfile.TemporaryDirectory(prefix="gonio-report-") as folder:
             start, start_cpu = time.perf_counter(), _cpu_with_children()
-            write_report(result, folder, processes=processes)
+            write_report(result, folder)
             wall.append(time.perf_counter() - start)
             cpu.append(_cpu_with_children() - start_cpu)
-    return statistics.median(wall), (statistics.median(cpu) if processes == 1 else None), min(wall)
+    return statistics.median(wall), statistics.median(cpu), min(wall)
 
 
 def report_command(result, repeats: int) -> dict[str, float]:
-    """``gonio report FOLDER --out OUT`` of the saved ``result`` as a command, with one
-    process and with two (each a fresh process: the fork server starts cold): medians of
-    wall and CPU time [s], alternately."""
-    times: dict[str, list[float]] = {"1": [], "2": []}
-    cpus: dict[str, list[float]] = {"1": [], "2": []}
+    """``gonio report FOLDER --out OUT`` of the saved ``result`` as a command (a fresh
+    process each time): medians of wall and CPU time [s]."""
+    times, cpus = [], []
     with tempfile.TemporaryDirectory(prefix="gonio-report-command-") as scratch:
         folder = Path(scratch) / "fit"
         result.save(folder)
         for _ in range(repeats):
-            for processes in ("1", "2"):
-                out = Path(scratch) / f"report-{processes}"
-                wall, cpu = command_times([str(GONIO), "report", str(folder), "--out", str(out)],
-                                          {"GONIO_REPORT_PROCESSES": processes})
-                times[processes].append(wall)
-                cpus[processes].append(cpu)
-                shutil.rmtree(out)
-    return {"report_command_s": statistics.median(times["1"]), "report_command_cpu_s": statistics.median(cpus["1"]),
-            "report_command_2_processes_s": statistics.median(times["2"]),
-            "report_command_2_processes_cpu_s": statistics.median(cpus["2"]),
-            "speed_up_of_report_command_2_processes": statistics.median(times["1"]) / statistics.median(times["2"])}
+            out = Path(scratch) / "report"
+            wall, cpu = command_times([str(GONIO), "report", str(folder), "--out", str(out)])
+            times.append(wall)
+            cpus.append(cpu)
+            shutil.rmtree(out)
+    return {"report_command_s": statistics.median(times), "report_command_cpu_s": statistics.median(cpus)}
 
 
 def report_scaling(repeats: int, previous_max: int) -> list[dict]:
@@ -199,13 +188,11 @@ def report_scaling(repeats: int, previous_max: int) -> list[dict]:
         figures = time_figures(fit_figures, result, repeats)
         loads = [os.getloadavg()[0]]
         wall, cpu, least = time_write_report(result, repeats)
-        wall2, _, least2 = time_write_report(result, repeats, processes=2)
         command = report_command(result, repeats)
         loads.append(os.getloadavg()[0])
         row = {"n": n, "incidences": len(result.dataset.incidences()[0]), "walkers": result.mcmc.n_walkers,
                "steps": result.mcmc.n_steps, "fit_s": fit_seconds, "write_report_s": wall, "write_report_cpu_s": cpu,
-               "write_report_min_s": least, "write_report_2_processes_s": wall2,
-               "write_report_2_processes_min_s": least2, "speed_up_of_2_processes": wall / wall2, **command,
+               "write_report_min_s": least, **command,
                "load_average_before_after": loads,
                "figures_s": figures, "figures_total_s": sum(figures.values())}
         if n <= previous_max:
@@ -213,9 +200,8 @@ def report_scaling(repeats: int, previous_max: int) -> list[dict]:
             row.update(previous_figures_s=old, previous_figures_total_s=sum(old.values()),
                        speed_up_of_figures=sum(old.values()) / sum(figures.values()))
         rows.append(row)
-        print(f"  {n:6d} points: report {wall:.2f} s (CPU {cpu:.2f} s; figures {row['figures_total_s']:.2f} s), "
-              f"with 2 processes {wall2:.2f} s; gonio report {command['report_command_s']:.2f} s, with 2 processes "
-              f"{command['report_command_2_processes_s']:.2f} s (CPU {command['report_command_2_processes_cpu_s']:.2f} s; "
+        print(f"  {n:6d} points: report {wall:.2f} s (CPU {cpu:.2f} s; figures {row['figures_total_s']:.2f} s); "
+              f"gonio report {command['report_command_s']:.2f} s (CPU {command['report_command_cpu_s']:.2f} s; "
               f"load {loads[0]:.1f}-{loads[1]:.1f})"
               + (f", previous figures {row['previous_figures_total_s']:.2f} s" if "previous_figures_s" in row else ""),
               flush=True)
@@ -247,8 +233,9 @@ def command_seconds(command: list[str]) -> float:
 
 def become_subreaper() -> bool:
     """Make this process adopt its orphaned descendants (Linux ``PR_SET_CHILD_SUBREAPER``),
-    so that the CPU time of a command's fork server and of the report workers it forked,
-    which outlive the command by a moment, is counted in :func:`command_times`."""
+    so that the CPU time of a command's fork server and of the report workers it forked
+    (:data:`WORKERS_REVISION`), which outlive the command by a moment, is counted in
+    :func:`command_times`."""
     import ctypes
 
     try:
@@ -337,11 +324,11 @@ def source_compile_seconds() -> tuple[float, int]:
     return time.process_time() - start, len(files)
 
 
-#: What the command has loaded when it exits (with report workers: no matplotlib).
+#: What the command has loaded when it exits (the report drawn: matplotlib too).
 _EXIT_PROBE = """
 import gc, sys, time
 import emcee, h5netcdf, scipy.optimize
-import gonio.cli, gonio.cli.fit, gonio.fitting, gonio.report.workers
+import gonio.cli, gonio.cli.fit, gonio.fitting, gonio.report.fit_report
 from gonio.fitting.diagnostics import array_stats
 gonio.cli.build_parser()
 array_stats()
@@ -394,18 +381,12 @@ def fit_command(repeats: int) -> dict:
         recording = make_recording(folder)
         totals, cpus, loads, phase_runs, start_up, numpy, pace = [], [], [], [], [], [], []
         exits_frozen, exits_collected = [], []
-        single, single_cpus = [], []
         for k in range(repeats):
             out = folder / f"fit-{k}"
             loads.append(os.getloadavg()[0])
             wall, cpu = command_times([str(GONIO), "fit", str(recording), *FIT_ARGUMENTS, "--out", str(out)])
             totals.append(wall)
             cpus.append(cpu)
-            shutil.rmtree(out)
-            wall, cpu = command_times([str(GONIO), "fit", str(recording), *FIT_ARGUMENTS, "--out", str(out)],
-                                      {"GONIO_REPORT_PROCESSES": "1"})
-            single.append(wall)
-            single_cpus.append(cpu)
             shutil.rmtree(out)
             probe = subprocess.run([sys.executable, __file__, "--phases", str(recording), str(out)], check=True,
                                    capture_output=True, text=True, env={**os.environ, "PYTHONWARNINGS": "ignore"})
@@ -433,11 +414,6 @@ def fit_command(repeats: int) -> dict:
         "phases_cpu_s": phases_cpu,
         "phases_cpu_sum_s": sum(phases_cpu.values()),
         "command_cpu_s": statistics.median(cpus),
-        "report_in_process_wall_s": statistics.median(single),
-        "report_in_process_wall_min_s": min(single),
-        "report_in_process_wall_runs_s": single,
-        "report_in_process_cpu_s": statistics.median(single_cpus),
-        "speed_up_of_report_workers": statistics.median(single) / total,
         "load_average_runs": loads,
         "imports_s": imports,
         "bytecode": "gonio's compiled before timing (compileall), as after a first run or by make",
@@ -451,7 +427,125 @@ def fit_command(repeats: int) -> dict:
         "pace_reference_s": statistics.median(pace),
         "pace_reference_runs_s": pace,
         "ratio_to_pace_reference": total / statistics.median(pace),
-        "report_in_process_ratio_to_pace_reference": statistics.median(single) / statistics.median(pace),
+    }
+
+
+# ------------------------------------------------- the report workers on the default path
+#: The last revision with the report workers (``gonio.report.workers``), whose code
+#: ``--workers-decision`` times.
+WORKERS_REVISION = "d552be7"
+#: Largest 1-minute load average at which a timed run starts (a quiet 2-core machine).
+QUIET_LOAD = 0.7
+#: Longest wait for the machine to be that quiet before a run [s]; past it the run is
+#: made anyway and its load recorded.
+QUIET_WAIT_S = 240.0
+
+
+def wait_until_quiet(limit: float = QUIET_LOAD, longest: float | None = None) -> float:
+    """Wait until the 1-minute load average is below ``limit`` (at most ``longest`` s,
+    default :data:`QUIET_WAIT_S`); returns the load average at the start of the run."""
+    deadline = time.monotonic() + (QUIET_WAIT_S if longest is None else longest)
+    while os.getloadavg()[0] >= limit and time.monotonic() < deadline:
+        time.sleep(2.0)
+    return os.getloadavg()[0]
+
+
+def export_revision(revision: str, folder: Path) -> Path:
+    """gonio, drivers and protocols of the git ``revision`` exported into ``folder``, to
+    be run by this interpreter with ``PYTHONPATH=folder`` (the same dependencies)."""
+    archive = subprocess.run(["git", "archive", revision, "gonio", "drivers", "protocols"], cwd=ROOT, check=True,
+                             capture_output=True).stdout
+    folder.mkdir(parents=True, exist_ok=True)
+    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    compileall.compile_dir(folder / "gonio", quiet=1)
+    compileall.compile_dir(folder / "drivers", quiet=1)
+    return folder
+
+
+def default_path_decision(repeats: int, quiet_wait: float = QUIET_WAIT_S, revision: str | None = WORKERS_REVISION) -> dict:
+    """The default path with the report workers against one process, same run, alternating.
+
+    ``gonio fit REC --model oren-nayar --fix ir_weight=1 --report --quiet`` on the Fig 16
+    recording of :func:`make_recording` (the realistic rig), as it comes (the fork-server
+    workers of ``gonio.report.workers`` draw the report) and with
+    ``GONIO_REPORT_PROCESSES=1`` (one process), and ``gonio report FOLDER`` with
+    ``GONIO_REPORT_PROCESSES`` 1 (its default) and 2; each pair in alternating order
+    (ABBA), every run started when the 1-minute load is below :data:`QUIET_LOAD` (waiting
+    at most ``quiet_wait`` s), ``python -c "import numpy"`` timed between them as the
+    reference. The code is that of the git ``revision`` (``python -m gonio`` of an export
+    of it; default :data:`WORKERS_REVISION`, the last with the workers), or with None the
+    working tree's.
+    """
+    with tempfile.TemporaryDirectory(prefix="gonio-workers-") as scratch:
+        folder = Path(scratch)
+        if revision is None:
+            compileall.compile_dir(ROOT / "gonio", quiet=1)
+            compileall.compile_dir(ROOT / "drivers", quiet=1)
+            gonio, code = [str(GONIO)], {}
+        else:
+            source = export_revision(revision, folder / "source")
+            gonio, code = [sys.executable, "-m", "gonio"], {"PYTHONPATH": str(source)}
+        runs: dict[str, dict[str, list[float]]] = {name: {"wall": [], "cpu": [], "load": []}
+                                                   for name in ("fit_workers", "fit_one_process",
+                                                                "report_one_process", "report_workers")}
+        numpy_runs = []
+        fit_env = {"fit_workers": {}, "fit_one_process": {"GONIO_REPORT_PROCESSES": "1"}}
+        report_env = {"report_one_process": {"GONIO_REPORT_PROCESSES": "1"},
+                      "report_workers": {"GONIO_REPORT_PROCESSES": "2"}}
+        recording = folder / "plaster"
+        subprocess.run([*gonio, "run", str(PROTOCOL), "--out", str(recording), "--sample", SAMPLE], check=True,
+                       capture_output=True, env={**os.environ, **code})
+        saved = folder / "saved"
+        command_times([*gonio, "fit", str(recording), *FIT_ARGUMENTS, "--out", str(saved)],
+                      {**code, "GONIO_REPORT_PROCESSES": "1"})  # the fit gonio report draws; warms the file cache
+        for k in range(repeats):
+            for group in (fit_env, report_env):
+                order = list(group) if k % 2 == 0 else list(group)[::-1]
+                for name in order:
+                    out = folder / f"{name}-{k}"
+                    if name.startswith("fit"):
+                        command = [*gonio, "fit", str(recording), *FIT_ARGUMENTS, "--out", str(out)]
+                    else:
+                        command = [*gonio, "report", str(saved), "--out", str(out)]
+                    runs[name]["load"].append(wait_until_quiet(longest=quiet_wait))
+                    wall, cpu = command_times(command, {**code, **group[name]})
+                    runs[name]["wall"].append(wall)
+                    runs[name]["cpu"].append(cpu)
+                    shutil.rmtree(out)
+                    print(f"  {k + 1}/{repeats} {name:20s} {wall:6.2f} s wall, CPU {cpu:5.2f} s "
+                          f"(load {runs[name]['load'][-1]:.2f})", flush=True)
+            wait_until_quiet(longest=quiet_wait)
+            numpy_runs.append(command_seconds([sys.executable, "-c", "import numpy"]))
+
+    def summary(name: str) -> dict:
+        wall = runs[name]["wall"]
+        return {"wall_median_s": statistics.median(wall), "wall_min_s": min(wall), "wall_max_s": max(wall),
+                "wall_stdev_s": statistics.stdev(wall) if len(wall) > 1 else 0.0, "wall_runs_s": wall,
+                "cpu_median_s": statistics.median(runs[name]["cpu"]), "cpu_runs_s": runs[name]["cpu"],
+                "load_average_at_start": runs[name]["load"]}
+
+    result = {name: summary(name) for name in runs}
+    numpy_s = statistics.median(numpy_runs)
+    for name in runs:
+        result[name]["ratio_to_import_numpy"] = result[name]["wall_median_s"] / numpy_s
+    # paired differences (one process minus workers) of the runs made side by side
+    pairs = [a - b for a, b in zip(runs["fit_one_process"]["wall"], runs["fit_workers"]["wall"])]
+    report_pairs = [a - b for a, b in zip(runs["report_one_process"]["wall"], runs["report_workers"]["wall"])]
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
+    return {
+        "fit_command": f"gonio fit RECORDING {' '.join(FIT_ARGUMENTS)} --out FOLDER",
+        "report_command": "gonio report FOLDER --out OUT",
+        "recording": f"{PROTOCOL.name} measured by gonio run --sample {SAMPLE} (default realism)",
+        "code": f"git revision {revision}" if revision else f"working tree (HEAD {head.strip()})",
+        "repeats": repeats, "quiet_load_limit": QUIET_LOAD, "runs": result,
+        "import_numpy_s": numpy_s, "import_numpy_runs_s": numpy_runs,
+        "fit_speed_up_of_workers": result["fit_one_process"]["wall_median_s"] / result["fit_workers"]["wall_median_s"],
+        "fit_paired_gain_of_workers_s": pairs,
+        "fit_paired_gain_median_s": statistics.median(pairs),
+        "report_speed_up_of_workers": (result["report_one_process"]["wall_median_s"]
+                                       / result["report_workers"]["wall_median_s"]),
+        "report_paired_gain_of_workers_s": report_pairs,
+        "report_paired_gain_median_s": statistics.median(report_pairs),
     }
 
 
@@ -469,11 +563,7 @@ def chart(scaling: list[dict], command: dict, path: Path) -> None:
     n = [row["n"] for row in scaling]
     left.plot(n, [row["write_report_s"] for row in scaling], "o-", color="C0", label="write_report (figures + HTML), wall")
     left.plot(n, [row["write_report_cpu_s"] for row in scaling], "o:", color="C0", label="write_report, CPU time")
-    left.plot(n, [row["write_report_2_processes_s"] for row in scaling], "^-", color="C2",
-              label="write_report, 2 processes, wall")
     left.plot(n, [row["report_command_s"] for row in scaling], "D:", color="C1", label="gonio report command, wall")
-    left.plot(n, [row["report_command_2_processes_s"] for row in scaling], "D-", color="C4",
-              label="gonio report command, 2 processes, wall")
     old = [(row["n"], row["previous_figures_total_s"]) for row in scaling if "previous_figures_total_s" in row]
     if old:
         left.plot(*zip(*old), "s--", color="C3", label=f"figures of {PREVIOUS_REVISION} (previous)")
@@ -495,11 +585,9 @@ def chart(scaling: list[dict], command: dict, path: Path) -> None:
     for k, (name, seconds) in enumerate(phases.items()):
         right.barh(0, seconds, left=start, color=matplotlib.colormaps["tab20"](k % 20), label=f"{name}: {seconds:.2f} s")
         start += seconds
-    right.barh(1, command["report_in_process_wall_s"], color="0.6",
-               label=f"command, report in its process: {command['report_in_process_wall_s']:.2f} s")
-    right.barh(2, command["wall_s"], color="0.3", label=f"command, report by 2 workers: {command['wall_s']:.2f} s")
+    right.barh(1, command["wall_s"], color="0.3", label=f"the command: {command['wall_s']:.2f} s")
     right.axvline(FIT_TARGET_S, color="k", ls=":", lw=1)
-    right.set_yticks([0, 1, 2], ["phases\n(one process)", "command,\none process", "command,\nworkers"])
+    right.set_yticks([0, 1], ["phases", "command"])
     right.set_xlabel("wall time [s]")
     right.set_title(f"gonio fit of the Fig 16 recording with --report (target {FIT_TARGET_S:g} s)", fontsize=10)
     right.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
@@ -512,12 +600,34 @@ def main() -> int:
     parser.add_argument("--previous-max", type=int, default=1000,
                         help="largest fit whose report the previous figure code draws (default 1000)")
     parser.add_argument("--phases", nargs=2, metavar=("RECORDING", "OUT"), help=argparse.SUPPRESS)
+    parser.add_argument("--workers-decision", action="store_true",
+                        help="only the default path with the report workers against one process (same run, "
+                             "alternating, quiet machine); merged into report.json")
+    parser.add_argument("--revision", default=WORKERS_REVISION,
+                        help=f"--workers-decision: the git revision whose code is timed (default {WORKERS_REVISION}, "
+                             "the last with the report workers)")
+    parser.add_argument("--quiet-wait", type=float, default=QUIET_WAIT_S,
+                        help=f"longest wait [s] for a 1-minute load below {QUIET_LOAD} before each run of "
+                             f"--workers-decision (default {QUIET_WAIT_S:g})")
     args = parser.parse_args()
     if args.phases:  # child mode: one phase-by-phase run, JSON on stdout
         print(json.dumps(run_phases(*args.phases)))
         return 0
+    if args.workers_decision:
+        become_subreaper()
+        decision = default_path_decision(args.repeats, args.quiet_wait, args.revision)
+        decision["command"] = (f"python benchmarks/bench_report.py --workers-decision --repeats {args.repeats} "
+                               f"--quiet-wait {args.quiet_wait:g}" + (f" --revision {args.revision}" if args.revision
+                                                                       else ""))
+        decision["quiet_wait_s"] = args.quiet_wait
+        decision["machine"] = machine()
+        path = OUT / "report.json"
+        payload = json.loads(path.read_text()) if path.exists() else {"benchmark": "report"}
+        payload["report_workers_decision"] = decision
+        write_json("report", payload)
+        print(json.dumps({k: v for k, v in decision.items() if k != "runs"}, indent=1))
+        return 0
     load_before = os.getloadavg()
-    subreaper = become_subreaper()
     print("report against the number of measurements:", flush=True)
     scaling = report_scaling(args.repeats, args.previous_max)
     print("gonio fit of the Fig 16 recording with --report:", flush=True)
@@ -528,13 +638,10 @@ def main() -> int:
         "benchmark": "report",
         "command": f"python benchmarks/bench_report.py --repeats {args.repeats} --previous-max {args.previous_max}",
         "machine": machine(),
-        # CPU times of commands include their fork server's workers only as a subreaper
-        "cpu_of_commands_includes_workers": subreaper,
         "previous_revision": PREVIOUS_REVISION,
         "report_target_s": REPORT_TARGET_S,
         "report_scaling": scaling,
         "report_of_10000_within_target": scaling[-1]["write_report_s"] <= REPORT_TARGET_S,
-        "report_of_10000_with_2_processes_within_target": scaling[-1]["write_report_2_processes_s"] <= REPORT_TARGET_S,
         "fit_command": command,
     }
     path = write_json("report", payload)
@@ -542,9 +649,7 @@ def main() -> int:
     for name, seconds in command["phases_s"].items():
         print(f"  {name:58s} {seconds:6.2f} s  (CPU {command['phases_cpu_s'][name]:.2f} s)")
     print(f"  {'phases together':58s} {command['phases_sum_s']:6.2f} s  (CPU {command['phases_cpu_sum_s']:.2f} s)")
-    print(f"  {'the command, report in its own process':58s} {command['report_in_process_wall_s']:6.2f} s  "
-          f"(CPU {command['report_in_process_cpu_s']:.2f} s)")
-    print(f"  {'the command, report by 2 workers':58s} {command['wall_s']:6.2f} s  (CPU {command['command_cpu_s']:.2f} s; "
+    print(f"  {'the command':58s} {command['wall_s']:6.2f} s  (CPU {command['command_cpu_s']:.2f} s; "
           f"python -c pass {command['interpreter_start_s']:.2f} s; load {min(command['load_average_runs']):.1f}-"
           f"{max(command['load_average_runs']):.1f}); {command['ratio_to_pace_reference']:.2f} times the pace "
           f"reference ({command['pace_reference_s']:.2f} s)")

@@ -2,17 +2,16 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import sys
 import time
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator
+from typing import TYPE_CHECKING, Any
 
 from .arguments import name_value_pairs, number
 
 if TYPE_CHECKING:  # loaded on use: the command line starts without the fitting stack
-    from gonio.fitting import Dataset, Prior
+    from gonio.fitting import Prior
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -261,25 +260,21 @@ def _run(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as error:
         raise CLIError(str(error)) from None
     say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
-    with _report_workers(args.report) as pool:  # they import matplotlib while this process fits
-        drawing = _report_drawing(pool, dataset) if args.report else None
-        with warnings.catch_warnings(), fitting_progress(args.quiet):
-            warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
-            result = fit_dataset(
-                dataset, args.model, data_priors=data_priors, fixed=fixed, priors=priors, mcmc=args.mcmc,
-                jitter=_jitter(args.jitter), options=options, n_walkers=args.walkers, max_steps=args.max_steps,
-                rhat_limit=args.rhat_limit, seed=args.seed, progress=_Progress(args.quiet),
-                alignment=_alignment(args.alignment), stray_light=args.stray_light, announce=say)
-        if drawing is not None:
-            drawing.draw_fit(result)  # the workers draw while this process saves
-        path = result.save(out)
-        if replacing:
-            remove_stale_results(out, result.saved_files())  # the earlier fit's report too, before writing it
-        print(result.summary())
-        if drawing is not None:
-            from gonio.report.workers import finish_report
+    with warnings.catch_warnings(), fitting_progress(args.quiet):
+        warnings.simplefilter("ignore", ConvergenceWarning)  # reported below, loudly
+        result = fit_dataset(
+            dataset, args.model, data_priors=data_priors, fixed=fixed, priors=priors, mcmc=args.mcmc,
+            jitter=_jitter(args.jitter), options=options, n_walkers=args.walkers, max_steps=args.max_steps,
+            rhat_limit=args.rhat_limit, seed=args.seed, progress=_Progress(args.quiet),
+            alignment=_alignment(args.alignment), stray_light=args.stray_light, announce=say)
+    path = result.save(out)
+    if replacing:
+        remove_stale_results(out, result.saved_files())  # the earlier fit's report too, before writing it
+    print(result.summary())
+    if args.report:
+        from gonio.report.fit_report import write_report
 
-            print(f"report: {finish_report(pool, result, out, drawing)}")
+        print(f"report: {write_report(result, out)}")
     print(f"result: {path}")
     if result.converged is False:
         print("gonio: WARNING: the MCMC chain did NOT converge (step limit reached); "
@@ -325,37 +320,3 @@ def _out_folder(out: str | None, paths: list[Path], names: list[str]) -> Path:
 def _jitter(option: str) -> str | bool:
     """The ``jitter`` argument of :func:`gonio.fitting.fit` for a ``--jitter`` choice."""
     return False if option == "none" else option
-
-
-def _report_drawing(pool, dataset: Dataset):
-    """The report's figures (gonio.report.workers.ReportDrawing), those of the measurements
-    alone given to the workers now."""
-    from gonio.report.workers import ReportDrawing, print_warning
-
-    drawing = ReportDrawing(pool, print_warning)
-    drawing.draw_measurements(dataset)
-    return drawing
-
-
-@contextlib.contextmanager
-def _report_workers(report: bool) -> Iterator[Any]:
-    """The report's worker pool (gonio.report.workers.report_pool) for ``gonio fit``, or
-    None: none without ``--report`` or with one report process.
-
-    While the workers run, this process keeps its BLAS to one thread
-    (:func:`threadpoolctl.threadpool_limits`): a fit's matrix products (a few hundred
-    values) gain nothing from threads, and OpenBLAS's threads, which spin between calls,
-    took 0.4 s of CPU from the cores the fork server and the workers draw on
-    (docs/fitting.md "Performance").
-    """
-    if not report:
-        yield None
-        return
-    from threadpoolctl import threadpool_limits
-
-    from gonio.report.workers import print_warning, report_pool, report_processes
-
-    processes = report_processes(while_fitting=True)
-    with report_pool(processes if processes > 1 else 0, warn=print_warning) as pool:
-        with threadpool_limits(limits=1, user_api="blas") if pool is not None else contextlib.nullcontext():
-            yield pool

@@ -14,8 +14,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="write the HTML report (figures embedded) of a fit result folder",
         description=(
             "Read a folder written by 'gonio fit' (result.json, chain.npz) and write report.html, a single "
-            "self-contained file with every figure embedded, plus the figures as PNG files. The figures are "
-            "drawn in this process; $GONIO_REPORT_PROCESSES=2 (or more) shares them with worker processes."
+            "self-contained file with every figure embedded, plus the figures as PNG files."
         ),
     )
     parser.add_argument("result_dir", metavar="RESULT_DIR", help="folder written by 'gonio fit'")
@@ -24,19 +23,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from gonio.report.workers import report_processes, write_report_shared
-
     source = Path(args.result_dir)
     if not (source / "result.json").exists() and not source.is_file():
         raise FileNotFoundError(f"{source}: no result.json here; give a folder written by 'gonio fit'")
     if args.out is not None:
         check_output_folder(args.out, "report")
-    processes = report_processes()
-    if processes > 1:  # the workers start importing before this process imports matplotlib
-        path = write_report_shared(source, args.out, processes)
-    else:
-        from gonio.report.fit_report import write_report
+    from gonio.report.fit_report import write_report  # matplotlib: once the arguments are checked
 
-        path = write_report(source, args.out)
+    path = write_report(source, args.out)
     print(f"report written to {path.resolve()}")
     return 0

@@ -292,7 +292,7 @@ class FitResult:
         return cached[1]
 
     def __getstate__(self) -> dict[str, Any]:
-        """The result for pickling (e.g. to a report worker), without the cached
+        """The result for pickling (to another process), without the cached
         FitProblem of :meth:`problem`: it holds the model's prepared functions, which do
         not pickle, and is rebuilt on demand."""
         state = self.__dict__.copy()

@@ -15,10 +15,10 @@ if TYPE_CHECKING:
 __all__ = ["write_report"]
 
 
-def write_report(source: str | Path | FitResult, out: str | Path | None = None, *, processes: int = 1) -> Path:
+def write_report(source: str | Path | FitResult, out: str | Path | None = None) -> Path:
     """Write the HTML report of a fit (a :class:`~gonio.fitting.FitResult` or a result
     folder) into ``out`` (default: the result folder); see
     :func:`gonio.report.fit_report.write_report`."""
     from .fit_report import write_report as write
 
-    return write(source, out, processes=processes)
+    return write(source, out)

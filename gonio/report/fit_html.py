@@ -2,11 +2,10 @@
 
 The report (:func:`gonio.report.fit_report.write_report`) is ``report.html``, one
 self-contained file with every figure embedded as a base64 PNG, plus the figures as
-``fit-*.png``. The figures are drawn with matplotlib (:mod:`gonio.report.fit_report`,
-possibly in worker processes: :mod:`gonio.report.workers`); this module holds what needs
-no matplotlib: which figures there are (:data:`FIGURES`), the file names, and the writing
-of the page and the files from the figures' PNG bytes. ``gonio fit --report`` writes them
-in its own process, which never imports matplotlib when workers draw the figures.
+``fit-*.png``. The figures are drawn with matplotlib (:mod:`gonio.report.rendering`);
+this module holds what needs no matplotlib: which figures there are (:data:`FIGURES`),
+the file names (which ``gonio fit --overwrite`` reads to remove an earlier report), and
+the writing of the page and the files from the figures' PNG bytes.
 
 The page reads top to bottom: warnings first, then what was measured, data against the
 posterior predictive band, residuals, the parameter table, the posterior (corner plot),
@@ -28,8 +27,8 @@ from gonio.models import get as get_model
 if TYPE_CHECKING:
     from gonio.fitting.results import FitResult
 
-__all__ = ["ReportFigure", "FIGURES", "FIGURE_NAMES", "DATASET_FIGURES", "REPORT_FILE", "REPORT_FILES",
-           "write_html", "write_report_files"]
+__all__ = ["ReportFigure", "FIGURES", "FIGURE_NAMES", "REPORT_FILE", "REPORT_FILES", "write_html",
+           "write_report_files"]
 
 
 class ReportFigure(NamedTuple):
@@ -43,10 +42,6 @@ class ReportFigure(NamedTuple):
     function: str
     #: Caption under it.
     caption: str
-    #: Relative cost of drawing and encoding it: CPU seconds for the Fig 16 fit after the
-    #: imports (benchmarks/bench_report.py); the shares of the report's processes are
-    #: balanced with it (:func:`gonio.report.workers.share_figures`).
-    cost: float
 
 
 #: The HTML file of a report.
@@ -55,32 +50,26 @@ REPORT_FILE = "report.html"
 #: The report's figures in report order.
 FIGURES: tuple[ReportFigure, ...] = (
     ReportFigure("fit-geometry.png", "What was measured", "geometry_figure",
-                 "Viewing directions (rings, one size per incidence: views shared by several incidences show as concentric rings) and source directions (stars) on the hemisphere.", 0.09),
+                 "Viewing directions (rings, one size per incidence: views shared by several incidences show as concentric rings) and source directions (stars) on the hemisphere."),
     ReportFigure("fit-data.png", "Data and model", "data_figure",
                  "Measurements with one-sigma error bars; the model's posterior median with its 68 % and 95 % "
                  "posterior predictive bands (spread of the model over posterior draws, measurement noise not "
-                 "added).", 0.15),
+                 "added)."),
     ReportFigure("fit-residuals.png", "Residuals", "residual_figure",
                  "Normalised residuals, one panel per incidence (about 68 % should fall in the dark band and 95 % "
                  "within the light one), and every measured value against the model's at its geometry with the "
                  "1:1 line: a misfit the data figure's scale hides shows here. For an approximate model (oren-nayar, "
                  "its qualitative and numerical forms, Wolff's polynomial Fresnel factor), red crosses: the "
                  "approximation's own departure from the exact model at each value, in its uncertainties "
-                 "(docs/validity.md).", 0.08),
+                 "(docs/validity.md)."),
     ReportFigure("fit-corner.png", "Posterior", "corner_figure",
-                 "One- and two-dimensional marginal posteriors of the free parameters.", 0.18),
+                 "One- and two-dimensional marginal posteriors of the free parameters."),
     ReportFigure("fit-traces.png", "Chain", "trace_figure",
-                 "Every walker's position at every step; the shaded start is discarded as burn-in.", 0.24),
+                 "Every walker's position at every step; the shaded start is discarded as burn-in."),
 )
 
 #: The figures' file names in report order.
 FIGURE_NAMES: tuple[str, ...] = tuple(figure.file for figure in FIGURES)
-
-#: Figures drawn from the measurements alone, by file name: the function of
-#: :mod:`gonio.report.fit_figures` that draws each from a :class:`gonio.fitting.Dataset`
-#: (the same figure its :data:`FIGURES` function draws from a fit of that dataset).
-#: ``gonio fit --report`` has them drawn while the fit runs.
-DATASET_FIGURES: dict[str, str] = {"fit-geometry.png": "measurement_geometry_figure"}
 
 #: Every file a report writes into its output folder.
 REPORT_FILES: tuple[str, ...] = (REPORT_FILE,) + FIGURE_NAMES

@@ -1,11 +1,9 @@
 """The figures of a fit report drawn as PNG bytes, and the result a report is drawn from.
 
 :func:`render_figures` draws the figures of :data:`~gonio.report.fit_html.FIGURES` from a
-fit (:mod:`gonio.report.fit_figures`, matplotlib) and :func:`render_dataset_figures` those
-that need the measurements alone; :func:`load_source` reads the fit result a report is
-drawn from. Nothing here writes a file or starts a process: :mod:`gonio.report.fit_report`
-writes the report, in this process or with the worker processes of
-:mod:`gonio.report.workers`, both of which draw with these functions.
+fit (:mod:`gonio.report.fit_figures`, matplotlib); :func:`load_source` reads the fit result
+a report is drawn from. Nothing here writes a file: :mod:`gonio.report.fit_report` writes
+the report.
 """
 from __future__ import annotations
 
@@ -14,13 +12,12 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
-from gonio.fitting.dataset import Dataset
 from gonio.fitting.results import FitResult
 
 from . import fit_figures
-from .fit_html import DATASET_FIGURES, FIGURE_NAMES, FIGURES
+from .fit_html import FIGURE_NAMES, FIGURES
 
-__all__ = ["render_figures", "render_dataset_figures", "load_source"]
+__all__ = ["render_figures", "load_source"]
 
 #: zlib level of the PNG files: 1 makes files 2 to 5 % larger than 3 or the default 6 in
 #: 70 % (trace figure) to 90 % of the time of 3 and half that of 6 (measured on the
@@ -93,24 +90,7 @@ def render_figures(result: FitResult, filenames: tuple[str, ...] = FIGURE_NAMES)
         A name is not one of the report's figures.
     """
     functions = {figure.file: figure.function for figure in FIGURES}
-    return _render(result, filenames, functions, "render_figures: unknown figure file(s)")
-
-
-def render_dataset_figures(dataset: Dataset, filenames: tuple[str, ...] = tuple(DATASET_FIGURES)) -> dict[str, bytes]:
-    """Draw figures of :data:`DATASET_FIGURES` from the measurements alone and encode them
-    as PNG: the same bytes :func:`render_figures` gives for a fit of ``dataset``
-    (parameters, return value and errors as there; default: every such figure).
-    """
-    return _render(dataset, filenames, DATASET_FIGURES,
-                   "render_dataset_figures: figure file(s) that cannot be drawn from the measurements alone:")
-
-
-def _render(source: FitResult | Dataset, filenames: tuple[str, ...], functions: dict[str, str],
-            refusal: str) -> dict[str, bytes]:
-    """PNG bytes of ``filenames``, each drawn from ``source`` by its function of
-    :mod:`gonio.report.fit_figures` (``functions``); ``refusal`` begins the error for names
-    not among them."""
     unknown = sorted(set(filenames) - set(functions))
     if unknown:
-        raise ValueError(f"{refusal} {unknown}; expected names of {list(functions)}")
-    return {filename: _png(getattr(fit_figures, functions[filename])(source)) for filename in filenames}
+        raise ValueError(f"render_figures: unknown figure file(s) {unknown}; expected names of {list(functions)}")
+    return {filename: _png(getattr(fit_figures, functions[filename])(result)) for filename in filenames}
