@@ -124,8 +124,7 @@ def vase_case() -> dict:
     clean = render_images(brdf, normals, mask, VASE["lights"])
     sd = NOISE * float(np.nanmax(clean))
     images = clean + np.random.default_rng(0).normal(0.0, sd, clean.shape)
-    albedo = VASE["rho"]
-    lambert = lambda ti, pi, tr, pr: np.full(np.broadcast(ti, pi, tr, pr).shape, albedo / np.pi)  # noqa: E731
+    lambert = vision.lambert_brdf(VASE["rho"])
     model = material_of(f"oren-nayar-tabulated:sigma={VASE['sigma']},rho={VASE['rho']}")
     options = {"noise_sd": sd, "albedo_known": True, "in_plane_of": (0.0, 1.0, 0.0)}
     results = {name: vision.photometric_stereo(images, VASE["lights"], m, mask, **options)

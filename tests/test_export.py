@@ -281,17 +281,8 @@ view = [-50, -20, 0, 20, 45]
 
 
 def read_astm(path):
-    """The ``# key: JSON`` header and the table (a dict of float columns) of an ASTM export."""
-    header, lines = {}, []
-    for line in path.read_text().splitlines():
-        if line.startswith("#"):
-            key, _, value = line[1:].partition(":")
-            header[key.strip()] = json.loads(value)
-        else:
-            lines.append(line.split(","))
-    names = lines[0]
-    table = np.array(lines[1:], float)
-    return header, {name: table[:, n] for n, name in enumerate(names)}
+    """An ASTM export: the same ``# key: JSON`` header and comma-separated table as the CSV."""
+    return read_csv(path)
 
 
 def gonio_view_azimuth(t):

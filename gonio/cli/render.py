@@ -56,18 +56,13 @@ def _sources(args: argparse.Namespace) -> tuple[Callable, list[Callable], float 
     return sample.brdf, [], rho, args.source
 
 
-def _lambert(albedo: float) -> Callable:
-    """The Lambertian BRDF of ``albedo`` [1/sr]."""
-    return lambda ti, pi, tr, pr: np.full(np.broadcast(ti, pi, tr, pr).shape, albedo / np.pi)
-
-
 def _render_shape(args, brdf, drawn, albedo, title, out: Path) -> list[Path]:
     from gonio import vision
     from gonio.report.vision_plots import shape_figure
 
     normals, mask = (vision.sphere_normals if args.shape == "sphere" else vision.cylinder_normals)(args.size)
     view = vision.direction(*args.view)
-    lambert = _lambert(albedo)
+    lambert = vision.lambert_brdf(albedo)
     rows, arrays = [], {}
     for k, light in enumerate(args.light):
         source = vision.direction(*light)
@@ -90,7 +85,7 @@ def _render_map(args, brdf, albedo, title, out: Path) -> list[Path]:
     light = args.light[0]
     axis = np.linspace(-MAP_EXTENT, MAP_EXTENT, args.size)
     p, q = np.meshgrid(axis, axis)
-    lambert = _lambert(albedo)
+    lambert = vision.lambert_brdf(albedo)
     model = vision.reflectance_map(brdf, vision.direction(*light), p, q)
     flat = vision.reflectance_map(lambert, vision.direction(*light), p, q)
     fig = reflectance_map_figure(f"reflectance map: {title}", p, q, model, flat, light, albedo)

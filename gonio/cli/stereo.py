@@ -84,10 +84,9 @@ def _recover(scene: dict[str, Any], args: argparse.Namespace, noise_sd: float | 
 def _lambert_of(material: Any):
     """Lambert's BRDF of the material's albedo (:func:`gonio.vision.lambert_albedo`): the
     comparison of the paper's Figs 26-27 when the albedo is known."""
-    from gonio.vision import lambert_albedo
+    from gonio.vision import lambert_albedo, lambert_brdf
 
-    albedo = lambert_albedo(material.brdf, material.values.get("rho"))
-    return lambda ti, pi, tr, pr: np.full(np.broadcast(ti, pi, tr, pr).shape, albedo / np.pi)
+    return lambert_brdf(lambert_albedo(material.brdf, material.values.get("rho")))
 
 
 def _needed(args: argparse.Namespace) -> int:

@@ -142,9 +142,14 @@ class LeastSquaresResult:
 
 
 def _optimiser_bounds(problem: FitProblem, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    return optimiser_bounds([problem.spec(name) for name in names])
+
+
+def optimiser_bounds(specs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """The optimiser's bounds of parameters ``specs``: their physical range, an open end
+    1e-9 of the range inside (the one rule of the single and the batched least squares)."""
     lower, upper = [], []
-    for name in names:
-        spec = problem.spec(name)
+    for spec in specs:
         lo, hi = spec.bounds
         width = hi - lo if math.isfinite(hi - lo) else 1.0
         # Open bounds are excluded from the physical range: stay a hair inside them.

@@ -56,7 +56,7 @@ import numpy as np
 from gonio import models
 from gonio.models import Model, Param
 
-from .least_squares import _AT_BOUND, _DEGENERATE_RCOND, _random_start, jacobian_diagnostics
+from .least_squares import _AT_BOUND, _DEGENERATE_RCOND, _random_start, jacobian_diagnostics, optimiser_bounds
 from .problem import BATCH_ELEMENTS
 
 __all__ = ["ManyLeastSquaresResult", "least_squares_many"]
@@ -160,18 +160,6 @@ class _Setup:
         return self.weight if self.weight.shape[0] == 1 else self.weight[rows]
 
 
-def _bounds(specs: tuple[Param, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """The optimiser's bounds: the physical range, open ends 1e-9 of the range inside (the
-    rule of :func:`gonio.fitting.least_squares.fit_least_squares`)."""
-    lower, upper = [], []
-    for spec in specs:
-        lo, hi = spec.bounds
-        width = hi - lo if math.isfinite(hi - lo) else 1.0
-        lower.append(lo + 1e-9 * width if spec.open_lower and math.isfinite(lo) else lo)
-        upper.append(hi - 1e-9 * width if spec.open_upper and math.isfinite(hi) else hi)
-    return np.array(lower), np.array(upper)
-
-
 def _scales(specs: tuple[Param, ...], values: np.ndarray) -> np.ndarray:
     """Characteristic scale of each parameter: its range, or |value| when unbounded; shape
     of ``values`` (M, P)."""
@@ -234,7 +222,7 @@ def _setup(model, geometry, values, sigma, fixed, options) -> _Setup:
     if not free:
         raise ValueError(f"every parameter of {model.name!r} is fixed; nothing to fit")
     specs = tuple(model.param(n) for n in free)
-    lower, upper = _bounds(specs)
+    lower, upper = optimiser_bounds(specs)
     frozen = model.at(*angles, **dict(options or {}))
     linear_free = [n for n in free if n in model.linear_in]
     linear = linear_free[0] if len(linear_free) == 1 else None

@@ -32,7 +32,7 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["direction", "sphere_normals", "cylinder_normals", "gradient_normals", "local_angles", "render",
-           "lambert_albedo", "reflectance_map"]
+           "lambert_brdf", "lambert_albedo", "reflectance_map"]
 
 #: A BRDF ``brdf(theta_i, phi_i, theta_r, phi_r) -> array`` [1/sr], angles in degrees, broadcasting.
 Brdf = Callable[..., np.ndarray]
@@ -154,6 +154,12 @@ def render(brdf: Brdf, normals: np.ndarray, mask: np.ndarray, light: np.ndarray,
     values = np.asarray(brdf(theta_i[lit], 0.0, theta_r[lit], dphi[lit]), float)
     image[lit] = values * irradiance * np.cos(np.radians(theta_i[lit]))
     return image
+
+
+def lambert_brdf(albedo: float) -> Brdf:
+    """The Lambertian BRDF ``albedo / pi`` [1/sr] as a :data:`Brdf` (the paper's
+    comparison surface)."""
+    return lambda ti, pi_, tr, pr: np.full(np.broadcast(ti, pi_, tr, pr).shape, albedo / np.pi)
 
 
 def lambert_albedo(brdf: Brdf, rho: float | None = None) -> float:

@@ -47,7 +47,6 @@ candidate search returns one of the two.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
@@ -539,7 +538,7 @@ def _model_of(model: Any, draws: int) -> tuple[Brdf, list[Brdf], str]:
     if not hasattr(model, "draw_brdf"):
         from gonio.export import material_of
 
-        model = material_of(model if isinstance(model, (str, os.PathLike)) else model, max_draws=max(draws, 1))
+        model = material_of(model, max_draws=max(draws, 1))
     rows = range(min(len(model.draws), draws)) if model.draws is not None else ()
     drawn = [lambda ti, pi, tr, pr, k=k: model.draw_brdf(ti, pi, tr, pr, np.array([k]))[0] for k in rows]
     return model.brdf, drawn, model.source or model.model
