@@ -12,11 +12,18 @@ difference to gonio is recorded (it must be at rounding level).
 
 Targets (issue "Fast inference"): the plain call of ``oren-nayar`` at least 2.5 x the -O2
 loop, agreement to 1e-12; the fixed-geometry path at least 0.5 x the -O3 fast-math loop.
+Issue "Scale": a one-off call, the first large call of a fresh interpreter (2e6 random
+geometries, ``gonio.brdf("oren-nayar", ...)`` timed alone after ``import gonio``; best of
+:data:`ONE_OFF_REPEATS` interpreters), at least 2.5 x the -O2 loop; timed also for the
+revision ``--previous`` (default ``HEAD``, extracted with ``git archive``) and with the
+compiled path taken at once (numba loading from its on-disk cache in that call).
 
-Run:  python benchmarks/closed_form_speed.py   (writes docs/benchmarks/closed_forms.json)
+Run:  python benchmarks/closed_form_speed.py [--previous REV]
+(writes docs/benchmarks/closed_forms.json)
 """
 from __future__ import annotations
 
+import argparse
 import ctypes
 import math
 import os
@@ -28,6 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, best_time, machine, random_geometries, write_json  # noqa: E402
+from bench_call_overhead import revision_tree  # noqa: E402
 
 import gonio  # noqa: E402
 import gonio.models._core as core  # noqa: E402
@@ -122,7 +130,62 @@ def first_call_seconds(compiled: bool, cold: bool = False) -> dict[str, float]:
     return {"import_gonio_s": imported, "first_call_s": first, "second_call_s": second}
 
 
-def main() -> dict:
+ONE_OFF = """
+import sys, time
+sys.path.insert(0, {benchmarks!r})
+from _common import random_geometries
+geometry = random_geometries({n})
+import gonio
+import gonio.models._core as core
+core.COMPILED_AFTER = {after}
+seconds = []
+for _ in range(2):
+    start = time.perf_counter()
+    gonio.brdf("oren-nayar", *geometry, rho=0.9, sigma=30.0)
+    seconds.append(time.perf_counter() - start)
+print(*seconds, gonio.__file__)
+"""
+#: Fresh interpreters per one-off measurement (the best is kept).
+ONE_OFF_REPEATS = 5
+
+
+def one_off_seconds(pythonpath: Path | None = None, compiled: bool = False) -> tuple[list[float], list[float]]:
+    """The first and the second plain call of ``oren-nayar`` on the N random geometries of
+    this script in fresh interpreters [s], one interpreter per repeat: the process's own
+    rule for the compiled path (``compiled`` False: the numpy path), or the compiled path
+    at once (numba and the cached loops load in the first call); ``gonio`` imported from
+    ``pythonpath`` when given."""
+    env = dict(os.environ)
+    if pythonpath is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(pythonpath), env.get("PYTHONPATH", "")])
+    code = ONE_OFF.format(benchmarks=str(Path(__file__).resolve().parent), n=N,
+                          after=0 if compiled else DEFAULT_AFTER)
+    # run from the revision's tree (``python -c`` puts the working directory first on sys.path)
+    cwd = str(pythonpath) if pythonpath is not None else None
+    first, second = [], []
+    for _ in range(ONE_OFF_REPEATS):
+        done = subprocess.run([sys.executable, "-c", code], env=env, cwd=cwd, check=True, capture_output=True,
+                              text=True)
+        one, two, source = done.stdout.split()
+        assert pythonpath is None or Path(source).is_relative_to(pythonpath), source
+        first.append(float(one))
+        second.append(float(two))
+    return first, second
+
+
+def one_off(t_c: float, previous: str | None) -> dict:
+    """One-off first calls of this revision (numpy path and compiled path) and of the
+    revision ``previous``, with their ratios to the -O2 loop's best time ``t_c`` [s]."""
+    runs = {"numpy_path": one_off_seconds(), "compiled_path_warm_cache": one_off_seconds(compiled=True)}
+    if previous:
+        with revision_tree(previous) as tree:
+            runs[f"previous_revision_{previous}"] = one_off_seconds(tree)
+    return {label: {"seconds": first, "best_s": min(first), "ratio_vs_c": t_c / min(first),
+                    "second_call_seconds": second, "second_call_ratio_vs_c": t_c / min(second)}
+            for label, (first, second) in runs.items()}
+
+
+def main(previous: str | None = "HEAD") -> dict:
     load_before = os.getloadavg()[0]
     # the plain call as a process makes it once its numpy work has paid for loading the
     # compiled paths (gonio.models._core.COMPILED_AFTER); the numpy path is timed as well
@@ -182,7 +245,7 @@ def main() -> dict:
         # the machine is shared: 1-minute load averages before and after the run
         "load_average_before_after": [load_before, os.getloadavg()[0]],
         "benchmark": "closed_forms",
-        "command": "python benchmarks/closed_form_speed.py",
+        "command": f"python benchmarks/closed_form_speed.py --previous {previous or repr('')}",
         "geometries": N,
         "machine": machine(),
         "records": records,
@@ -197,7 +260,15 @@ def main() -> dict:
     print(f"oren-nayar first call of 16384 geometries: {payload['oren_nayar_first_call']}")
     on = next((r for r in records if r["model"] == "oren-nayar"), None)
     if on is not None:
+        t_c = N / on["c_evaluations_per_second"]
+        payload["oren_nayar_one_off_call"] = one_off(t_c, previous)
+        for label, row in payload["oren_nayar_one_off_call"].items():
+            print(f"oren-nayar one-off call of {N} geometries, {label}: best {row['best_s'] * 1e3:.1f} ms "
+                  f"({row['ratio_vs_c']:.2f} x the -O2 loop; all {[round(t * 1e3, 1) for t in row['seconds']]} ms; "
+                  f"second call {row['second_call_ratio_vs_c']:.2f} x)")
         payload["targets"] = {
+            "oren-nayar one-off first call >= 2.5 x the -O2 loop":
+                payload["oren_nayar_one_off_call"]["numpy_path"]["ratio_vs_c"] >= 2.5,
             "oren-nayar plain call >= 2.5 x the -O2 loop": on["ratio_vs_c"] >= 2.5,
             "oren-nayar agrees with the C loop to 1e-12": on["relative_error"] <= 1e-12,
             "oren-nayar fixed geometry >= 0.5 x the -O3 fast-math loop": on["fixed_geometry_ratio_vs_c_fast_math"] >= 0.5,
@@ -208,4 +279,7 @@ def main() -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--previous", default="HEAD",
+                        help="git revision whose one-off call is timed in the same run ('' for none)")
+    main(parser.parse_args().previous or None)

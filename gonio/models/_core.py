@@ -224,6 +224,12 @@ _RIGHT_ANGLE = 90.0
 #: Geometries evaluated at a time by the plain call on large inputs: the arrays of one
 #: chunk (64 KiB each) stay in the cache and below the allocator's mmap threshold.
 CHUNK = 8192
+#: Geometries per chunk of the allocation-free plain call (:attr:`Model.fill`): each chunk
+#: pays the ~50 numpy calls' own cost once for 4 times as many geometries as a
+#: :data:`CHUNK`, its temporaries (about 13 arrays of 256 KiB) still in the caches
+#: (2e6 Oren-Nayar geometries: 32 ms against 38 ms in chunks of 8192 at a load of 2 on
+#: the 2-core benchmark machine, equal at a load of 0.8; 131072 was no better).
+FILL_CHUNK = 4 * CHUNK
 #: Smallest plain call evaluated in chunks, and through a model's compiled path where it
 #: has one (:attr:`Model.compiled`): a smaller call never pays for loading numba.
 COMPILED_MIN = 2 * CHUNK
@@ -235,6 +241,16 @@ COMPILED_MIN = 2 * CHUNK
 #: (the rent-or-buy rule), and a single call of moderate size never waits for numba.
 COMPILED_AFTER = 20_000_000
 _numpy_geometries = 0
+#: Largest plain call evaluated one geometry at a time in plain Python, through a model's
+#: :attr:`Model.point` where it has one: up to it, about 0.55 us per geometry beats the
+#: fixed cost of the numpy path's ~60 array operations, about 50 us whatever the size
+#: below a few hundred geometries (for Oren-Nayar the two meet near 80 geometries,
+#: benchmarks/bench_call_overhead.py).
+POINT_MAX = 64
+#: Types of the scalar arguments the small plain call takes as they are.
+_SCALAR_TYPES = (float, int, np.float64)
+#: The (native, canonical) float64 dtype of the arrays the small plain call takes.
+_FLOAT64 = np.dtype(np.float64)
 
 
 def _compiled_due(size: int) -> bool:
@@ -310,6 +326,25 @@ class Model:
         at least :data:`COMPILED_MIN` geometries once the process has evaluated
         :data:`COMPILED_AFTER` geometries with numpy; a faster path of the same formula,
         tested equal to ``kernel``/``prepare`` (tests/models/test_compiled_closed_forms.py).
+    point : callable, optional
+        ``point(params, options) -> value``: for checked scalar parameters (floats), a
+        plain-Python ``value(theta_i, phi_i, theta_r, phi_r) -> float``, the BRDF [1/sr]
+        of one geometry given as floats [deg], returning :func:`outside` of the angles
+        unless ``0 <= theta <= 90`` holds for both polar angles (and NaN for a NaN
+        azimuth, as its formula gives; an infinite azimuth may raise).  Used for
+        plain calls of at most :data:`POINT_MAX` geometries given as floats or float64
+        arrays of one shape with float parameters (:meth:`_call_points`): a call then
+        costs a few microseconds instead of the numpy path's ~50 array operations.
+        Tested equal to ``prepare`` to 1e-14 (tests/test_models_fast_paths.py).
+    fill : callable, optional
+        ``fill(params, options, size) -> f``: for checked scalar parameters, a function
+        ``f(theta_i, phi_i, theta_r, phi_r, out)`` writing the BRDF [1/sr] of at most
+        ``size`` flat geometries [rad] (above the horizon, not NaN) into ``out`` without
+        allocating (its temporaries are allocated once by ``fill``).  Used for plain
+        calls of at least :data:`CHUNK` geometries that the compiled path leaves,
+        :data:`FILL_CHUNK` geometries at a time (:meth:`_call_filled`); the same operations as
+        ``prepare`` (smaller calls, where the numpy calls' own cost dominates, go through
+        ``prepare``: 40 % faster at 100 geometries, equal at 8192).
     """
 
     name: str
@@ -325,12 +360,16 @@ class Model:
     linear_in: tuple[str, ...] = ()
     broadcasts_params: bool = False
     compiled: Callable[[], Callable[..., np.ndarray]] | None = None
+    point: Callable[[dict, dict], Callable[[float, float, float, float], float]] | None = None
+    fill: Callable[[dict, dict, int], Callable[..., np.ndarray]] | None = None
     _by_name: Mapping[str, Param] = field(init=False, repr=False, compare=False)
+    _names: frozenset = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if (self.kernel is None) == (self.prepare is None):
             raise TypeError(f"model {self.name!r}: give exactly one of kernel or prepare")
         object.__setattr__(self, "_by_name", {p.name: p for p in self.params})
+        object.__setattr__(self, "_names", frozenset(self._by_name) | {o.name for o in self.options})
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -418,15 +457,94 @@ class Model:
             BRDF [1/sr] with the broadcast shape of the angles and parameters; 0 below
             the horizon, NaN where any angle is NaN.
         """
+        if self.point is not None:
+            out = self._call_points(theta_i, phi_i, theta_r, phi_r, values)
+            if out is not None:
+                return out
         params, options = self.resolve(values)
         ti, pi_, tr, pr = _as_angles(theta_i, phi_i, theta_r, phi_r)
         if _any_array(params):
             return self._call_broadcast(ti, pi_, tr, pr, params, options)
+        if ti.size >= COMPILED_MIN and self.compiled is not None and _compiled_due(ti.size):
+            return self._call_compiled(ti, pi_, tr, pr, params, options)
+        if self.fill is not None and ti.size >= CHUNK:
+            return self._call_filled(ti, pi_, tr, pr, params, options)
         if ti.size >= COMPILED_MIN:
-            if self.compiled is not None and _compiled_due(ti.size):
-                return self._call_compiled(ti, pi_, tr, pr, params, options)
             return self._call_in_chunks(ti, pi_, tr, pr, params, options)
         return self._call_scalar_params(ti, pi_, tr, pr, params, options)
+
+    def _call_points(self, theta_i, phi_i, theta_r, phi_r, values: Mapping[str, Any]) -> np.ndarray | None:
+        """The plain call through :attr:`point`, one geometry at a time in plain Python, or
+        None when the call is not a small one of known names with float parameters inside
+        their ranges and angles that are floats or float64 arrays of one shape (every
+        other call, and every error, is left to the general path).
+
+        Returns
+        -------
+        numpy.ndarray or None
+            BRDF [1/sr] with the angles' shape (0-d for float angles); 0 below the
+            horizon, NaN where an angle is NaN.
+        """
+        columns = _point_columns(theta_i, phi_i, theta_r, phi_r)
+        if columns is None:
+            return None
+        checked = self._float_values(values)
+        if checked is None:
+            return None
+        shape, angles = columns
+        try:
+            out = list(map(self.point(*checked), *angles))
+        except (ValueError, ArithmeticError):  # a negative polar angle, an infinite azimuth
+            return None
+        if shape is None:
+            return np.array(out[0])
+        return np.array(out) if len(shape) == 1 else np.array(out).reshape(shape)
+
+    def _float_values(self, values: Mapping[str, Any]) -> tuple[dict[str, float], dict[str, Any]] | None:
+        """:meth:`resolve` for known names and float values inside their ranges, else None."""
+        if not self._names.issuperset(values):
+            return None
+        params = {}
+        for p in self.params:
+            value = values.get(p.name, p.default)
+            if type(value) not in _SCALAR_TYPES or not p.contains(value):
+                return None
+            params[p.name] = float(value)
+        options = {}
+        for o in self.options:
+            value = values.get(o.name, o.default)
+            if value not in o.choices:
+                return None
+            options[o.name] = value
+        return params, options
+
+    def _call_filled(self, ti, pi_, tr, pr, params, options) -> np.ndarray:
+        """The plain call through :attr:`fill`, :data:`FILL_CHUNK` geometries at a time,
+        with preallocated temporaries: the arrays of a chunk stay in the processor's
+        caches, and nothing is allocated and freed per chunk, so a process's first large
+        call does not fault in fresh pages chunk after chunk (glibc returns the freed top
+        of its heap to the system until a large block has been freed once: through
+        ``prepare`` in chunks, the first call of 2e6 Oren-Nayar geometries in a fresh
+        interpreter took 3 times as long as the next, benchmarks/closed_form_speed.py).
+        Chunks with a geometry below the horizon or a NaN (or infinite) angle go through
+        :meth:`_call_scalar_params`."""
+        flat = [np.ravel(a) for a in (ti, pi_, tr, pr)]
+        size = ti.size
+        out = np.empty(size)
+        width = min(size, FILL_CHUNK)
+        fill = self.fill(params, options, width)
+        radians = np.empty((4, width))
+        for start in range(0, size, FILL_CHUNK):
+            part = slice(start, start + FILL_CHUNK)
+            chunk = [a[part] for a in flat]
+            if _inside(*chunk):
+                rows = radians[:, : chunk[0].size]
+                for angle, row in zip(chunk, rows):
+                    np.multiply(angle, _DEGREE, out=row)
+                fill(*rows, out[part])
+            else:
+                out[part] = self._call_scalar_params(*chunk, params, options)
+        return out.reshape(ti.shape)
 
     def _call_compiled(self, ti, pi_, tr, pr, params, options) -> np.ndarray:
         """:meth:`_call_in_chunks` through the model's compiled path (:attr:`compiled`)."""
@@ -501,6 +619,72 @@ def _domain(ti, pi_, tr, pr) -> tuple[np.ndarray, np.ndarray]:
     with np.errstate(invalid="ignore"):
         above = (ti <= _RIGHT_ANGLE) & (tr <= _RIGHT_ANGLE)
     return above & ~nan, nan
+
+
+def _inside(ti: np.ndarray, pi_: np.ndarray, tr: np.ndarray, pr: np.ndarray) -> bool:
+    """Whether every geometry [deg] is above the horizon with finite angles, by four
+    reductions (no temporaries): a NaN makes the maxima NaN, a NaN or an infinity the
+    sums not finite; False also when finite azimuths sum to an overflow (the caller's
+    general path is right for every geometry)."""
+    return bool(np.maximum.reduce(ti) <= _RIGHT_ANGLE and np.maximum.reduce(tr) <= _RIGHT_ANGLE
+                and math.isfinite(np.add.reduce(pi_)) and math.isfinite(np.add.reduce(pr)))
+
+
+def _point_columns(theta_i: Any, phi_i: Any, theta_r: Any, phi_r: Any) -> tuple[tuple[int, ...] | None, list] | None:
+    """The four angles [deg] of a small plain call as columns (lists of floats).
+
+    Returns
+    -------
+    (shape, columns) or None
+        ``shape`` None for four scalar angles (columns of one float each), else the shape
+        of the float64 arrays (scalars repeated along them); None when an angle is neither
+        a float nor a float64 array, the arrays differ in shape, or the call has more
+        than :data:`POINT_MAX` geometries.
+    """
+    angles = (theta_i, phi_i, theta_r, phi_r)
+    ndarray = np.ndarray
+    if type(theta_i) is ndarray and type(phi_i) is ndarray and type(theta_r) is ndarray and type(phi_r) is ndarray:
+        shape = theta_i.shape   # the common case, checked at once
+        if (theta_i.size > POINT_MAX or not (phi_i.shape == theta_r.shape == phi_r.shape == shape)
+                or not (theta_i.dtype is phi_i.dtype is theta_r.dtype is phi_r.dtype is _FLOAT64)):
+            return None
+        if len(shape) == 1:
+            return shape, [theta_i.tolist(), phi_i.tolist(), theta_r.tolist(), phi_r.tolist()]
+        return shape, [a.ravel().tolist() for a in angles]
+    shape = None
+    for angle in angles:
+        kind = type(angle)
+        if kind is float or kind is int or kind is np.float64:
+            continue
+        if kind is not ndarray or angle.dtype is not _FLOAT64:
+            return None
+        if shape is None:
+            size = angle.size
+            if size > POINT_MAX:
+                return None
+            shape = angle.shape
+        elif angle.shape != shape:
+            return None
+    if shape is None:
+        return None, [(float(a),) for a in angles]
+    return shape, [a.ravel().tolist() if type(a) is ndarray else [float(a)] * size for a in angles]
+
+
+def outside(theta_i: float, phi_i: float, theta_r: float, phi_r: float) -> float:
+    """The BRDF [1/sr] of a geometry [deg] outside the domain of a model's formula: NaN
+    where an angle is NaN, else 0 (below the horizon); ``ValueError`` for a negative
+    polar angle.
+
+    The rule of :func:`_domain` for one geometry, called by a model's one-geometry
+    ``value`` (:attr:`Model.point`) when ``0 <= theta <= 90`` fails for theta_i or
+    theta_r; the small plain call leaves the ``ValueError`` to the general path, which
+    raises with its message.
+    """
+    if theta_i != theta_i or theta_r != theta_r or phi_i != phi_i or phi_r != phi_r:
+        return math.nan
+    if theta_i < 0.0 or theta_r < 0.0:
+        raise ValueError("negative polar angle")
+    return 0.0
 
 
 _DEGREE = math.pi / 180.0

@@ -35,11 +35,13 @@ bounds, Fig. 16).
 from __future__ import annotations
 
 import math
+from math import cos, sin, tan
+from typing import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._core import LinearForm, Option, Param, with_linear_form
+from .._core import LinearForm, Option, Param, outside, with_linear_form
 from .._trig import cos_from_half_tangent, sin_from_half_tangent
 
 __all__ = [
@@ -351,10 +353,25 @@ def interreflection_coefficient(sigma: ArrayLike, rho: ArrayLike) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- the models
+_DEGREE = math.pi / 180.0
+_RIGHT_ANGLE = 90.0
+
+
+def _radians_sq(sigma):
+    """sigma^2 [rad^2] of sigma [deg] (float or array): the multiplication of
+    :func:`gonio.models._core._radians`, no numpy call for a float."""
+    sigma_rad = sigma * _DEGREE
+    return sigma_rad * sigma_rad
+
+
 def _oren_nayar_coefficients(rho, sigma, ir_weight) -> tuple:
-    """The scalars a, b, c of  a + b direct_shape + c ir_shape  (eq 33-34; see below)."""
-    sigma_sq = np.radians(sigma) ** 2
-    diffuse = np.divide(rho, math.pi)
+    """The scalars a, b, c of  a + b direct_shape + c ir_shape  (eq 33-34; see below).
+
+    Floats give floats (plain Python arithmetic, no numpy call: the small plain call,
+    :func:`_oren_nayar_point`, computes them per call); arrays broadcast.
+    """
+    sigma_sq = _radians_sq(sigma)
+    diffuse = rho / math.pi
     interreflection = ir_weight * _ir_amplitude_rad(rho, sigma_sq) / math.pi
     return (diffuse * _c1_rad(sigma_sq) + interreflection,
             diffuse * _saturation(sigma_sq, C23_SATURATION),
@@ -370,36 +387,91 @@ _ROUGHEST_SQ = (math.pi / 2.0) ** 2
 _FLOOR_FREE_SHAPE = _c1_rad(_ROUGHEST_SQ) / _saturation(_ROUGHEST_SQ, C23_SATURATION)
 
 
-def _oren_nayar_shapes(theta_i, phi_i, theta_r, phi_r) -> tuple[np.ndarray, np.ndarray]:
+#: Rows of the scratch array of :func:`_oren_nayar_shapes`.
+SCRATCH_ROWS = 5
+
+
+def _oren_nayar_shapes(theta_i, phi_i, theta_r, phi_r, out=None, scratch=None, mask=None
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """direct_shape and ir_shape of eq 33-34 (see :func:`_prepare_oren_nayar`), angles [rad].
 
-    Written with in-place operations on a few temporaries (the plain call's cost is the
-    number of passes over the arrays): the same formulas as :func:`c2`, :func:`c3` and
+    Every operation writes into ``out`` or ``scratch`` (the plain call's cost is the
+    number of passes over the arrays, and a call on preallocated arrays allocates
+    nothing: :func:`_oren_nayar_fill`): the same formulas as :func:`c2`, :func:`c3` and
     :func:`interreflection_coefficient` (tests/models/test_oren_nayar_functional.py), with
-    cos(dphi) and sin(alpha) from half-angle tangents (:mod:`gonio.models._trig`).
+    cos(dphi) and sin(alpha) from half-angle tangents (:mod:`gonio.models._trig`), in the
+    order of :func:`gonio.models.oren_nayar.compiled.eq33_35`.
+
+    Parameters
+    ----------
+    theta_i, phi_i, theta_r, phi_r : array_like
+        Source and viewing directions [rad], above the horizon (broadcast together).
+    out : tuple of numpy.ndarray, optional
+        Two float arrays of the broadcast shape receiving direct_shape and ir_shape [-];
+        when None, they and the temporaries are allocated here.
+    scratch : numpy.ndarray, optional
+        Float array of shape ``(SCRATCH_ROWS,) + shape`` for the temporaries (with ``out``).
+    mask : numpy.ndarray, optional
+        Boolean array of the broadcast shape, a temporary (with ``out``).
+
+    Returns
+    -------
+    direct_shape, ir_shape : numpy.ndarray
+        The two geometry terms [-] (``out`` when given).
     """
-    cos_dphi = cos_from_half_tangent(np.subtract(phi_r, phi_i))
-    alpha = np.maximum(theta_i, theta_r)
-    beta = np.minimum(theta_i, theta_r)
-    b = beta * _TWO_OVER_PI                     # 2 beta / pi
-    ir_shape = b * b                            # (2 beta / pi)^2
-    angular_c2 = sin_from_half_tangent(alpha)   # sin(alpha) - (2 beta/pi)^3 [cos dphi < 0]
-    angular_c2 -= ir_shape * b * (cos_dphi < 0.0)
-    ir_shape *= cos_dphi
-    direct_shape = np.tan(beta)
-    direct_shape *= cos_dphi
-    direct_shape *= angular_c2
-    direct_shape *= C2_AMPLITUDE
-    c3 = alpha * beta                           # C3' = (4 alpha beta / pi^2)^2
+    if out is None:
+        shape = np.broadcast(theta_i, phi_i, theta_r, phi_r).shape
+        out, scratch, mask = (np.empty(shape), np.empty(shape)), np.empty((SCRATCH_ROWS,) + shape), np.empty(shape, bool)
+    direct, ir = out
+    # the rows of the scratch block (as 0-d arrays, not numpy scalars, for scalar angles)
+    cos_dphi, alpha, beta, b, angular_c2 = scratch if scratch.ndim > 1 else [row[...] for row in scratch]
+    _half_tangent_cos(np.subtract(phi_r, phi_i, out=cos_dphi), b)
+    np.maximum(theta_i, theta_r, out=alpha)
+    np.minimum(theta_i, theta_r, out=beta)
+    np.multiply(beta, _TWO_OVER_PI, out=b)          # 2 beta / pi
+    np.multiply(b, b, out=ir)                       # (2 beta / pi)^2
+    _half_tangent_sin(np.multiply(alpha, 0.5, out=angular_c2), direct)
+    np.multiply(ir, b, out=b)                       # sin(alpha) - (2 beta/pi)^3 [cos dphi < 0]
+    b *= np.less(cos_dphi, 0.0, out=mask)          # (a masked subtraction, where=, is 4 times slower)
+    angular_c2 -= b
+    ir *= cos_dphi
+    np.tan(beta, out=direct)
+    direct *= cos_dphi
+    direct *= angular_c2
+    direct *= C2_AMPLITUDE
+    c3 = np.multiply(alpha, beta, out=b)            # C3' = (4 alpha beta / pi^2)^2
     c3 *= _FOUR_OVER_PI_SQ
     c3 *= c3
-    c3 *= 1.0 - np.abs(cos_dphi)
-    half = alpha + beta
+    np.abs(cos_dphi, out=cos_dphi)
+    c3 *= np.subtract(1.0, cos_dphi, out=cos_dphi)
+    half = np.add(alpha, beta, out=alpha)
     half *= 0.5
-    c3 *= np.tan(half)
+    c3 *= np.tan(half, out=half)
     c3 *= C3_AMPLITUDE
-    direct_shape += c3
-    return direct_shape, ir_shape
+    direct += c3
+    return direct, ir
+
+
+def _half_tangent_cos(x: np.ndarray, work: np.ndarray) -> np.ndarray:
+    """cos(x) in place of x [rad] through tan(x/2) (:func:`gonio.models._trig.cos_from_half_tangent`,
+    the same operations); ``work`` is a temporary of x's shape."""
+    x *= 0.5
+    t = np.tan(x, out=x)
+    t *= t
+    np.subtract(1.0, t, out=work)
+    t += 1.0
+    return np.divide(work, t, out=t)
+
+
+def _half_tangent_sin(half: np.ndarray, work: np.ndarray) -> np.ndarray:
+    """sin(2 half) in place of ``half`` [rad] through tan(half)
+    (:func:`gonio.models._trig.sin_from_half_tangent`, the same operations); ``work`` is a
+    temporary of its shape."""
+    t = np.tan(half, out=half)
+    np.multiply(t, t, out=work)
+    work += 1.0
+    t *= 2.0
+    return np.divide(t, work, out=t)
 
 
 def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
@@ -431,6 +503,107 @@ def _prepare_oren_nayar(theta_i, phi_i, theta_r, phi_r):
     return with_linear_form(evaluate, lambda: LinearForm(
         np.stack(np.broadcast_arrays(np.ones_like(direct_shape), direct_shape, ir_shape)),
         _oren_nayar_coefficients, exact=direct_shape >= -_FLOOR_FREE_SHAPE))
+
+
+def _oren_nayar_point(params: dict, options: dict) -> Callable[[float, float, float, float], float]:
+    """The small plain call of ``oren-nayar`` (:attr:`gonio.models.Model.point`).
+
+    Parameters
+    ----------
+    params : dict
+        Checked float values of rho [-], sigma [deg] and ir_weight [-].
+    options : dict
+        None for this model.
+
+    Returns
+    -------
+    callable
+        ``value(theta_i, phi_i, theta_r, phi_r)``: the BRDF [1/sr] of one geometry given
+        as floats [deg], in plain Python (:mod:`math`); below the horizon, at NaN and at
+        negative polar angles that of :func:`gonio.models._core.outside`, NaN at a NaN
+        azimuth (``ValueError`` at an infinite one).
+
+    Notes
+    -----
+    The operations of :func:`_oren_nayar_shapes` and :func:`_combine_into` on one
+    geometry, in the same order (the scalar form of
+    :func:`gonio.models.oren_nayar.compiled.eq33_35`, written out: a call per geometry
+    would cost a quarter of the arithmetic), except that cos(dphi) and sin(alpha) come
+    from the C library's ``cos`` and ``sin`` (cheaper in plain Python than the half-angle
+    tangents that numpy's vectorised ``tan`` makes cheaper there): the values agree to a
+    few ulp (tests/test_models_fast_paths.py).
+    """
+    a, b, c = _oren_nayar_coefficients(params["rho"], params["sigma"], params["ir_weight"])
+
+    def value(theta_i: float, phi_i: float, theta_r: float, phi_r: float) -> float:
+        if not (0.0 <= theta_i <= _RIGHT_ANGLE and 0.0 <= theta_r <= _RIGHT_ANGLE):  # NaN too
+            return outside(theta_i, phi_i, theta_r, phi_r)
+        if theta_i > theta_r:
+            alpha, beta = theta_i * _DEGREE, theta_r * _DEGREE
+        else:
+            alpha, beta = theta_r * _DEGREE, theta_i * _DEGREE
+        cos_dphi = cos(phi_r * _DEGREE - phi_i * _DEGREE)
+        two_beta = beta * _TWO_OVER_PI
+        ir_shape = two_beta * two_beta
+        if cos_dphi < 0.0:
+            angular_c2 = sin(alpha) - ir_shape * two_beta
+            c3 = 1.0 + cos_dphi                   # 1 - |cos dphi|
+        else:
+            angular_c2 = sin(alpha)
+            c3 = 1.0 - cos_dphi
+        direct_shape = tan(beta) * cos_dphi * angular_c2 * C2_AMPLITUDE
+        t = alpha * beta * _FOUR_OVER_PI_SQ
+        c3 *= t * t
+        c3 *= tan((alpha + beta) * 0.5)
+        direct_shape += c3 * C3_AMPLITUDE
+        t = direct_shape * b + c * (ir_shape * cos_dphi)
+        t += a
+        return t if not t < 0.0 else 0.0      # max(t, 0) of numpy: NaN stays NaN
+
+    return value
+
+
+def _combine_into(direct: np.ndarray, ir: np.ndarray, a, b, c) -> np.ndarray:
+    """max(a + b direct + c ir, 0) [1/sr] in place of ``direct`` (``ir`` is overwritten)
+    for scalar coefficients; the operations of ``evaluate`` in :func:`_prepare_oren_nayar`."""
+    direct *= b
+    ir *= c
+    direct += ir
+    direct += a
+    return np.maximum(direct, 0.0, out=direct)
+
+
+def _oren_nayar_fill(params: dict, options: dict, size: int) -> Callable[..., np.ndarray]:
+    """The large plain call of ``oren-nayar`` (:attr:`gonio.models.Model.fill`).
+
+    Parameters
+    ----------
+    params : dict
+        Checked float values of rho [-], sigma [deg] and ir_weight [-].
+    options : dict
+        None for this model.
+    size : int
+        Largest number of geometries of one call of the returned function.
+
+    Returns
+    -------
+    callable
+        ``fill(theta_i, phi_i, theta_r, phi_r, out)``: writes the BRDF [1/sr] of 1-D
+        angles [rad] (at most ``size``, above the horizon, not NaN) into ``out`` and
+        returns it, allocating nothing (its temporaries are allocated here once).
+    """
+    a, b, c = _oren_nayar_coefficients(params["rho"], params["sigma"], params["ir_weight"])
+    scratch = np.empty((SCRATCH_ROWS + 1, size))
+    mask = np.empty(size, bool)
+
+    def fill(theta_i, phi_i, theta_r, phi_r, out: np.ndarray) -> np.ndarray:
+        n = out.size
+        rows = scratch[:, :n]
+        direct, ir = _oren_nayar_shapes(theta_i, phi_i, theta_r, phi_r, out=(out, rows[0]),
+                                        scratch=rows[1:], mask=mask[:n])
+        return _combine_into(direct, ir, a, b, c)
+
+    return fill
 
 
 def oren_nayar_brdf(theta_i, phi_i, theta_r, phi_r, rho: float, sigma: float, ir_weight: float = 1.0) -> np.ndarray:
@@ -499,8 +672,8 @@ def oren_nayar_brdf(theta_i, phi_i, theta_r, phi_r, rho: float, sigma: float, ir
 def _qualitative_coefficients(rho, sigma, variant: str = "eq36") -> tuple:
     """The scalars a = rho/pi A and b = rho/pi B of  a + b shape  (eq 36; see below)."""
     half = C1_SATURATION_FOOTNOTE11 if variant == "footnote11" else C1_SATURATION
-    sigma_sq = np.radians(sigma) ** 2
-    diffuse = np.divide(rho, math.pi)
+    sigma_sq = _radians_sq(sigma)
+    diffuse = rho / math.pi
     return diffuse * _c1_rad(sigma_sq, half), diffuse * (C2_AMPLITUDE * _saturation(sigma_sq, C23_SATURATION))
 
 

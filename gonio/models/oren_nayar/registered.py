@@ -2,14 +2,16 @@
 ``oren-nayar-qualitative`` (eq 36).
 
 Each :class:`~gonio.models.Model` joins its formula in numpy
-(:mod:`gonio.models.oren_nayar.functional`, whose docstring says what the models are) with
-its compiled plain call (:mod:`gonio.models.oren_nayar.compiled`, loaded with numba on
+(:mod:`gonio.models.oren_nayar.functional`, whose docstring says what the models are;
+for ``oren-nayar`` also its plain-Python small call and its allocation-free large call)
+with its compiled plain call (:mod:`gonio.models.oren_nayar.compiled`, loaded with numba on
 first use). The formulas sit below both: this module is the only one that knows the two.
 """
 from __future__ import annotations
 
 from .._core import Model, register
-from .functional import IR_WEIGHT, RHO, SIGMA, VARIANT, _prepare_oren_nayar, _prepare_qualitative
+from .functional import (IR_WEIGHT, RHO, SIGMA, VARIANT, _oren_nayar_fill, _oren_nayar_point, _prepare_oren_nayar,
+                         _prepare_qualitative)
 
 __all__ = ["OREN_NAYAR", "OREN_NAYAR_QUALITATIVE"]
 
@@ -38,6 +40,8 @@ OREN_NAYAR = register(
         energy_conserving=False,
         broadcasts_params=True,
         compiled=_compiled_oren_nayar,
+        point=_oren_nayar_point,
+        fill=_oren_nayar_fill,
     )
 )
 
