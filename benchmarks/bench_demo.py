@@ -47,6 +47,8 @@ PHASES = {
     "save (result.json, chain.npz, posterior.nc)": ("results.py", "save"),
     "report (figures, report.html)": ("fit_report.py", "write_report"),
     "the rig's compiled radiance of the tabulated model (every caller)": ("compiled_rig.py", "rig_radiance_table"),
+    "the table's error against the exact model (polish, every caller)": ("polish.py", "table_error"),
+    "the aperture average's numpy path, model at the sub-rays (every caller)": ("instrument.py", "average"),
 }
 
 

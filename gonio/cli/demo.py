@@ -190,7 +190,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "demo",
         help="measure the paper's wall plaster on the emulated rig, choose and fit a model with MCMC, write the report",
-        description=__doc__.split("\n\n")[0] + " Takes about two minutes on two cores. Exit status: 0 converged and "
+        description=__doc__.split("\n\n")[0] + " Takes about a minute on two cores. Exit status: 0 converged and "
                     "adequate, 3 chain not converged, 4 model inadequate, 5 noise understated, 2 bad input "
                     "(docs/fitting.md).",
     )

@@ -1,9 +1,10 @@
 """Compiled radiance of a misaligned rig through its apertures, for fits of the alignment.
 
 A fit with free alignment parameters (:mod:`gonio.fitting.rig_errors`) gives every walker
-its own true geometry, so the aperture average of the model (the 7 x 7 sub-rays of
-:func:`gonio.instrument.aperture_averaged` about each true lamp and camera axis) cannot be
-prepared once.  Done with numpy arrays, every walker's W x N x 49 sub-rays go through
+its own true geometry, so the aperture average of the model (the k x k sub-rays of
+:func:`gonio.instrument.aperture_averaged` about each true lamp and camera axis, k = 7 for
+the full cubature and 4 for the compact one) cannot be prepared once.  Done with numpy
+arrays, every walker's W x N x k^2 sub-rays go through
 :func:`drivers.rig_geometry.misaligned_angles`, :func:`gonio.instrument.cone_quadrature`
 and the model, each writing temporaries in degrees and back (about 0.6 ms per walker on
 the Fig 16 recording).  This module computes the same number in one compiled loop:
@@ -12,11 +13,15 @@ the Fig 16 recording).  This module computes the same number in one compiled loo
   true camera axis of each walker and each distinct recorded camera direction, as unit
   vectors (the rotations of :func:`~drivers.rig_geometry.misaligned_angles`: axis zero
   offsets, then the sample's tilt);
-- the 7 sub-rays of each axis in the frame of that axis (the cubature of
-  :func:`~gonio.instrument.cone_quadrature`, Stroud's S2:3-1 on the equal-area disk),
+- the sub-rays of each axis in the frame of that axis for both cubatures (the 7 of the full
+  rule and the 4 of the compact one, :func:`~gonio.instrument.cone_quadrature`),
   each with its polar angle, ``sin``, ``cos`` and ``tan`` and the cosine and sine of its
   azimuth computed once;
-- for every value, the 49 (lamp, camera) pairs: the Oren-Nayar BRDF of eq 33-35 written
+- for every value, the rule :func:`gonio.instrument.aperture_rule` chooses at its true
+  axes (the compact one, 16 pairs, for a model of
+  :data:`gonio.instrument.COMPACT_RULE_MODELS` away from the horizon and the
+  retro-reflection direction; the full one, 49 pairs, elsewhere), and its (lamp, camera)
+  pairs: the Oren-Nayar BRDF of eq 33-35 written
   with per-direction sines and cosines (``sin(alpha)`` is the larger of the two sines,
   ``tan(beta)`` the smaller tangent, ``cos(dphi)`` the dot product of the two azimuths'
   unit vectors, ``tan((alpha + beta)/2) = (sin a + sin b)/(cos a + cos b)``), floored at 0,
@@ -24,7 +29,7 @@ the Fig 16 recording).  This module computes the same number in one compiled loo
 
 Lambert is the same loop with the coefficients (rho/pi, 0, 0).  The lamp sub-rays depend on
 the lamp direction only and the camera sub-rays on the camera direction only, so a
-recording's three lamp directions cost 3 x 7 sub-rays per walker, not N x 7.
+recording's three lamp directions cost 3 x 11 sub-rays per walker, not N x 11.
 
 ``oren-nayar-tabulated`` (the exact V-cavity model read from its table) is the same loop
 with the table read at every (lamp, camera) pair instead of eq 33-35
@@ -58,7 +63,7 @@ import numpy as np
 from numba import njit, prange
 
 from drivers.rig_geometry import ALIGNMENT_ERRORS
-from gonio.instrument import cone_offsets
+from gonio.instrument import COMPACT_MAX_THETA_DEG, COMPACT_MIN_SEPARATION_DEG, COMPACT_RULE_MODELS, RULES, cone_offsets
 from gonio.models import Model
 from gonio.models._compiled import JIT_OPTIONS
 from gonio.models.oren_nayar.compiled import eq33_35
@@ -82,7 +87,15 @@ JIT_OPTIONS_PARALLEL = dict(JIT_OPTIONS, parallel=True)
 #: cos(theta_i) of an axis at or below which the aperture average is not weighted by the
 #: sub-rays' cosines (as :class:`gonio.instrument._SubRays` does at grazing incidence).
 _GRAZING_COS = 1e-12
-# The fields of a sub-ray in the kernel's scratch arrays (7, 6): theta [rad], cos(phi),
+#: The sub-rays of both cubatures of :data:`gonio.instrument.RULES` in the kernels' arrays:
+#: the full rule's 7 (its first the cone's axis), then the compact rule's 4.
+_FULL = len(RULES["full"][2])
+_POINTS = _FULL + len(RULES["compact"][2])
+#: :func:`gonio.instrument.aperture_rule`'s limits as cosines: of the largest polar angle of
+#: an axis, and of the smallest angle between lamp and camera axes.
+_COMPACT_COS_THETA = math.cos(math.radians(COMPACT_MAX_THETA_DEG))
+_COMPACT_COS_SEPARATION = math.cos(math.radians(COMPACT_MIN_SEPARATION_DEG))
+# The fields of a sub-ray in the kernel's scratch arrays (11, 6): theta [rad], cos(phi),
 # sin(phi), sin(theta), cos(theta), tan(theta).
 
 
@@ -95,8 +108,8 @@ def _to_sample(x: float, y: float, z: float, ca: float, sa: float, cb: float, sb
 
 @njit(**JIT_OPTIONS)
 def _cone_rays(vx: float, vy: float, vz: float, cos_beta, sin_beta, cos_ring, sin_ring, rays) -> float:
-    """The 7 sub-rays about the axis ``v`` into ``rays`` (7, 6: theta [rad], cos and sin of
-    phi, sin, cos and tan of theta); returns cos(theta) of the axis.
+    """The sub-rays of both cubatures about the axis ``v`` into ``rays`` (11, 6: theta [rad],
+    cos and sin of phi, sin, cos and tan of theta); returns cos(theta) of the axis.
 
     The frame of :func:`gonio.instrument.cone_quadrature`: ``e1`` along increasing polar
     angle, ``e2`` along increasing azimuth (the azimuth of an axis on the normal is
@@ -111,7 +124,7 @@ def _cone_rays(vx: float, vy: float, vz: float, cos_beta, sin_beta, cos_ring, si
         p = math.atan2(ay, ax)
         cp, sp = math.cos(p), math.sin(p)
     e1x, e1y, e1z = az * cp, az * sp, -rho
-    for j in range(7):
+    for j in range(cos_beta.shape[0]):
         u = sin_beta[j] * cos_ring[j]
         w = sin_beta[j] * sin_ring[j]
         x = cos_beta[j] * ax + u * e1x - w * sp
@@ -130,6 +143,22 @@ def _cone_rays(vx: float, vy: float, vz: float, cos_beta, sin_beta, cos_ring, si
         rays[j, 4] = z
         rays[j, 5] = math.tan(theta)
     return az
+
+
+@njit(**JIT_OPTIONS)
+def _rule_range(lamp_rays, camera_rays, lamp: int, camera: int, compact: bool) -> tuple[int, int]:
+    """The sub-rays ``[first, stop)`` of the cubature :func:`gonio.instrument.aperture_rule`
+    chooses for one true (lamp, camera) pair of axes: the compact rule's where ``compact``
+    (the model is one of :data:`gonio.instrument.COMPACT_RULE_MODELS`), both axes are within
+    its polar angle and apart by at least its separation; the full rule's elsewhere."""
+    c_i, c_r = lamp_rays[lamp, 0, 4], camera_rays[camera, 0, 4]  # the full rule's first ray is the axis
+    if compact and c_i >= _COMPACT_COS_THETA and c_r >= _COMPACT_COS_THETA:
+        dot = (lamp_rays[lamp, 0, 3] * camera_rays[camera, 0, 3]
+               * (lamp_rays[lamp, 0, 1] * camera_rays[camera, 0, 1] + lamp_rays[lamp, 0, 2] * camera_rays[camera, 0, 2])
+               + c_i * c_r)
+        if dot <= _COMPACT_COS_SEPARATION:
+            return _FULL, _POINTS
+    return 0, _FULL
 
 
 @njit(**JIT_OPTIONS)
@@ -173,7 +202,7 @@ def _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camer
 
 @njit(**JIT_OPTIONS)
 def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignment, coefficients,
-                 lamp_rule, camera_rule, ring, weights, out) -> None:
+                 lamp_rule, camera_rule, ring, weights, compact, out) -> None:
     """``<f cos theta_i>`` through the apertures at the true geometry of every alignment [1/sr].
 
     Parameters
@@ -187,14 +216,18 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
     coefficients : numpy.ndarray
         (W, 3) the model's a, b, c (:func:`_oren_nayar`).
     lamp_rule, camera_rule : numpy.ndarray
-        (2, 7) cos and sin of each cubature point's angle from its cone's axis.
+        (2, 11) cos and sin of each cubature point's angle from its cone's axis (the full
+        rule's 7 points, then the compact rule's 4, :func:`_rule`).
     ring, weights : numpy.ndarray
-        (2, 7) cos and sin of the points' angles around the axis; (7,) their weights.
+        (2, 11) cos and sin of the points' angles around the axis; (11,) their weights
+        (each rule's summing to 1).
+    compact : bool
+        Whether the model may take the compact rule (:func:`_rule_range`).
     out : numpy.ndarray
         (W, N), written: 0 where a true axis lies below the horizon.
     """
-    lamp_rays = np.empty((lamp_directions.shape[0], 7, 6))
-    camera_rays = np.empty((camera_directions.shape[0], 7, 6))
+    lamp_rays = np.empty((lamp_directions.shape[0], _POINTS, 6))
+    camera_rays = np.empty((camera_directions.shape[0], _POINTS, 6))
     lamp_cos = np.empty(lamp_directions.shape[0])
     camera_cos = np.empty(camera_directions.shape[0])
     for w in range(alignment.shape[0]):
@@ -207,15 +240,16 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
                 out[w, n] = 0.0
                 continue
             grazing = lamp_cos[lamp] <= _GRAZING_COS
+            first, stop = _rule_range(lamp_rays, camera_rays, lamp, camera, compact)
             total = 0.0
-            for i in range(7):
+            for i in range(first, stop):
                 c_i = lamp_rays[lamp, i, 4]
                 if c_i < 0.0:  # a sub-ray below the horizon reflects nothing
                     continue
                 t_i, cp_i, sp_i = lamp_rays[lamp, i, 0], lamp_rays[lamp, i, 1], lamp_rays[lamp, i, 2]
                 s_i, tan_i = lamp_rays[lamp, i, 3], lamp_rays[lamp, i, 5]
                 weight = weights[i] * (1.0 if grazing else c_i)
-                for j in range(7):
+                for j in range(first, stop):
                     c_r = camera_rays[camera, j, 4]
                     if c_r < 0.0:
                         continue
@@ -231,7 +265,7 @@ def _table_fields(rays, count: int, out) -> None:
     computed once per direction instead of once per pair: ``z = max(pi/2 - theta, 0)``, the
     y coordinate ``log(z + Y_OFFSET) + Y_SLOPE z``, ``sin`` and ``cos`` of ``theta / 2``."""
     for k in range(count):
-        for j in range(7):
+        for j in range(rays.shape[1]):
             theta = rays[k, j, 0]
             z = max(_HALF_PI - theta, 0.0)
             out[k, j, 0] = z
@@ -272,7 +306,7 @@ def _reduce_along_sigma(table, first: int, s_weights, out) -> None:
 
 @njit(**JIT_OPTIONS_PARALLEL)
 def rig_radiance_table(lamp_directions, camera_directions, lamp_of, camera_of, alignment, table, s_first, s_weights,
-                       rho, lambertian, shape, lo, step, lamp_rule, camera_rule, ring, weights, out) -> None:
+                       rho, lambertian, shape, lo, step, lamp_rule, camera_rule, ring, weights, compact, out) -> None:
     """:func:`rig_radiance` for ``oren-nayar-tabulated``: the table read at every sub-ray pair.
 
     Walkers are independent and run in parallel (numba ``prange``).
@@ -296,10 +330,10 @@ def rig_radiance_table(lamp_directions, camera_directions, lamp_of, camera_of, a
     The other parameters and ``out`` as :func:`rig_radiance`.
     """
     for w in prange(alignment.shape[0]):
-        lamp_rays = np.empty((lamp_directions.shape[0], 7, 6))
-        camera_rays = np.empty((camera_directions.shape[0], 7, 6))
-        lamp_fields = np.empty((lamp_directions.shape[0], 7, 4))
-        camera_fields = np.empty((camera_directions.shape[0], 7, 4))
+        lamp_rays = np.empty((lamp_directions.shape[0], _POINTS, 6))
+        camera_rays = np.empty((camera_directions.shape[0], _POINTS, 6))
+        lamp_fields = np.empty((lamp_directions.shape[0], _POINTS, 4))
+        camera_fields = np.empty((camera_directions.shape[0], _POINTS, 4))
         lamp_cos = np.empty(lamp_directions.shape[0])
         camera_cos = np.empty(camera_directions.shape[0])
         logs = np.empty((2, 1))
@@ -317,14 +351,15 @@ def rig_radiance_table(lamp_directions, camera_directions, lamp_of, camera_of, a
                 out[w, n] = 0.0
                 continue
             grazing = lamp_cos[lamp] <= _GRAZING_COS
+            first, stop = _rule_range(lamp_rays, camera_rays, lamp, camera, compact)
             total = 0.0
-            for i in range(7):
+            for i in range(first, stop):
                 c_i = lamp_rays[lamp, i, 4]
                 if c_i < 0.0:  # a sub-ray below the horizon reflects nothing
                     continue
                 weight = weights[i] * (1.0 if grazing else c_i)
                 cp_i, sp_i = lamp_rays[lamp, i, 1], lamp_rays[lamp, i, 2]
-                for j in range(7):
+                for j in range(first, stop):
                     c_r = camera_rays[camera, j, 4]
                     if c_r < 0.0:
                         continue
@@ -346,10 +381,12 @@ def rig_radiance_table(lamp_directions, camera_directions, lamp_of, camera_of, a
 
 
 def _rule(solid_angle_sr: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The cubature of a cone (:func:`gonio.instrument.cone_offsets`) as the kernel takes it:
-    cos and sin of the points' angles from the axis, (2, 7); cos and sin of their angles
-    around it, (2, 7); their weights, (7,)."""
-    beta, around, weights = cone_offsets(solid_angle_sr)
+    """Both cubatures of a cone (:func:`gonio.instrument.cone_offsets`, the full rule's 7
+    points then the compact rule's 4) as the kernel takes them: cos and sin of the points'
+    angles from the axis, (2, 11); cos and sin of their angles around it, (2, 11); their
+    weights, (11,)."""
+    beta, around, weights = (np.concatenate(parts) for parts in zip(cone_offsets(solid_angle_sr, "full"),
+                                                                    cone_offsets(solid_angle_sr, "compact")))
     return np.stack([np.cos(beta), np.sin(beta)]), np.stack([np.cos(around), np.sin(around)]), weights
 
 
@@ -387,6 +424,8 @@ class CompiledRigRadiance:
         self._camera, self._camera_of = _distinct(tr, pr)
         (lamp_rule, self._ring, self._weights), (camera_rule, _, _) = _rule(apertures[0]), _rule(apertures[1])
         self._rules = (lamp_rule, camera_rule)
+        #: Whether the compact cubature may average the model's cones (gonio.instrument.aperture_rule).
+        self._compact = base.name in COMPACT_RULE_MODELS
         if base.name == TABULATED:
             from gonio.models.tabulated.oren_nayar import table
 
@@ -421,7 +460,7 @@ class CompiledRigRadiance:
         else:
             coefficients = np.ascontiguousarray(np.broadcast_to(coefficients, (rows, 3)))
             rig_radiance(self._lamp, self._camera, self._lamp_of, self._camera_of, offsets, coefficients,
-                         self._rules[0], self._rules[1], self._ring, self._weights, out)
+                         self._rules[0], self._rules[1], self._ring, self._weights, self._compact, out)
         if all(np.ndim(v) == 0 for v in (*params.values(), *alignment.values())):
             return out[0]
         return out
@@ -439,7 +478,8 @@ class CompiledRigRadiance:
         rig_radiance_table(self._lamp, self._camera, self._lamp_of, self._camera_of, offsets, flat,
                            np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(s_weights), rho,
                            np.ascontiguousarray(sigma == 0.0), tuple(int(n) for n in lookup.values.shape[1:]),
-                           lookup.lo, lookup.step, self._rules[0], self._rules[1], self._ring, self._weights, out)
+                           lookup.lo, lookup.step, self._rules[0], self._rules[1], self._ring, self._weights,
+                           self._compact, out)
 
 
 def _distinct(theta: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

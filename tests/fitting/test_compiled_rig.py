@@ -130,3 +130,24 @@ def test_fits_with_free_alignment_take_the_compiled_path_and_the_same_likelihood
     assert free._rig._kernel is not None and fixed._rig._kernel is None  # a fixed alignment: numpy
     vector = [0.9, 30.0, 2.0, 0.1, -0.2]
     assert free.log_likelihood(vector) == pytest.approx(fixed.log_likelihood(vector[:3]), rel=1e-12)
+
+
+def test_the_compiled_loop_chooses_the_aperture_rule_the_numpy_path_chooses():
+    """Both paths take gonio.instrument.aperture_rule's cubature at each walker's true axes
+    (the compact one away from the horizon and the retro-reflection, the full one there):
+    the test geometry holds both, and the loop forced to the full rule everywhere differs
+    from the numpy path by far more than RTOL_TABLE where the compact rule applies."""
+    from gonio.instrument import aperture_rule
+
+    geometry = _geometry()
+    compact = aperture_rule(*geometry)
+    assert compact.any() and (~compact).any()
+    params = {"rho": np.array([[0.9]]), "sigma": np.array([[30.0]])}
+    alignment = {"tilt_x": np.array([[0.1]])}
+    expected = _numpy_path("oren-nayar-tabulated", geometry, params, alignment)
+    rig = CompiledRigRadiance(gonio.models.get("oren-nayar-tabulated"), geometry, APERTURES)
+    np.testing.assert_allclose(rig(params, alignment), expected, rtol=RTOL_TABLE, atol=1e-15)
+    rig._compact = False  # the full rule everywhere
+    full = rig(params, alignment)
+    inside = compact & (expected[0] > 0)
+    assert np.max(np.abs(full[0, inside] / expected[0, inside] - 1.0)) > 20 * RTOL_TABLE  # measured 6.8e-6
