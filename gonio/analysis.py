@@ -132,31 +132,22 @@ def joined(datasets: Sequence[Dataset]) -> Dataset:
     ValueError
         The quantities differ.
     """
-    from .fitting import Dataset
+    from .fitting import Dataset, LowRankCovariance
+    from .fitting.covariance import block_diagonal
 
     quantities = {d.quantity for d in datasets}
     if len(quantities) > 1:
         raise ValueError(f"the files hold different quantities {sorted(quantities)}; fit them separately")
     covariance = None
     if any(d.covariance is not None for d in datasets):
-        covariance = _block_diagonal([d.covariance if d.covariance is not None else np.diag(d.sigma**2)
-                                      for d in datasets])
+        covariance = block_diagonal([d.covariance if d.covariance is not None
+                                     else LowRankCovariance(d.sigma**2, np.zeros((d.n, 0))) for d in datasets])
     cat = lambda name: np.concatenate([getattr(d, name) for d in datasets])  # noqa: E731
     metadata = {k: v for d in reversed(datasets) for k, v in d.metadata.items()}
     metadata["joined"] = [d.label for d in datasets]
     return Dataset(cat("theta_i"), cat("phi_i"), cat("theta_r"), cat("phi_r"), cat("value"), cat("sigma"),
                    quantity=datasets[0].quantity, label=" + ".join(d.label for d in datasets), metadata=metadata,
                    covariance=covariance)
-
-
-def _block_diagonal(blocks: Sequence[np.ndarray]) -> np.ndarray:
-    n = sum(len(b) for b in blocks)
-    out = np.zeros((n, n))
-    start = 0
-    for block in blocks:
-        out[start:start + len(block), start:start + len(block)] = block
-        start += len(block)
-    return out
 
 
 def recording_notes(folder: str | Path, quantity: str) -> list[str]:

@@ -172,7 +172,8 @@ class LinearityCorrection:
 
     @staticmethod
     def value_covariance(values: np.ndarray, jacobian: np.ndarray, coefficient_covariance: np.ndarray) -> np.ndarray:
-        """Covariance of ``values`` from the correction's coefficients: ``(v J) C (v J)^T``.
+        """Covariance of ``values`` from the correction's coefficients: ``(v J) C (v J)^T``
+        (:meth:`value_factors` times its transpose).
 
         Examples
         --------
@@ -180,8 +181,17 @@ class LinearityCorrection:
         >>> LinearityCorrection.value_covariance(np.array([2.0, 1.0]), J, np.diag([1e-8, 1e-8])).round(12).tolist()
         [[1.25e-08, 2.812e-09], [2.812e-09, 6.64e-10]]
         """
+        factors = LinearityCorrection.value_factors(values, jacobian, coefficient_covariance)
+        return factors @ factors.T
+
+    @staticmethod
+    def value_factors(values: np.ndarray, jacobian: np.ndarray, coefficient_covariance: np.ndarray) -> np.ndarray:
+        """Factors ``F`` (n, P) with ``F F^T`` the covariance of ``values`` from the
+        correction's coefficients: ``(v J) S`` with ``S S^T = C`` (from C's eigenvectors,
+        its rounding-level negative eigenvalues taken as 0)."""
         scaled = np.asarray(values, float)[:, None] * np.asarray(jacobian, float)
-        return scaled @ np.asarray(coefficient_covariance, float) @ scaled.T
+        eigenvalues, eigenvectors = np.linalg.eigh(np.asarray(coefficient_covariance, float))
+        return scaled @ (eigenvectors * np.sqrt(np.maximum(eigenvalues, 0.0)))
 
 
 def ccd_components(camera: CameraModel, signal: np.ndarray, exposure: np.ndarray, gain: np.ndarray,

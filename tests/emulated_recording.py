@@ -28,11 +28,12 @@ geometries = [[10, 0, -10], [20, 0, -10], [30, 0, -10], [40, 0, -10], [50, 0, -1
 def record(folder: Path, text: str, sample: str, seed: int, realism: str = "ideal", resume: bool = False) -> Path:
     """Measure the protocol ``text`` on an emulated rig of ``sample`` (a sample spec),
     ``seed`` and ``realism`` into ``folder`` (``resume``: continue the recording there),
-    its reference standard (if any) swapped in by the emulator's holder; the lamp starts
-    warm."""
+    its reference standard (if any) swapped in by the emulator's holder and the sample
+    remounted as the protocol's mountings ask; the lamp starts warm."""
     protocol = protocols.loads(text, source=f"{folder.name}.toml")
     reflectance = protocol.reference.reflectance if protocol.reference is not None else 0.99
-    with emulated_rig(sample, seed, name=f"test-{folder.name}", realism=realism) as (rig, emulator, change, meta):
+    with emulated_rig(sample, seed, name=f"test-{folder.name}", realism=realism,
+                      remount_time=protocol.rig.remount_time) as (rig, emulator, change, meta):
         acquisition.run_protocol(protocol, rig, folder, resume=resume, metadata=meta, clock=emulator.control.now,
-                                 warm_up=False, change_sample=lambda which: change(which, reflectance))
+                                 warm_up=False, change_sample=lambda which, **how: change(which, reflectance, **how))
     return folder

@@ -14,6 +14,7 @@ Modules: :mod:`~gonio.fitting.dataset` (the data interface), :mod:`~gonio.fittin
 """
 from __future__ import annotations
 
+from .covariance import LowRankCovariance
 from .dataset import CSV_COLUMNS, QUANTITIES, Dataset
 from .least_squares import LeastSquaresResult, fit_least_squares
 from .least_squares_batch import ManyLeastSquaresResult, least_squares_many
@@ -28,6 +29,7 @@ __all__ = [
     "CSV_COLUMNS",
     "QUANTITIES",
     "Dataset",
+    "LowRankCovariance",
     "FitProblem",
     "predict_quantity",
     "Prior",

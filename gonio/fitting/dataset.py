@@ -33,6 +33,8 @@ import numpy as np
 
 from gonio.geometry import azimuth_difference, signed_viewing_angle
 
+from .covariance import LowRankCovariance
+
 __all__ = ["Dataset", "QUANTITIES", "CSV_COLUMNS", "QUANTITY_LABELS"]
 
 #: Quantities a dataset can hold, with the unit of the values.
@@ -107,13 +109,16 @@ class Dataset:
         Short name of the sample or run, used in reports.
     metadata : dict
         Free-form information (instrument, date, protocol...); saved with fit results.
-    covariance : array_like, optional
+    covariance : array_like or LowRankCovariance, optional
         Covariance matrix of the measurement errors, shape (n, n), when they are
         correlated (a reduced recording: the PRNU of nested camera windows, the
         normal-view value shared by an incidence's normalised values, the calibration of
-        absolute BRDF). Its diagonal must equal ``sigma**2``. Fits then use the
-        generalised least-squares likelihood (:class:`gonio.fitting.FitProblem`).
-        Saved with fit results (JSON), not in the CSV form.
+        absolute BRDF), or the same as a diagonal plus low rank
+        (:class:`gonio.fitting.covariance.LowRankCovariance`, what a reduction gives: the
+        fit then never forms the n x n matrix). Its diagonal must equal ``sigma**2``. Fits
+        then use the generalised least-squares likelihood
+        (:class:`gonio.fitting.FitProblem`). Saved beside fit results and CSV tables in
+        numpy's formats.
 
     Raises
     ------
@@ -171,9 +176,7 @@ class Dataset:
             array.setflags(write=False)
             object.__setattr__(self, name, array)
         if self.covariance is not None:
-            covariance = _checked_covariance(self.covariance, arrays["sigma"])
-            covariance.setflags(write=False)
-            object.__setattr__(self, "covariance", covariance)
+            object.__setattr__(self, "covariance", _checked_covariance(self.covariance, arrays["sigma"]))
         object.__setattr__(self, "label", str(self.label))
         object.__setattr__(self, "metadata", dict(self.metadata))
 
@@ -237,7 +240,7 @@ class Dataset:
             quantity=self.quantity,
             label=self.label,
             metadata={k: ([v[i] for i in select] if k in PER_VALUE_METADATA else v) for k, v in self.metadata.items()},
-            covariance=None if self.covariance is None else self.covariance[np.ix_(select, select)],
+            covariance=None if self.covariance is None else _covariance_subset(self.covariance, select),
         )
 
     # ------------------------------------------------------------------ persistence
@@ -247,7 +250,7 @@ class Dataset:
         out: dict[str, Any] = {name: getattr(self, name).tolist() for name in CSV_COLUMNS}
         out.update(quantity=self.quantity, label=self.label, metadata=dict(self.metadata))
         if covariance and self.covariance is not None:
-            out["covariance"] = self.covariance.tolist()
+            out["covariance"] = np.asarray(self.covariance).tolist()
         return out
 
     @classmethod
@@ -269,8 +272,9 @@ class Dataset:
         columns ``theta_i,phi_i,theta_r,phi_r,value,sigma``.
 
         A covariance is written beside the file as ``<stem>_covariance.npy`` (numpy's
-        format), which the header line ``# covariance:`` names and :meth:`from_csv` reads
-        back.
+        format; ``<stem>_covariance.npz`` with the arrays ``independent`` and ``factors``
+        for a :class:`~gonio.fitting.covariance.LowRankCovariance`), which the header line
+        ``# covariance:`` names and :meth:`from_csv` reads back.
         """
         import json
 
@@ -282,9 +286,7 @@ class Dataset:
             header["label"] = self.label
         header.update(self.metadata)
         if self.covariance is not None:
-            covariance_path = path.with_name(f"{path.stem}_covariance.npy")
-            np.save(covariance_path, np.asarray(self.covariance), allow_pickle=False)
-            header["covariance"] = covariance_path.name
+            header["covariance"] = save_covariance(path.with_name(f"{path.stem}_covariance"), self.covariance).name
         buffer = io.StringIO()
         for key, value in header.items():
             buffer.write(f"# {key}: {json.dumps(value, default=json_default)}\n")
@@ -356,13 +358,40 @@ class Dataset:
         return f"<Dataset {self.label!r}: {self.n} {self.quantity} values>"
 
 
-def _covariance_beside(path: Path, name: Any, table) -> np.ndarray | None:
-    """The covariance a CSV's ``# covariance:`` line names (a ``.npy`` file beside it), or None.
+def save_covariance(stem: Path, covariance: Any) -> Path:
+    """Write ``covariance`` as ``stem.npy`` (an (n, n) array) or ``stem.npz`` (a
+    :class:`LowRankCovariance`: its ``independent`` and ``factors`` arrays); returns the path."""
+    if isinstance(covariance, LowRankCovariance):
+        path = stem.with_name(stem.name + ".npz")
+        with open(path, "wb") as handle:
+            np.savez(handle, **covariance.arrays())
+        return path
+    path = stem.with_name(stem.name + ".npy")
+    np.save(path, np.asarray(covariance), allow_pickle=False)
+    return path
+
+
+def load_covariance(path: Path) -> Any:
+    """The covariance :func:`save_covariance` wrote (``ValueError`` naming the file when it
+    is neither form)."""
+    try:
+        if path.suffix == ".npz":
+            with np.load(path, allow_pickle=False) as arrays:
+                return LowRankCovariance(arrays["independent"], arrays["factors"])
+        return np.load(path, allow_pickle=False)
+    except (ValueError, KeyError, OSError) as error:
+        raise ValueError(f"{path}: not a covariance file (an (n, n) .npy array, or a .npz with the arrays "
+                         f"'independent' and 'factors'): {error}") from None
+
+
+def _covariance_beside(path: Path, name: Any, table) -> Any:
+    """The covariance a CSV's ``# covariance:`` line names (a ``.npy`` or ``.npz`` file
+    beside it, :func:`save_covariance`), or None.
 
     Files of older versions say ``not stored (...)``: no covariance. Refused when rows were
     left out for a missing value (the matrix no longer matches the rows).
     """
-    if not isinstance(name, str) or not name.endswith(".npy"):
+    if not isinstance(name, str) or not name.endswith((".npy", ".npz")):
         return None
     covariance_path = path.parent / name
     if not covariance_path.is_file():
@@ -372,14 +401,29 @@ def _covariance_beside(path: Path, name: Any, table) -> np.ndarray | None:
     if table.metadata.get("dropped_rows"):
         raise ValueError(f"{path}: rows with a missing value were left out, so the covariance {name!r} no longer "
                          "matches the rows; remove those rows and their entries from both files")
-    try:
-        return np.load(covariance_path, allow_pickle=False)
-    except ValueError as error:
-        raise ValueError(f"{covariance_path}: not a numpy array file ({error})") from None
+    return load_covariance(covariance_path)
 
 
-def _checked_covariance(covariance: Any, sigma: np.ndarray) -> np.ndarray:
-    """The covariance as a float array, checked: (n, n), symmetric, diagonal sigma^2, positive definite."""
+def _covariance_subset(covariance: Any, select: np.ndarray) -> Any:
+    """The covariance of the values ``select`` (integer indices)."""
+    if isinstance(covariance, LowRankCovariance):
+        return covariance.subset(select)
+    return covariance[np.ix_(select, select)]
+
+
+def _checked_covariance(covariance: Any, sigma: np.ndarray) -> Any:
+    """The covariance checked: (n, n), symmetric, diagonal sigma^2, positive definite; a
+    :class:`LowRankCovariance` (positive definite by construction) for n values with the
+    diagonal sigma^2, else a read-only float array."""
+    if isinstance(covariance, LowRankCovariance):
+        if covariance.n != sigma.size:
+            raise ValueError(f"Dataset field 'covariance' covers {covariance.n} values; expected {sigma.size}")
+        variance = covariance.variance()
+        if not np.allclose(variance, sigma**2, rtol=1e-9, atol=0.0):
+            k = int(np.argmax(np.abs(variance - sigma**2) / sigma**2))
+            raise ValueError(f"Dataset field 'covariance': diagonal entry {k} = {variance[k]:g} is not "
+                             f"sigma^2 = {sigma[k]**2:g}")
+        return covariance
     matrix = np.array(covariance, dtype=float)
     n = sigma.size
     if matrix.shape != (n, n):
@@ -395,4 +439,5 @@ def _checked_covariance(covariance: Any, sigma: np.ndarray) -> np.ndarray:
         np.linalg.cholesky(matrix)
     except np.linalg.LinAlgError:
         raise ValueError("Dataset field 'covariance' is not positive definite") from None
+    matrix.setflags(write=False)
     return matrix

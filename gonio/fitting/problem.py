@@ -51,6 +51,7 @@ import numpy as np
 from gonio import models
 from gonio.models import Model, Param
 
+from .covariance import noise_of
 from .dataset import Dataset
 from .evaluation import combine_prediction, evaluated_model
 from .rig_errors import ALIGNMENT_NAMES, ALIGNMENT_PARAMETERS, RIG_ERROR_NAMES, STRAY_LIGHT, RigPrediction, \
@@ -193,21 +194,6 @@ class QuadraticChiSquare:
         return out
 
 
-def _lapack():
-    """LAPACK's Cholesky factorisation and triangular solve (``dpotrf``, ``dtrtrs``),
-    imported on first use: called directly they cost a third of scipy.linalg's wrappers,
-    which check their inputs on every call."""
-    global _LAPACK
-    if _LAPACK is None:
-        from scipy.linalg.lapack import dpotrf, dtrtrs
-
-        _LAPACK = (dpotrf, dtrtrs)
-    return _LAPACK
-
-
-_LAPACK = None
-
-
 class FitProblem:
     """A model, a dataset, fixed parameters: prediction, residuals, log-likelihood.
 
@@ -311,17 +297,14 @@ class FitProblem:
             self._fast_normal = self.model.at(sources[:, 0], sources[:, 1], 0.0, sources[:, 1], **self.options)
             self._normal_index = index
         self._cos_i = np.cos(np.radians(dataset.theta_i))
-        self._cholesky = None if dataset.covariance is None else np.linalg.cholesky(dataset.covariance)
-        self._precision: np.ndarray | None = None  # C^-1, computed on first use
-        self._whitener: np.ndarray | None = None  # L^-1, computed on first use
-        self._log_sigma_sum = float(np.sum(np.log(dataset.sigma)))
+        #: The errors' distribution: independent, a dense covariance or diagonal plus low
+        #: rank (gonio.fitting.covariance).
+        self.noise = noise_of(dataset.sigma, dataset.covariance)
         #: Every parameter's fixed or default value (the free ones are overwritten per call).
         self._set_values = {p.name: self.fixed.get(p.name, p.default) for p in self.specs}
-        #: log of the Gaussian likelihood's normalisation without extra noise: -(log det L
-        #: + N/2 log 2 pi), L = diag(sigma) or the covariance's Cholesky factor.
-        self._log_normalisation = -(self._log_sigma_sum if self._cholesky is None
-                                    else float(np.sum(np.log(np.diag(self._cholesky))))
-                                    ) - 0.5 * dataset.n * math.log(2.0 * math.pi)
+        #: log of the Gaussian likelihood's normalisation without extra noise: -(1/2 log det C
+        #: + N/2 log 2 pi), C = diag(sigma^2) or the covariance.
+        self._log_normalisation = -self.noise.half_log_det - 0.5 * dataset.n * math.log(2.0 * math.pi)
         self._linear = self._quadratic_chi_square()
         self._model_names = set(self.model.param_names)
         # The linear path's model parameters: free ones by column of a vector, the others fixed.
@@ -357,7 +340,7 @@ class FitProblem:
         if exact.all():
             whitened = np.stack([self.whiten(t)[0] for t in terms])
             return form, QuadraticChiSquare(whitened, self.whiten(np.asarray(self.dataset.value, float))[0]), None
-        if self._cholesky is not None:
+        if self.noise.correlated:
             return None
         sigma, value = self.dataset.sigma, np.asarray(self.dataset.value, float)
         rest = ~exact
@@ -482,28 +465,14 @@ class FitProblem:
         noise's variance ``extra`` on its diagonal), or ``difference / sigma_tot`` for
         independent errors.
         """
-        extra_zero = np.all(np.asarray(extra) == 0.0)
-        if self._cholesky is None:
-            sigma = self.dataset.sigma if extra_zero else np.sqrt(self.dataset.sigma**2 + extra)
-            return difference / sigma, float(np.sum(np.log(sigma)))
-        potrf, trtrs = _lapack()
-        if extra_zero:
-            factor = self._cholesky
-        else:  # LAPACK directly: a fit with a free extra noise factors once per walker and step
-            matrix = self.dataset.covariance.copy()
-            matrix.flat[:: self.dataset.n + 1] += extra  # the diagonal
-            factor, info = potrf(matrix, lower=1, clean=1, overwrite_a=1)
-            if info != 0:
-                factor = np.linalg.cholesky(matrix)  # raises LinAlgError, naming the problem
-        z, _ = trtrs(factor, difference, lower=1)
-        return z, float(np.sum(np.log(np.diag(factor))))
+        return self.noise.whiten(difference, extra)
 
     def residuals(self, vector: Any) -> np.ndarray:
         """Whitened residuals (prediction - value) / sigma, or L^-1 (prediction - value) for
         correlated data (jitter not included)."""
         _, predicted = self._predict_vector(vector)
         difference = predicted - self.dataset.value
-        if self._cholesky is None:
+        if not self.noise.correlated:
             return difference / self.dataset.sigma
         if not np.all(np.isfinite(difference)):
             return np.full(difference.shape, np.nan)
@@ -562,22 +531,16 @@ class FitProblem:
             return out
         normaliser = 0.5 * self.dataset.n * math.log(2.0 * math.pi)
         extra = self.extra_variance(values, predicted) if self.jitter else 0.0
-        if self._cholesky is None and not self.jitter:
+        if not self.noise.correlated and not self.jitter:
             z = difference / self.dataset.sigma
             out[finite] = (-0.5 * np.einsum("wn,wn->w", z, z) + self._log_normalisation)[finite]
-        elif self._cholesky is None:
-            variance = self.dataset.sigma**2 + np.asarray(extra)
-            chi2 = np.sum(difference**2 / variance, axis=-1)
-            log_det = 0.5 * np.sum(np.broadcast_to(np.log(variance), difference.shape), axis=-1)
-            out[finite] = (-0.5 * chi2 - log_det - normaliser)[finite]
         elif not self.jitter:
-            z = self._whitening_matrix() @ difference[finite].T
-            out[finite] = -0.5 * np.sum(z * z, axis=0) + self._log_normalisation
-        else:  # a covariance with a free extra noise: one Cholesky factor per walker, the predictions shared
-            extra_rows = np.broadcast_to(extra, difference.shape)
-            for w in np.flatnonzero(finite):
-                z, log_det = self.whiten(difference[w], extra_rows[w])
-                out[w] = -0.5 * float(np.dot(z, z)) - log_det - normaliser
+            z = self.noise.whiten_rows(difference[finite])
+            out[finite] = -0.5 * np.einsum("wn,wn->w", z, z) + self._log_normalisation
+        else:  # a free extra noise: a covariance per walker, the predictions shared
+            extra_rows = np.broadcast_to(extra, difference.shape)[finite]
+            chi2, log_det = self.noise.chi_square_rows(difference[finite], extra_rows)
+            out[finite] = -0.5 * chi2 - log_det - normaliser
         out[~np.isfinite(out)] = -math.inf
         return out
 
@@ -593,8 +556,7 @@ class FitProblem:
         """:meth:`replicated_data` of one block of rows."""
         values = self.batch_values(vectors)
         predicted = self._batch_prediction(values)
-        z = rng.standard_normal(predicted.shape)
-        noise = z @ self._cholesky.T if self._cholesky is not None else z * self.dataset.sigma
+        noise = self.noise.draw(rng, predicted.shape[0])
         if self.jitter:
             extra = np.broadcast_to(self.extra_variance(values, predicted), predicted.shape)
             noise = noise + np.sqrt(extra) * rng.standard_normal(predicted.shape)
@@ -605,22 +567,6 @@ class FitProblem:
         params = {name: values[name] for name in self.model.param_names}
         return np.asarray(self._predict_checked(values, params), float).reshape(-1, self.dataset.n)
 
-    def _whitening_matrix(self) -> np.ndarray:
-        """``L^-1`` for the data's covariance ``L L^T`` (computed once).
-
-        One matrix product per batch instead of a triangular solve: LAPACK's solve of a few
-        dozen right-hand sides is threaded and took 10 ms on a loaded 2-core machine (the
-        product 0.01 ms); the same whitened residuals to rounding. An explicit inverse loses
-        about cond(L) times the rounding of a solve: harmless for the reduction's
-        covariances (a diagonal dominated by each value's own noise), to be revisited for a
-        covariance near singular.
-        """
-        if self._whitener is None:
-            from scipy.linalg import solve_triangular
-
-            self._whitener = solve_triangular(self._cholesky, np.eye(self.dataset.n), lower=True)
-        return self._whitener
-
     def chi_square_batch(self, vectors: Any) -> np.ndarray:
         """Chi-square of the data under the fit's likelihood (the extra noise included) at
         every row of ``vectors`` (shape (W, n_free), inside the physical bounds), in one
@@ -628,8 +574,9 @@ class FitProblem:
         (:func:`gonio.fitting.adequacy.posterior_predictive_pvalue`).
 
         Equal to the sum of squares of :meth:`whiten` row by row, to rounding; NaN where a
-        prediction is undefined. With correlated errors and a free extra noise (one
-        Cholesky factor per row) the rows are taken one by one.
+        prediction is undefined. With a free extra noise every row has its own covariance
+        (``self.noise.chi_square_rows``: one Cholesky factor per row for a dense covariance,
+        one k x k factor per row for a diagonal plus low rank).
 
         Returns
         -------
@@ -648,23 +595,18 @@ class FitProblem:
 
     def _chi_square_rows(self, vectors: np.ndarray) -> np.ndarray:
         """:meth:`chi_square_batch` of one block of rows."""
-        if self._cholesky is not None and self.jitter:
-            return np.array([self._chi_square_of(vector) for vector in vectors])
         values = self.batch_values(vectors)
         predicted = self._batch_prediction(values)
         difference = predicted - self.dataset.value
-        if self._cholesky is not None:
-            z = self._whitening_matrix() @ difference.T
-            return np.sum(z * z, axis=0)
-        variance = self.dataset.sigma**2 + (np.asarray(self.extra_variance(values, predicted)) if self.jitter else 0.0)
-        return np.sum(difference**2 / variance, axis=-1)
-
-    def _chi_square_of(self, vector: Any) -> float:
-        """:meth:`chi_square_batch` of one vector, through :meth:`whiten`."""
-        values, predicted = self._predict_vector(vector)
-        extra = self.extra_variance(values, predicted) if self.jitter else 0.0
-        z = self.whiten(predicted - self.dataset.value, extra)[0]
-        return float(np.dot(z, z))
+        if self.jitter:
+            extra = np.broadcast_to(np.asarray(self.extra_variance(values, predicted), float), difference.shape)
+            chi2 = np.full(len(difference), np.nan)
+            finite = np.all(np.isfinite(difference), axis=1)
+            if finite.any():
+                chi2[finite] = self.noise.chi_square_rows(difference[finite], extra[finite])[0]
+            return chi2
+        z = self.noise.whiten_rows(difference)
+        return np.einsum("wn,wn->w", z, z)
 
     def _linear_log_likelihood(self, vectors: np.ndarray) -> np.ndarray:
         """:meth:`log_likelihood_batch` through the sufficient statistics of a linear model.
@@ -706,22 +648,7 @@ class FitProblem:
         values, predicted = self._predict_vector(vector)
         difference = predicted - self.dataset.value
         extra = self.extra_variance(values, predicted) if self.jitter else 0.0
-        if self._cholesky is None:
-            sigma = self.total_sigma(values, predicted)
-            return -0.5 * (difference / sigma) ** 2 - np.log(sigma) - 0.5 * math.log(2.0 * math.pi)
-        if np.all(np.asarray(extra) == 0.0):
-            precision = self._data_precision()
-        else:
-            precision = np.linalg.inv(self.dataset.covariance + np.diag(np.broadcast_to(extra, (self.dataset.n,))))
-        g = precision @ difference
-        q = np.diag(precision)
-        return -0.5 * np.log(2.0 * math.pi / q) - 0.5 * g**2 / q
-
-    def _data_precision(self) -> np.ndarray:
-        """The inverse of the data's covariance (computed once)."""
-        if self._precision is None:
-            self._precision = np.linalg.inv(self.dataset.covariance)
-        return self._precision
+        return self.noise.loo(difference[None, :], extra)[0]
 
     def pointwise_log_likelihood_batch(self, vectors: Any) -> np.ndarray:
         """:meth:`pointwise_log_likelihood` of every row of ``vectors``, shape (W, N): one
@@ -731,18 +658,10 @@ class FitProblem:
 
     def _pointwise_rows(self, vectors: np.ndarray) -> np.ndarray:
         """:meth:`pointwise_log_likelihood_batch` of one block of rows."""
-        if self._cholesky is not None and self.jitter:
-            return np.array([self.pointwise_log_likelihood(v) for v in vectors]).reshape(-1, self.dataset.n)
         values = self.batch_values(vectors)
         predicted = self._batch_prediction(values)
-        if self._cholesky is not None:  # the leave-one-out conditionals of pointwise_log_likelihood
-            precision = self._data_precision()
-            g = (predicted - self.dataset.value) @ precision  # precision is symmetric
-            q = np.diag(precision)
-            return -0.5 * np.log(2.0 * math.pi / q) - 0.5 * g**2 / q
-        variance = self.dataset.sigma**2 + (np.asarray(self.extra_variance(values, predicted)) if self.jitter else 0.0)
-        difference = predicted - self.dataset.value
-        return -0.5 * difference**2 / variance - 0.5 * np.log(variance) - 0.5 * math.log(2.0 * math.pi)
+        extra = np.asarray(self.extra_variance(values, predicted)) if self.jitter else 0.0
+        return self.noise.loo(predicted - self.dataset.value, extra)
 
     def chi_square(self, values: Mapping[str, float]) -> float:
         """Sum of squared whitened residuals with the measurement uncertainties only."""

@@ -33,6 +33,7 @@ from gonio.files import write_atomic
 from .adequacy import Adequacy, assess
 from .discrepancy import discrepancy_statement
 from .diagnostics import RHAT_LIMIT
+from .covariance import LowRankCovariance
 from .dataset import Dataset
 from .least_squares import LeastSquaresResult, _with_unit
 from .mcmc import LogPosterior, McmcResult
@@ -554,7 +555,7 @@ class FitResult:
             self._write_inference_data(directory / INFERENCE_DATA_FILE)
         if self.dataset.covariance is not None:
             buffer = io.BytesIO()
-            np.savez(buffer, covariance=self.dataset.covariance, result_id=np.array(self.result_id))
+            np.savez(buffer, **_covariance_arrays(self.dataset.covariance), result_id=np.array(self.result_id))
             write_atomic(directory / COVARIANCE_FILE, buffer.getvalue())
         if self.comparison is not None:
             comparison = {**_clean(self.comparison), "result_id": self.result_id}
@@ -806,6 +807,14 @@ def _posterior_flags(problem: FitProblem, posterior: Mapping[str, Any]) -> list[
 
 
 # ---------------------------------------------------------------------- summary text
+def _covariance_arrays(covariance: Any) -> dict[str, np.ndarray]:
+    """What ``covariance.npz`` holds: ``covariance`` (n, n), or for a diagonal plus low rank
+    its ``independent`` variances (n,) and shared ``factors`` (n, k), never the n x n matrix."""
+    if isinstance(covariance, LowRankCovariance):
+        return covariance.arrays()
+    return {"covariance": np.asarray(covariance)}
+
+
 def _load_dataset(path: Path, data: Mapping[str, Any]) -> Dataset:
     """The dataset of a result.json at ``path``, its covariance read from the file it names
     (format 2) or from the record itself (format 1)."""
@@ -814,7 +823,8 @@ def _load_dataset(path: Path, data: Mapping[str, Any]) -> Dataset:
     if name is not None:
         covariance_path = path.parent / name
         with np.load(covariance_path) as arrays:
-            record["covariance"] = arrays["covariance"]
+            record["covariance"] = (LowRankCovariance(arrays["independent"], arrays["factors"]) if "factors" in arrays
+                                    else arrays["covariance"])
             _check_same_save(path, data.get("result_id"), covariance_path, str(arrays["result_id"]))
     return Dataset.from_dict(record)
 

@@ -12,7 +12,7 @@ from ..uncertainty import COMPONENTS, LinearityCorrection
 from .brdf_table import BRDF_COVARIANCE, BRDF_TABLE, brdf_table_text, csv_text
 
 if TYPE_CHECKING:  # gonio.fitting imports the reduction's results: imported where used
-    from ..fitting import Dataset, Prior
+    from ..fitting import Dataset, LowRankCovariance, Prior
 
 __all__ = ["Reduced", "IncidenceCalibration", "CALIBRATIONS", "COMMON_CALIBRATION", "ANGULAR_BEHAVIOUR",
            "SATURATED_MAJORITY", "LOW_SIGNAL_SIGMAS", "REDUCTION_FORMAT", "REDUCED_TABLE", "REDUCED_BUDGET",
@@ -204,52 +204,74 @@ class Reduced:
 
     # -- correlations --------------------------------------------------------------------
     def covariance(self) -> np.ndarray:
-        """Covariance matrix of the values' errors [``unit``^2].
+        """Covariance matrix of the values' errors [``unit``^2]: :meth:`covariance_factors`
+        as the dense (n, n) matrix."""
+        return self.covariance_factors().dense()
+
+    def covariance_factors(self) -> "LowRankCovariance":
+        """Covariance of the values' errors [``unit``^2] as a diagonal plus low rank
+        (:class:`gonio.fitting.covariance.LowRankCovariance`), never forming n x n.
 
         Every component is independent between values except PRNU, the linearity
         correction, the sample's texture and its mountings. The texture of the sample's
         central area, which every window covers, is one error of every value of the sample:
-        values share ``t_i t_j`` (their ``texture`` components). The mountings' scatter
-        enters as the low-rank covariance :attr:`mounting_factors` ``F F^T`` (its diagonal is
-        the ``mounting`` component; values measured in fewer mountings than the others keep
-        theirs independent). The camera windows of a recording are centred and nested (they shrink
-        with cos(theta_r) along one image axis), so the PRNU error of a window relative to
-        the largest one is a random walk in the window size: values i and j share
-        ``p^2 x_i x_j min(a_i, a_j)`` with ``a = 1/N - 1/N_max``
-        (:func:`gonio.uncertainty.ccd_components`); values measured through the same window
-        (the same |view|) share all of it. The linearity correction's coefficients are
-        common to every reading: values share ``(x_i d_i) C (x_j d_j)^T`` with ``d`` their
-        sensitivity relative to the reference standard's (:attr:`reference_linearity`).
-        Without window terms and correction the matrix is diagonal.
+        values share ``t_i t_j`` (their ``texture`` components; one factor column). The
+        mountings' scatter enters as the low-rank covariance :attr:`mounting_factors`
+        ``F F^T`` (its diagonal is the ``mounting`` component; values measured in fewer
+        mountings than the others keep theirs independent). The camera windows of a
+        recording are centred and nested (they shrink with cos(theta_r) along one image
+        axis), so the PRNU error of a window relative to the largest one is a random walk
+        in the window size: values i and j share ``p^2 x_i x_j min(a_i, a_j)`` with
+        ``a = 1/N - 1/N_max`` (:func:`gonio.uncertainty.ccd_components`); values measured
+        through the same window (the same |view|) share all of it. ``min(a_i, a_j)`` is a
+        sum over the distinct window terms ``l_1 < l_2 < ...``: ``sum_m (l_m - l_m-1)
+        [a_i >= l_m] [a_j >= l_m]``, one factor column per distinct window. The linearity
+        correction's coefficients are common to every reading: values share ``(x_i d_i) C
+        (x_j d_j)^T`` with ``d`` their sensitivity relative to the reference standard's
+        (:attr:`reference_linearity`; one column per coefficient). Without window terms,
+        texture, mountings and correction there are no columns.
         """
         return self._covariance(self.reference_linearity)
 
-    def _covariance(self, linearity_reference) -> np.ndarray:
-        """:meth:`covariance` with the linearity sensitivities taken relative to
+    def _covariance(self, linearity_reference) -> "LowRankCovariance":
+        """:meth:`covariance_factors` with the linearity sensitivities taken relative to
         ``linearity_reference`` ((P,) or one row per value)."""
+        from ..fitting.covariance import LowRankCovariance
+
         total = np.asarray(self.radiance_sigma, float)
-        prnu = np.asarray(self.budget.get("prnu", np.zeros_like(total)), float)
-        linear = np.asarray(self.budget.get("linearity", np.zeros_like(total)), float)
-        covariance = np.diag(total**2 - prnu**2 - linear**2)
-        if self.window is not None and np.any(prnu > 0):
-            a = np.asarray(self.window, float)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                correlation = np.sqrt(np.minimum.outer(a, a) / np.maximum.outer(a, a))
-            correlation = np.nan_to_num(correlation)  # a window with a = 0 has no PRNU term
-            sign = np.sign(self.radiance)
-            covariance += np.outer(sign * prnu, sign * prnu) * correlation
-        texture = np.asarray(self.budget.get("texture", np.zeros_like(total)), float)
-        if np.any(texture > 0):
-            signed = np.sign(self.radiance) * texture
-            covariance += np.outer(signed, signed)
+        columns = [self._prnu_factors(), self._texture_factors()]
         if self.mounting_factors is not None and self.mounting_factors.size:
-            covariance += self.mounting_factors @ self.mounting_factors.T
-        np.fill_diagonal(covariance, total**2 - linear**2)
+            columns.append(np.asarray(self.mounting_factors, float).reshape(total.size, -1))
+        factors = np.hstack(columns)
+        linear = np.asarray(self.budget.get("linearity", np.zeros_like(total)), float)
+        independent = total**2 - linear**2 - np.einsum("nk,nk->n", factors, factors)
         if self.linearity_jacobian is not None:
             reference = 0.0 if linearity_reference is None else linearity_reference
-            covariance += LinearityCorrection.value_covariance(self.radiance, self.linearity_jacobian - reference,
-                                                               self.linearity_covariance)
-        return covariance
+            factors = np.hstack([factors, LinearityCorrection.value_factors(
+                self.radiance, self.linearity_jacobian - reference, self.linearity_covariance)])
+        return LowRankCovariance(independent, factors)
+
+    def _prnu_factors(self) -> np.ndarray:
+        """The PRNU's factor columns, one per distinct window term (:meth:`covariance_factors`)."""
+        total = np.asarray(self.radiance_sigma, float)
+        prnu = np.asarray(self.budget.get("prnu", np.zeros_like(total)), float)
+        if self.window is None or not np.any(prnu > 0):
+            return np.zeros((total.size, 0))
+        a = np.asarray(self.window, float)
+        shared = (a > 0) & (prnu > 0)
+        per_unit = np.zeros_like(total)  # p x / sqrt(a): the walk's scale for each value
+        per_unit[shared] = np.sign(self.radiance[shared]) * prnu[shared] / np.sqrt(a[shared])
+        levels = np.unique(a[shared])
+        steps = np.sqrt(np.diff(levels, prepend=0.0))
+        return np.where(a[:, None] >= levels[None, :], per_unit[:, None] * steps[None, :], 0.0)
+
+    def _texture_factors(self) -> np.ndarray:
+        """The texture's factor column (every value's ``texture`` component, signed)."""
+        total = np.asarray(self.radiance_sigma, float)
+        texture = np.asarray(self.budget.get("texture", np.zeros_like(total)), float)
+        if not np.any(texture > 0):
+            return np.zeros((total.size, 0))
+        return (np.sign(self.radiance) * texture)[:, None]
 
     # -- the calibration per incidence -----------------------------------------------------
     def _incidence_groups(self) -> np.ndarray:
@@ -267,7 +289,7 @@ class Reduced:
                 "those lamp angles to the protocol, or calibrate with one common E_0 (calibration='common')")
         return group
 
-    def _per_incidence(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _per_incidence(self) -> tuple[np.ndarray, np.ndarray, "LowRankCovariance"]:
         """Each value's factor ``E_0 / E_k``, its group, and the values' covariance with each
         value's linearity sensitivity relative to its own incidence's readings."""
         group = self._incidence_groups()
@@ -416,10 +438,10 @@ class Reduced:
             radiance_covariance = self._per_incidence()[2]
         else:
             relative = np.full(data.n, self.reference_irradiance_sigma / self.reference_irradiance)
-            radiance_covariance = self.covariance()
+            radiance_covariance = self.covariance_factors()
         if "linearity" in components:
             total, linear = np.asarray(self.radiance_sigma, float), np.asarray(self.budget["linearity"], float)
-            own = np.diag(radiance_covariance) - total**2 + linear**2  # the correction's variance in this calibration
+            own = radiance_covariance.variance() - total**2 + linear**2  # the correction's variance in this calibration
             components["linearity"] = np.sqrt(np.maximum(own, 0.0)) / np.abs(scale)
         components["calibration"] = np.abs(data.value) * relative
         return data, components
@@ -466,14 +488,14 @@ class Reduced:
         from ..fitting import Dataset
 
         self._require_usable()
-        value, covariance, metadata = self.radiance, self.covariance(), self._dataset_metadata()
+        value, covariance, metadata = self.radiance, self.covariance_factors(), self._dataset_metadata()
         if _calibration(calibration) == "per-incidence":
             factor, group, covariance = self._per_incidence()
             value = self.radiance * factor
-            covariance = covariance * np.outer(factor, factor)
-            covariance += np.outer(value, value) * self._incidence_deviations()[np.ix_(group, group)]
+            shared = value[:, None] * _square_root(self._incidence_deviations())[group]
+            covariance = covariance.scaled(factor).with_factors(shared)
             metadata = self._dataset_metadata(calibration, group)
-        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
+        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(covariance.variance()),
                        quantity="radiance", label=self.label, metadata=metadata, covariance=covariance)
 
     def normalised_radiance(self) -> Dataset:
@@ -503,17 +525,11 @@ class Reduced:
         k0 = normal_of[keep]
         x0 = self.radiance[k0]
         value = self.radiance[keep] / x0
-        full = self.covariance()
-        # r_i = x_i / x_0(i), linearised: dr_i = (dx_i - r_i dx_0(i)) / x_0(i)
-        covariance = (full[np.ix_(keep, keep)] - full[np.ix_(keep, k0)] * value[None, :]
-                      - value[:, None] * full[np.ix_(k0, keep)] + np.outer(value, value) * full[np.ix_(k0, k0)])
-        covariance /= np.outer(x0, x0)
-        covariance = 0.5 * (covariance + covariance.T)
         informative = keep != k0  # the normal-view points are 1 by construction: no data
-        covariance = covariance[np.ix_(informative, informative)]
-        keep, value = keep[informative], value[informative]
+        keep, k0, x0, value = keep[informative], k0[informative], x0[informative], value[informative]
+        covariance = _ratio_covariance(self.covariance_factors(), keep, k0, x0, value)
         return Dataset(self.theta_i[keep], self.phi_i[keep], self.theta_r[keep], self.phi_r[keep], value,
-                       np.sqrt(np.diag(covariance)),
+                       np.sqrt(covariance.variance()),
                        quantity="normalised_radiance", label=self.label, metadata=self._dataset_metadata(),
                        covariance=covariance)
 
@@ -541,16 +557,18 @@ class Reduced:
             value = self.radiance / scale
             common = sum(self.calibration.get(k, 0.0) ** 2 for k in COMMON_CALIBRATION if k != ANGULAR_BEHAVIOUR)
             u2 = self._incidence_variances()
-            shared = np.where(np.equal.outer(group, group), u2[group][:, None], 0.0) + common
-            covariance = covariance / np.outer(scale, scale) + np.outer(value, value) * shared
-            return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
+            # the irradiance at the value's angle (one column per angle) and the certificate
+            shared = np.hstack([value[:, None] * np.sqrt(u2)[None, :] * np.equal.outer(group, np.arange(u2.size)),
+                                value[:, None] * math.sqrt(common)])
+            covariance = covariance.scaled(1.0 / scale).with_factors(shared)
+            return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(covariance.variance()),
                            quantity="brdf", label=self.label, metadata=self._dataset_metadata(calibration, group),
                            covariance=covariance)
         scale = self.reference_irradiance * cos_i
         value = self.radiance / scale
         rel_cal = self.reference_irradiance_sigma / self.reference_irradiance
-        covariance = self.covariance() / np.outer(scale, scale) + np.outer(value, value) * rel_cal**2
-        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(np.diag(covariance)),
+        covariance = self.covariance_factors().scaled(1.0 / scale).with_factors(value * rel_cal)
+        return Dataset(self.theta_i, self.phi_i, self.theta_r, self.phi_r, value, np.sqrt(covariance.variance()),
                        quantity="brdf", label=self.label, metadata=self._dataset_metadata(), covariance=covariance)
 
     def best_dataset(self) -> Dataset:
@@ -607,3 +625,24 @@ def _nanmedian(values) -> float:
 def _nanmax(values) -> float:
     values = np.asarray(values, float)
     return float(np.nanmax(values)) if np.isfinite(values).any() else math.nan
+
+
+def _square_root(covariance: np.ndarray) -> np.ndarray:
+    """``S`` with ``S S^T = covariance`` (K, K), from its eigenvectors (rounding-level
+    negative eigenvalues taken as 0)."""
+    eigenvalues, eigenvectors = np.linalg.eigh(covariance)
+    return eigenvectors * np.sqrt(np.maximum(eigenvalues, 0.0))
+
+
+def _ratio_covariance(covariance: "LowRankCovariance", keep: np.ndarray, k0: np.ndarray, x0: np.ndarray,
+                      ratio: np.ndarray) -> "LowRankCovariance":
+    """Covariance of ``r = x_keep / x_k0`` to first order (``dr_i = (dx_i - r_i dx_k0(i)) /
+    x_k0(i)``, :meth:`Reduced.normalised_radiance`), for values ``keep`` none of which is a
+    ``k0``: the shared factors ``(U_i - r_i U_k0(i)) / x_k0(i)``, the independent variances
+    ``d_i / x_k0(i)^2``, and one more column per normal-view value ``k0`` for its own
+    independent error, ``-r_i sqrt(d_k0) / x_k0(i)`` on the values it normalises."""
+    factors = (covariance.factors[keep] - ratio[:, None] * covariance.factors[k0]) / x0[:, None]
+    normals, column = np.unique(k0, return_inverse=True)
+    own = np.zeros((keep.size, normals.size))
+    own[np.arange(keep.size), column] = -ratio * np.sqrt(covariance.independent[k0]) / x0
+    return type(covariance)(covariance.independent[keep] / x0**2, np.hstack([factors, own]))
