@@ -233,6 +233,11 @@ class SelectionTruth:
         return FAMILY[self.model]
 
 
+#: The comparison's extra-noise mode: "auto", the default of ``gonio fit`` and ``gonio demo``
+#: (the three verdicts: an extra noise only where the lack-of-fit test says the stated noise
+#: is short, docs/fitting.md "Goodness of fit: three verdicts").
+SELECTION_JITTER = "auto"
+
 SELECTION_TRUTHS = (
     SelectionTruth("lambert", "lambert", {"rho": 0.8}),
     *(SelectionTruth(f"exact-sigma-{s:g}", "oren-nayar-exact", {"rho": 0.9, "sigma": s})
@@ -381,14 +386,16 @@ def selection_run(truth: SelectionTruth, seed: int, scratch: Path) -> dict[str, 
     compare_start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        comparison = compare_models(dataset, CANDIDATES, priors=priors, **rig_errors())
+        comparison = compare_models(dataset, CANDIDATES, priors=priors, jitter=SELECTION_JITTER, **rig_errors())
     rows = [{"label": r["label"], "model": r["model"], "k": r["k"], "chi2": r["chi2"], "redchi": r["redchi"],
              "chi2_p": r["chi2_p"], "adequate": bool(r["adequate"]), "log_evidence": r["log_evidence"],
-             "bic": r["bic"]} for r in comparison.rows]
+             "bic": r["bic"], "verdict": r.get("verdict"), "lack_of_fit_p": r.get("lack_of_fit_p"),
+             "evidence_method": r.get("evidence_method")} for r in comparison.rows]
     chosen = comparison.row(comparison.chosen)
     return {
         "truth": truth.key, "seed": seed, "n_data": int(len(dataset.value)), "chosen": comparison.chosen,
         "chosen_model": chosen["model"], "chosen_adequate": bool(comparison.chosen_adequate),
+        "chosen_verdict": comparison.chosen_verdict, "jitter": comparison.jitter,
         "used_evidence": all(math.isfinite(r["log_evidence"]) for r in comparison.rows),
         "reason": comparison.reason, "chosen_values": dict(chosen["values"]), "rows": rows,
         "measure_wall_s": measure_wall, "compare_wall_s": time.perf_counter() - compare_start,
@@ -619,6 +626,8 @@ def summarise_selection(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             "none_adequate": proportion([not r["chosen_adequate"] for r in rs]),
             "data_can_tell": proportion(others_fail),
             "used_evidence": proportion([r["used_evidence"] for r in rs]),
+            "chosen_verdicts": {v: sum(str(r.get("chosen_verdict")) == v for r in rs)
+                                for v in sorted({str(r.get("chosen_verdict")) for r in rs})},
             "evidence_undefined_by_candidate": {c: int(sum(not _is_finite(next(x for x in r["rows"]
                                                                                 if x["label"] == c)["log_evidence"])
                                                            for r in rs)) for c in labels},
@@ -938,10 +947,12 @@ def print_tables(payload: Mapping[str, Any]) -> None:
 
 
 def draw_charts(payload: Mapping[str, Any], suffix: str) -> None:
-    """Write the four charts of a payload into docs/benchmarks/."""
-    chart_coverage(payload, OUT / f"calibration_coverage{suffix}.png")
-    chart_ranks(payload, OUT / f"calibration_ranks{suffix}.png")
-    chart_zscores(payload, payload["coverage_records"], OUT / f"calibration_zscores{suffix}.png")
+    """Write the four charts of a payload into docs/benchmarks/ (the confusion chart alone
+    without coverage runs)."""
+    if any(arm["n"] for arm in payload["coverage"]):
+        chart_coverage(payload, OUT / f"calibration_coverage{suffix}.png")
+        chart_ranks(payload, OUT / f"calibration_ranks{suffix}.png")
+        chart_zscores(payload, payload["coverage_records"], OUT / f"calibration_zscores{suffix}.png")
     chart_confusion(payload, OUT / f"calibration_confusion{suffix}.png")
 
 
@@ -970,12 +981,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--records", type=Path, default=None,
                         help="JSON-lines file of finished runs (appended; runs already in it are not repeated); "
                              "default a file in the temporary directory, removed after a complete run")
+    parser.add_argument("--selection-only", action="store_true",
+                        help="only the model-choice study (no coverage arms); outputs named *_selection")
     parser.add_argument("--charts-only", action="store_true",
                         help="redraw the charts from the JSON a previous run wrote; run nothing")
     args = parser.parse_args(argv)
     quick = args.quick
     REALISM["spec"] = args.realism
-    suffix = ("_lab" if args.realism == "lab" else "") + ("_quick" if quick else "")
+    suffix = (("_lab" if args.realism == "lab" else "") + ("_quick" if quick else "")
+              + ("_selection" if args.selection_only else ""))
+    if args.selection_only:
+        args.seeds, args.tabulated_seeds = 0, 0
     if args.charts_only:
         payload = json.loads((OUT / f"calibration{suffix}.json").read_text())
         draw_charts(payload, suffix)
@@ -1015,7 +1031,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     payload = {
         "benchmark": "calibration",
         "command": "python benchmarks/calibration.py" + (" --quick" if quick else "")
-                   + (f" --realism {args.realism}" if args.realism != "ideal" else ""),
+                   + (f" --realism {args.realism}" if args.realism != "ideal" else "")
+                   + (f" --selection-only --selection-seeds {n_sel}" if args.selection_only else ""),
         "arguments": {"coverage_seeds": n_cov, "tabulated_seeds": n_tab, "selection_seeds": n_sel,
                       "workers": args.workers, "realism": args.realism},
         "machine": machine(),
@@ -1037,6 +1054,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "coverage_targets": {k: list(v) for k, v in COVERAGE_TARGETS.items()},
             "selection_target": SELECTION_TARGET,
             "candidates": [{"model": n, "fixed": f} for n, f in CANDIDATES],
+            "selection_jitter": SELECTION_JITTER,
             "truths": [{"key": t.key, "spec": t.spec, "family": t.family} for t in SELECTION_TRUTHS],
         },
         "coverage": coverage,

@@ -36,9 +36,12 @@ Nuisance parameters
 Correlated errors
 -----------------
 A dataset with a ``covariance`` C is fitted by generalised least squares: the residual
-vector is whitened with the Cholesky factor L of C (C = L L^T, r_w = L^-1 (prediction -
-value)), so chi^2 = r^T C^-1 r and the Gaussian log-likelihood is
--chi^2/2 - log det L - n/2 log(2 pi). Without one, L = diag(sigma).
+vector is whitened, r_w = W (prediction - value) with W^T W = C^-1, so chi^2 = r^T C^-1 r
+and the Gaussian log-likelihood is -chi^2/2 - 1/2 log det C - n/2 log(2 pi). W is
+diag(1/sigma) for independent errors, L^-1 for a dense C = L L^T (Cholesky), and the
+symmetric root of C^-1 for a diagonal plus low rank (:class:`gonio.fitting.LowRankCovariance`,
+what a reduction gives), never formed as an n x n matrix (:mod:`gonio.fitting.covariance`,
+:attr:`FitProblem.noise`).
 """
 from __future__ import annotations
 
