@@ -54,7 +54,7 @@ import numpy as np
 from gonio import models
 from gonio.models import Model, Param
 
-from .covariance import noise_of
+from .covariance import DenseNoise, LowRankNoise, noise_of
 from .dataset import Dataset
 from .evaluation import combine_prediction, evaluated_model
 from .rig_errors import ALIGNMENT_NAMES, ALIGNMENT_PARAMETERS, RIG_ERROR_NAMES, STRAY_LIGHT, RigPrediction, \
@@ -140,14 +140,66 @@ class FloorPoints:
     sigma: np.ndarray
     cos_i: np.ndarray | None = None
 
-    def chi_square(self, params: Mapping[str, Any], scale: Any = 1.0) -> np.ndarray:
-        """Sum over the points of ((prediction - value) / sigma)^2 for parameters given as
-        (W, 1) columns or floats; shape (W,) (NaN where a prediction is undefined)."""
+    def residuals(self, params: Mapping[str, Any], scale: Any = 1.0) -> np.ndarray:
+        """(prediction - value) / sigma for parameters given as (W, 1) columns or floats;
+        shape (W, M) (NaN where a prediction is undefined)."""
         predicted = np.asarray(self.fast.unchecked(**params), float)
         if self.cos_i is not None:
             predicted = predicted * self.cos_i * scale
-        z = (predicted - self.value) / self.sigma
-        return np.sum(np.atleast_2d(z) ** 2, axis=-1)
+        return np.atleast_2d((predicted - self.value) / self.sigma)
+
+    def chi_square(self, params: Mapping[str, Any], scale: Any = 1.0) -> np.ndarray:
+        """Sum over the points of ((prediction - value) / sigma)^2 for parameters given as
+        (W, 1) columns or floats; shape (W,) (NaN where a prediction is undefined)."""
+        return np.sum(self.residuals(params, scale) ** 2, axis=-1)
+
+
+@dataclass
+class SharedSources:
+    """What the shared error sources of a diagonal plus low rank covariance ``D + U U^T``
+    take off the chi-square of independent errors ``D`` on the linear path.
+
+    With ``I + U^T D^-1 U = L L^T`` (k x k), Woodbury gives ``r^T C^-1 r = r^T D^-1 r -
+    |L^-1 U^T D^-1 r|^2``. The first term is a :class:`QuadraticChiSquare` on the exact
+    points plus :class:`FloorPoints` on the others, both whitened by ``D``; the second is
+    ``|A c - a + B z|^2`` with the exact points' ``A = L^-1 U_E^T D_E^-1 T_E^T`` (k x K) and
+    ``a = L^-1 U_E^T D_E^-1 y_E``, and ``B = L^-1 U_F^T D_F^-1/2`` applied to the floor
+    points' residuals ``z = D_F^-1/2 (prediction - value)``: each walker costs K k + M k
+    operations, whatever the number of exact points.
+
+    Attributes
+    ----------
+    terms : numpy.ndarray, shape (k, K)
+        ``A``.
+    value : numpy.ndarray, shape (k,)
+        ``a``.
+    floor : numpy.ndarray, shape (k, M)
+        ``B`` (M = 0 without floor points).
+    """
+
+    terms: np.ndarray
+    value: np.ndarray
+    floor: np.ndarray
+
+    @classmethod
+    def of(cls, covariance: Any, terms: np.ndarray, value: np.ndarray, exact: np.ndarray) -> "SharedSources":
+        """For a :class:`~gonio.fitting.LowRankCovariance`, the linear form's ``terms``
+        (K, N), the data ``value`` (N,) and which points the form describes exactly."""
+        d, u = covariance.independent, covariance.factors
+        inner = np.eye(covariance.rank) + u.T @ (u / d[:, None])
+        factor = np.linalg.cholesky(inner)
+        weighted = u[exact] / d[exact, None]  # D_E^-1 U_E
+        solve = lambda m: np.linalg.solve(factor, m)  # noqa: E731 (L^-1 applied to m)
+        return cls(solve(weighted.T @ terms[:, exact].T), solve(weighted.T @ value[exact]),
+                   solve((u[~exact] / np.sqrt(d[~exact, None])).T))
+
+    def __call__(self, coefficients: np.ndarray, floor_residuals: np.ndarray | None) -> np.ndarray:
+        """``|A c - a + B z|^2`` of every row of ``coefficients`` (W, K), with the floor
+        points' whitened residuals ``z`` (W, M) or None; shape (W,)."""
+        b = coefficients @ self.terms.T - self.value
+        if floor_residuals is not None:
+            b += floor_residuals @ self.floor.T
+        return np.einsum("wk,wk->w", b, b)
 
 
 class QuadraticChiSquare:
@@ -321,16 +373,19 @@ class FitProblem:
         #: Number of model evaluations so far (for benchmarks).
         self.evaluations = 0
 
-    def _quadratic_chi_square(self) -> tuple[Any, QuadraticChiSquare, FloorPoints | None] | None:
-        """(linear form, :class:`QuadraticChiSquare`, :class:`FloorPoints` or None) when
-        the prediction is linear in the form's coefficients for every parameter value (BRDF
-        or radiance data, no free extra noise, a model with a LinearForm), else None. Not
-        with rig errors that change the prediction.
+    def _quadratic_chi_square(self) -> tuple[Any, QuadraticChiSquare, FloorPoints | None,
+                                             SharedSources | None] | None:
+        """(linear form, :class:`QuadraticChiSquare`, :class:`FloorPoints` or None,
+        :class:`SharedSources` or None) when the prediction is linear in the form's
+        coefficients for every parameter value (BRDF or radiance data, no free extra noise,
+        a model with a LinearForm), else None. Not with rig errors that change the
+        prediction.
 
         Points where the form is not exact (eq 33's floor can act there) are taken point by
-        point: with independent errors the sufficient statistics cover the exact points and
-        :class:`FloorPoints` evaluates the model at the others; with correlated errors
-        (whitening mixes the points) such a point turns the linear path off."""
+        point: the sufficient statistics cover the exact points and :class:`FloorPoints`
+        evaluates the model at the others, both with the independent part of the errors;
+        a diagonal plus low rank covariance adds :class:`SharedSources`. With a dense
+        covariance (whitening mixes every point) such a point turns the linear path off."""
         if self.jitter or self.dataset.quantity not in ("brdf", "radiance") or self.has_rig_errors:
             return None
         form = self._fast.linear_form()
@@ -342,14 +397,21 @@ class FitProblem:
         terms = form.terms * self._cos_i if self.dataset.quantity == "radiance" else form.terms
         if exact.all():
             whitened = np.stack([self.whiten(t)[0] for t in terms])
-            return form, QuadraticChiSquare(whitened, self.whiten(np.asarray(self.dataset.value, float))[0]), None
-        if self.noise.correlated:
+            return form, QuadraticChiSquare(whitened, self.whiten(np.asarray(self.dataset.value, float))[0]), None, None
+        if isinstance(self.noise, DenseNoise):
             return None
-        sigma, value = self.dataset.sigma, np.asarray(self.dataset.value, float)
+        value = np.asarray(self.dataset.value, float)
+        shared = None
+        if isinstance(self.noise, LowRankNoise):
+            covariance = self.noise.covariance
+            sigma = np.sqrt(covariance.independent)
+            shared = SharedSources.of(covariance, terms, value, exact)
+        else:
+            sigma = self.dataset.sigma
         rest = ~exact
         floor = FloorPoints(self.model.at(*(g[rest] for g in self.dataset.geometry), **self.options), value[rest],
                             sigma[rest], self._cos_i[rest] if self.dataset.quantity == "radiance" else None)
-        return form, QuadraticChiSquare(terms[:, exact] / sigma[exact], value[exact] / sigma[exact]), floor
+        return form, QuadraticChiSquare(terms[:, exact] / sigma[exact], value[exact] / sigma[exact]), floor, shared
 
     @property
     def has_rig_errors(self) -> bool:
@@ -618,7 +680,7 @@ class FitProblem:
         place) gives each free model parameter as a (W, 1) column, the fixed ones stay
         floats; for radiance the coefficients are multiplied by the scale.
         """
-        form, chi_square, floor = self._linear
+        form, chi_square, floor, shared = self._linear
         params = dict(self._linear_fixed)
         for name, k in self._linear_free:
             params[name] = vectors[:, k:k + 1]
@@ -631,8 +693,12 @@ class FitProblem:
             coefficients *= scale
         self.evaluations += vectors.shape[0]
         out = chi_square(coefficients)
+        floor_residuals = None
         if floor is not None:
-            out += floor.chi_square(params, scale)
+            floor_residuals = floor.residuals(params, scale)
+            out += np.sum(floor_residuals**2, axis=-1)
+        if shared is not None:
+            out -= shared(coefficients, floor_residuals)
         out *= -0.5
         out += self._log_normalisation
         if not np.isfinite(out).all():

@@ -293,3 +293,23 @@ def test_leave_one_out_with_each_rows_extra_noise_is_the_dense_one(chunk, monkey
         expected = -0.5 * np.log(2.0 * math.pi / q) - 0.5 * (precision @ rows[w]) ** 2 / q
         np.testing.assert_allclose(got[w], expected, rtol=1e-9)
         assert chi2[w] == pytest.approx(float(rows[w] @ precision @ rows[w]), rel=1e-10)
+
+
+def test_the_linear_path_with_floor_points_equals_the_dense_likelihood():
+    """Random geometries with grazing ones, where eq 33's floor can act: the sufficient
+    statistics of the exact points, the floor points one by one and the shared sources'
+    correction give the dense covariance's likelihood (which takes the model at every point)."""
+    rng = np.random.default_rng(10)
+    n = 400
+    ti, tr, dphi = rng.uniform(0, 89, n), rng.uniform(0, 89, n), rng.uniform(0, 180, n)
+    truth = np.asarray(__import__("gonio").brdf("oren-nayar", ti, 0, tr, dphi, sigma=25, rho=0.8))
+    factors = np.column_stack([0.003 * truth, 0.002 * truth * (tr > 45), rng.normal(0, 0.002, n) * truth])
+    c = LowRankCovariance((0.003 * truth + 1e-4) ** 2, factors)
+    value = truth + LowRankNoise(c).draw(rng, 1)[0]
+    sigma = np.sqrt(c.variance())
+    fast = FitProblem("oren-nayar", Dataset(ti, 0, tr, dphi, value, sigma, covariance=c))
+    dense = FitProblem("oren-nayar", Dataset(ti, 0, tr, dphi, value, sigma, covariance=c.dense()))
+    assert fast._linear is not None and fast._linear[2] is not None and dense._linear is None
+    assert 0 < fast._linear[2].value.size < n  # some floor points, taken one by one
+    rows = np.array([[0.8, 25.0, 1.0], [0.7, 35.0, 0.5], [0.95, 10.0, 0.0], [0.5, 60.0, 1.0]])
+    np.testing.assert_allclose(fast.log_likelihood_batch(rows), dense.log_likelihood_batch(rows), rtol=1e-9)
