@@ -224,7 +224,10 @@ def check(problem, least_squares, build_problem: Callable[..., Any]) -> ModelVal
     -----
     A dataset of more than :data:`MAX_CHECKED` independent values is compared on the
     values :func:`checked_values` selects, the evenly sampled ones weighted by the number of
-    values each stands for in ``J_w^T d_w``; correlated values are compared all together.
+    values each stands for in ``J_w^T d_w``. So is one whose covariance is a diagonal plus
+    low rank (:class:`~gonio.fitting.LowRankCovariance`), through the Woodbury form of
+    ``J^T C^-1 d`` whose three sums over values are taken on the same weighted sample
+    (:func:`_sampled_gradient`); a dense covariance is compared on every value.
     """
     reference = reference_for(problem.base_model.name, problem.options)
     free = list(least_squares.free)
@@ -234,6 +237,7 @@ def check(problem, least_squares, build_problem: Callable[..., Any]) -> ModelVal
     covariance = np.asarray(least_squares.covariance, float)[np.ix_(determined, determined)]
     free = [name for name, known in zip(free, determined) if known]  # undetermined ones: no shift to give
     data = problem.dataset
+    whole = problem
     checked, weights = _checked_with_weights(data)
     if len(checked) < data.n:
         data = data.subset(checked)
@@ -246,10 +250,15 @@ def check(problem, least_squares, build_problem: Callable[..., Any]) -> ModelVal
     exact = exact_problem.predict(values)
     difference = predicted - exact
     extra = problem.extra_variance(values, predicted) if problem.jitter else 0.0
-    whitened, _ = problem.whiten(difference, extra)
-    jacobian = np.column_stack([problem.whiten(column, extra)[0]
-                                for column in _prediction_jacobian(problem, approximation, free)])
-    shift = -covariance @ (jacobian.T @ (weights * whitened))
+    columns = _prediction_jacobian(problem, approximation, free)
+    if len(checked) < whole.dataset.n and whole.dataset.covariance is not None:
+        gradient = _sampled_gradient(whole, values, approximation, checked, weights, difference,
+                                     np.column_stack(columns))
+    else:
+        whitened, _ = problem.whiten(difference, extra)
+        jacobian = np.column_stack([problem.whiten(column, extra)[0] for column in columns])
+        gradient = jacobian.T @ (weights * whitened)
+    shift = -covariance @ gradient
     sd = np.sqrt(np.diag(covariance))
     sigma = np.sqrt(data.sigma ** 2 + extra)
     return ModelValidity(
@@ -264,13 +273,37 @@ def check(problem, least_squares, build_problem: Callable[..., Any]) -> ModelVal
 
 
 def _checked_with_weights(data) -> tuple[np.ndarray, np.ndarray]:
-    """The values to compare and the number of values each stands for (module notes):
-    correlated values all together, independent ones by :func:`checked_values`."""
+    """The values to compare and the number of values each stands for (module notes): a
+    dense covariance's all together, independent values and a diagonal plus low rank
+    covariance's by :func:`checked_values`."""
+    from .covariance import LowRankCovariance
+
     n = data.n
-    if data.covariance is not None:
+    if data.covariance is not None and not isinstance(data.covariance, LowRankCovariance):
         return np.arange(n), np.ones(n)
     theta_i, theta_r = (np.broadcast_to(np.asarray(a, float), (n,)) for a in (data.theta_i, data.theta_r))
     return checked_values(theta_i, theta_r, MAX_CHECKED)
+
+
+def _sampled_gradient(whole, values: Mapping[str, float], approximation: Mapping[str, float], checked: np.ndarray,
+                      weights: np.ndarray, difference: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
+    """``J^T C^-1 d`` for a diagonal plus low rank ``C = D + U U^T`` of ``whole``'s data
+    (the extra noise on ``D``) from the values ``checked`` standing for ``weights`` values
+    each: ``J^T D^-1 d - (U^T D^-1 J)^T (I + U^T D^-1 U)^-1 U^T D^-1 d`` (Woodbury), the
+    sums over values of its first, second and last factors estimated on the sample, the
+    middle one exact (it needs no exact model). ``difference`` (m,) and ``jacobian`` (m, p)
+    are at the checked values."""
+    covariance = whole.dataset.covariance
+    extra = 0.0
+    if whole.jitter:
+        extra = whole.extra_variance(values, whole.predict(approximation) if whole.jitter == "relative" else None)
+    independent = covariance.independent + np.broadcast_to(np.asarray(extra, float), (covariance.n,))
+    factors = covariance.factors
+    inner = np.eye(covariance.rank) + factors.T @ (factors / independent[:, None])
+    weight = weights / independent[checked]
+    sampled = factors[checked]
+    shared = np.linalg.solve(inner, sampled.T @ (weight * difference))
+    return jacobian.T @ (weight * difference) - (sampled.T @ (weight[:, None] * jacobian)).T @ shared
 
 
 def _prediction_jacobian(problem, values: Mapping[str, float], free: list[str]) -> list[np.ndarray]:
