@@ -110,7 +110,11 @@ class LowRankCovariance:
         return matrix if dtype is None else matrix.astype(dtype)
 
     def __getitem__(self, key: Any) -> np.ndarray:
-        """Entries of the dense matrix (``c[i, j]``, ``c[:3, :3]``), formed for the call."""
+        """Entries of the dense matrix: ``c[i, j]`` from the two parts (O(k)), any other
+        index (``c[:3, :3]``) of the dense matrix formed for the call."""
+        if isinstance(key, tuple) and len(key) == 2 and all(isinstance(k, (int, np.integer)) for k in key):
+            i, j = (int(k) + self.n if k < 0 else int(k) for k in key)
+            return np.float64(self.factors[i] @ self.factors[j] + (self.independent[i] if i == j else 0.0))
         return self.dense()[key]
 
     def subset(self, index: np.ndarray) -> "LowRankCovariance":

@@ -81,7 +81,10 @@ def test_subset_scaling_factors_and_blocks_match_the_dense_operations():
     np.testing.assert_allclose(joined.dense()[:c.n, :c.n], c.dense())
     np.testing.assert_allclose(joined.dense()[c.n:, c.n:], other.dense())
     assert not joined.dense()[:c.n, c.n:].any()
-    np.testing.assert_allclose(np.asarray(c), c.dense()) and c[2, 3] == c.dense()[2, 3]
+    np.testing.assert_allclose(np.asarray(c), c.dense())
+    for i, j in ((2, 3), (5, 5), (-1, 0), (np.int64(7), -2)):
+        assert c[i, j] == pytest.approx(c.dense()[i, j], rel=1e-14)
+    np.testing.assert_array_equal(c[:3, 1], c.dense()[:3, 1])
 
 
 @pytest.mark.parametrize("independent, factors, expected", [
