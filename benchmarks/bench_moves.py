@@ -11,13 +11,21 @@ moves and mixtures of them, for 16 to 256 walkers and three seeds each, on four 
   emulator, ``--model oren-nayar --fix ir_weight=1`` (90 values, correlated errors, a
   calibration prior on ``scale``; the fit of ``gonio fit ... --report``);
 * ``gaussian``, ``bound``, ``skewed``: the problems of benchmarks/fit_time_accuracy.py
-  (near-Gaussian; sigma piled at its bound 0; a skewed Minnaert posterior from 4 values).
+  (near-Gaussian; sigma piled at its bound 0; a skewed Minnaert posterior from 4 values);
+* ``rig``: the fit of ``gonio demo`` (seed 0): both protocols measured on the default
+  (lab) emulated rig, ``oren-nayar-tabulated`` through the apertures with the rig's seven
+  alignment parameters and its stray light free and the calibration per incidence (126
+  values, 11 parameters, alignment pairs correlated at 0.96-0.99). Its model costs about
+  0.4 ms per walker, so it runs at 32 walkers only, against a reference of DE (32 walkers
+  x 20000 steps, burn-in 2000; the stretch move's reference would take hours).
 
 Moves (gonio.fitting.moves): ``stretch`` (emcee's default, the affine-invariant stretch
 move), ``de`` (differential evolution), ``de+snooker`` (DE 0.8 + DE snooker 0.2, the
 mixture emcee's documentation shows), ``de+stretch`` (0.5 each), ``gaussian`` (random-walk
 Metropolis with the least-squares covariance times 2.38^2/d; DE where that covariance is
-undetermined), ``gaussian+de``, ``gaussian+stretch`` (0.5 each).
+undetermined), ``gaussian+de``, ``gaussian+stretch`` (0.5 each), ``laplace+de``
+(independence proposals from the least-squares Laplace approximation, a Student t, 0.5 +
+DE 0.5; DE where that covariance is undetermined).
 
 Per run: steps and wall time to convergence (the checks included), largest tau, smallest
 bulk ESS (ArviZ) and ESS per second, and against a reference chain of each problem
@@ -56,31 +64,47 @@ from _common import OUT, ROOT, machine, write_json  # noqa: E402
 
 PROTOCOL = ROOT / "protocols" / "oren-nayar-fig16-plaster.toml"
 GONIO = Path(sys.executable).with_name("gonio")
-MOVES = ("stretch", "de", "de+snooker", "de+stretch", "gaussian", "gaussian+de", "gaussian+stretch")
+MOVES = ("stretch", "de", "de+snooker", "de+stretch", "gaussian", "gaussian+de", "gaussian+stretch", "laplace+de")
 WALKERS = (16, 32, 64, 128, 256)
 SEEDS = (0, 1, 2)
 REFERENCE_WALKERS, REFERENCE_STEPS, REFERENCE_BURN = 256, 20000, 2000
+#: Problems whose reference chain is not the stretch move's default one: (moves, walkers).
+REFERENCE_OF = {"rig": ("de", 32)}
+#: Problems run at these ensemble sizes only (a costly model).
+WALKERS_OF = {"rig": (32,)}
 
 
 def fig16_problem(scratch: Path):
     """The Fig 16 recording fitted as ``gonio fit REC --model oren-nayar --fix ir_weight=1``."""
-    from gonio.cli.fit import _load
+    from gonio.analysis import load_data
     from gonio.fitting import FitProblem
 
     recording = scratch / "plaster"
     subprocess.run([str(GONIO), "run", str(PROTOCOL), "--out", str(recording)], check=True, capture_output=True)
-    dataset, priors = _load(recording, None)
+    dataset, priors = load_data(recording)
     return FitProblem("oren-nayar", dataset, {"ir_weight": 1.0}, {}, False), priors
 
 
-def reference(problem, start, priors) -> np.ndarray:
-    """Samples of the reference chain (stretch move, fixed length, no early stop)."""
+def rig_problem(scratch: Path):
+    """The fit of ``gonio demo`` at seed 0 (module docstring)."""
+    from gonio.cli.demo import RIG_ERRORS, measure_demo
+    from gonio.fitting import FitProblem
+
+    dataset, priors = measure_demo(scratch / "demo", seed=0).fit_inputs("per-incidence")
+    return FitProblem("oren-nayar-tabulated", dataset, None, None, None, RIG_ERRORS["alignment"],
+                      RIG_ERRORS["stray_light"]), priors
+
+
+def reference(problem, start, priors, name: str = "") -> np.ndarray:
+    """Samples of the reference chain (fixed length, no early stop; the stretch move with
+    256 walkers unless :data:`REFERENCE_OF` names another)."""
     from gonio.fitting.mcmc import ConvergenceWarning, sample_posterior
 
+    moves, walkers = REFERENCE_OF.get(name, ("stretch", REFERENCE_WALKERS))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        chain, _ = sample_posterior(problem, start, priors=priors, n_walkers=REFERENCE_WALKERS,
-                                    max_steps=REFERENCE_STEPS, tau_multiple=1e9, seed=12345, moves="stretch")
+        chain, _ = sample_posterior(problem, start, priors=priors, n_walkers=walkers,
+                                    max_steps=REFERENCE_STEPS, tau_multiple=1e9, seed=12345, moves=moves)
     return chain.chain[REFERENCE_BURN:].reshape(-1, len(problem.free))
 
 
@@ -208,7 +232,7 @@ def chart(summary: list[dict], path: Path) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--problems", default="fig16,gaussian,bound,skewed")
+    parser.add_argument("--problems", default="fig16,gaussian,bound,skewed,rig")
     parser.add_argument("--moves", default=",".join(MOVES))
     parser.add_argument("--walkers", default=",".join(map(str, WALKERS)))
     parser.add_argument("--chart-only", action="store_true", help="redraw moves.png from moves.json")
@@ -247,14 +271,18 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="gonio-moves-") as scratch:
         others = accuracy_problems()
         for name in args.problems.split(","):
-            problem, priors = fig16_problem(Path(scratch)) if name == "fig16" else (others[name], None)
+            if name in ("fig16", "rig"):
+                problem, priors = (fig16_problem if name == "fig16" else rig_problem)(Path(scratch))
+            else:
+                problem, priors = others[name], None
+            priors = problem.priors_with_defaults(priors)  # the rig's alignment priors, as gonio.fitting.fit
             start = fit_least_squares(problem, seed=0, priors=priors)
             began = time.perf_counter()
-            ref = reference(problem, start, priors)
+            ref = reference(problem, start, priors, name)
             references[name] = {"free": list(problem.free), "median": np.median(ref, 0).tolist(),
                                 "sd": ref.std(axis=0).tolist(), "seconds": time.perf_counter() - began}
             print(f"{name}: reference {references[name]}", flush=True)
-            rows += runs(name, problem, start, priors, ref, moves, walkers, SEEDS)
+            rows += runs(name, problem, start, priors, ref, moves, WALKERS_OF.get(name, walkers), SEEDS)
     loads = [load_before, os.getloadavg()[0]]
     previous = OUT / "moves.json"
     if set(moves) != set(MOVES) and previous.exists():  # a partial run: keep the other move sets' rows

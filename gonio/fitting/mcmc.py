@@ -6,9 +6,17 @@ added in quadrature, :mod:`gonio.fitting.problem`).  The model is evaluated thro
 fixed-geometry fast path (``Model.at``), built once by :class:`FitProblem`, for a whole
 half-ensemble at a time.
 
-The walkers are advanced by emcee's moves (:mod:`gonio.fitting.moves`; by default
-differential evolution, whose autocorrelation time is a quarter of the stretch move's on
-the problems measured) in gonio's loop over preallocated arrays
+The walkers are advanced by emcee's moves (:mod:`gonio.fitting.moves`). By default half
+the steps are independence proposals drawn from the posterior's Laplace approximation (a
+Student t about the least-squares optimum, scaled by its covariance,
+:func:`~gonio.fitting.moves.laplace_move`) and half differential evolution (a walker moves
+along the difference of two others): where the posterior is close to its Laplace
+approximation a walker forgets where it was in a step or two however strongly the
+parameters correlate, and where it is not, or the least-squares covariance is undetermined
+(a parameter at a bound), differential evolution does the work, at a quarter of the
+stretch move's autocorrelation time (benchmarks/bench_moves.py, docs/fitting.md
+"Performance"). Both are exact Metropolis-Hastings steps: the approximation decides only
+how many proposals are taken. The loop is gonio's over preallocated arrays
 (:class:`gonio.fitting.ensemble.EnsembleChain`, the chain of ``emcee.EnsembleSampler``
 bit for bit, without its per-step bookkeeping).
 
@@ -353,7 +361,7 @@ def sample_posterior(
     seed: int | None = 0,
     progress: Callable[[int, int, float], None] | None = None,
     rhat_limit: float = RHAT_LIMIT,
-    moves: str = "de",
+    moves: str = "laplace+de",
 ) -> tuple[McmcResult, dict[str, Prior]]:
     """Sample the posterior with emcee until the autocorrelation criterion holds.
 
@@ -381,9 +389,11 @@ def sample_posterior(
     progress : callable, optional
         ``progress(steps, max_steps, max_tau)`` after every check.
     moves : str
-        The emcee moves (:data:`gonio.fitting.moves.MOVES`): ``"de"`` (differential
-        evolution, the default, chosen by measurement), ``"stretch"`` (emcee's default
-        move), or a mixture.
+        The emcee moves (:data:`gonio.fitting.moves.MOVES`): ``"laplace+de"`` (the
+        default, chosen by measurement: independence proposals from the Laplace
+        approximation 0.5 + differential evolution 0.5, DE alone where the least-squares
+        covariance is undetermined), ``"de"``, ``"stretch"`` (emcee's default move), or
+        another mixture.
 
     Returns
     -------
@@ -421,7 +431,8 @@ def sample_posterior(
 
     # emcee's moves draw from a legacy RandomState
     random = np.random.RandomState(int(rng.integers(2**31)))
-    sampler = EnsembleChain(posterior.batch, ensemble_moves(moves, start.covariance, ndim), walkers, random)
+    mode = np.array([start.values[name] for name in problem.free], float)
+    sampler = EnsembleChain(posterior.batch, ensemble_moves(moves, start.covariance, ndim, mode), walkers, random)
     posterior.model_seconds = 0.0
     posterior.calls = 0
     history: list[tuple[int, float]] = []
