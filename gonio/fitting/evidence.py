@@ -330,40 +330,13 @@ def _product_evidence(problem, least_squares, priors, factor: str) -> LaplaceEvi
 
 
 def _numerical_covariance(problem, values: Mapping[str, float], priors) -> np.ndarray:
-    """Inverse Hessian of -ln(likelihood x prior) at ``values`` by finite differences.
+    """Inverse Hessian of -ln(likelihood x prior) at ``values`` by finite differences
+    (:func:`gonio.fitting.curvature.inverse_hessian`)."""
+    from .curvature import inverse_hessian
 
-    Steps of 1e-4 of each parameter's physical range (of its magnitude when unbounded);
-    a parameter within two steps of a bound is differenced away from it.
-    """
     names = list(problem.free)
-    x = np.array([values[n] for n in names], float)
-
-    def negative_log_posterior(vector: np.ndarray) -> float:
-        return -_log_posterior(problem, priors, vector)
-
-    steps, centre = [], x.copy()
-    for k, name in enumerate(names):
-        lo, hi = problem.spec(name).bounds
-        h = 1e-4 * ((hi - lo) if math.isfinite(hi - lo) else max(abs(x[k]), 1e-12))
-        centre[k] = min(max(x[k], lo + 2 * h), hi - 2 * h) if math.isfinite(hi - lo) else x[k]
-        steps.append(h)
-    k = len(names)
-    hessian = np.empty((k, k))
-    f0 = negative_log_posterior(centre)
-    for i in range(k):
-        for j in range(i, k):
-            ei, ej = np.eye(k)[i] * steps[i], np.eye(k)[j] * steps[j]
-            if i == j:
-                value = (negative_log_posterior(centre + ei) - 2 * f0 + negative_log_posterior(centre - ei)) / steps[i] ** 2
-            else:
-                value = (negative_log_posterior(centre + ei + ej) - negative_log_posterior(centre + ei - ej)
-                         - negative_log_posterior(centre - ei + ej) + negative_log_posterior(centre - ei - ej)) / (
-                    4 * steps[i] * steps[j])
-            hessian[i, j] = hessian[j, i] = value
-    try:
-        return np.linalg.inv(hessian)
-    except np.linalg.LinAlgError:
-        return np.full((k, k), np.nan)
+    return inverse_hessian(lambda vector: -_log_posterior(problem, priors, vector),
+                           np.array([values[n] for n in names], float), [problem.spec(n).bounds for n in names])
 
 
 @dataclass(frozen=True)

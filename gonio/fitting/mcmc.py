@@ -53,7 +53,7 @@ from .least_squares import LeastSquaresResult
 from .priors import Prior, Uniform, default_prior
 from .problem import FitProblem
 
-__all__ = ["DEFAULT_WALKERS", "SERIAL_WALKERS", "default_walkers", "VectorisedStretchMove", "ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "start_spread", "LogPosterior"]
+__all__ = ["DEFAULT_WALKERS", "SERIAL_WALKERS", "default_walkers", "VectorisedStretchMove", "ConvergenceWarning", "McmcResult", "resolve_priors", "sample_posterior", "start_spread", "LogPosterior", "laplace_covariance"]
 
 
 #: Default ensemble size where the likelihood evaluates every walker at once (models that
@@ -432,7 +432,8 @@ def sample_posterior(
     # emcee's moves draw from a legacy RandomState
     random = np.random.RandomState(int(rng.integers(2**31)))
     mode = np.array([start.values[name] for name in problem.free], float)
-    sampler = EnsembleChain(posterior.batch, ensemble_moves(moves, start.covariance, ndim, mode), walkers, random)
+    covariance = laplace_covariance(problem, posterior, start) if moves.startswith("laplace") else start.covariance
+    sampler = EnsembleChain(posterior.batch, ensemble_moves(moves, covariance, ndim, mode), walkers, random)
     posterior.model_seconds = 0.0
     posterior.calls = 0
     history: list[tuple[int, float]] = []
@@ -528,6 +529,36 @@ def sample_posterior(
         moves=moves,
     )
     return result, priors
+
+
+def laplace_covariance(problem: FitProblem, posterior: LogPosterior, start: LeastSquaresResult) -> np.ndarray:
+    """The covariance of the posterior's Laplace approximation about the least-squares optimum.
+
+    The least-squares covariance where every entry is determined (the Gaussian priors are
+    in it); else, as where a free extra-noise term makes the residuals' Jacobian silent
+    about it, the inverse Hessian of the log posterior itself at the optimum
+    (:func:`gonio.fitting.curvature.inverse_hessian`, 2 k^2 + 1 evaluations, steps of a
+    hundredth of each least-squares standard error, or a thousandth of the value where
+    that is undetermined). Either may
+    still be unusable (an indefinite curvature at a bound): the moves then leave the
+    Laplace move out (:func:`gonio.fitting.moves.ensemble_moves`).
+    """
+    from .curvature import inverse_hessian
+
+    covariance = np.asarray(start.covariance, float)
+    if np.all(np.isfinite(covariance)):
+        return covariance
+    mode = np.array([start.values[name] for name in problem.free], float)
+    steps = [0.01 * start.stderr[name] if start.stderr.get(name, math.nan) > 0
+             else max(1e-3 * abs(value), 1e-9 * _width(problem.spec(name).bounds))
+             for name, value in zip(problem.free, mode)]
+    return inverse_hessian(lambda vector: -posterior(vector), mode, [problem.spec(name).bounds for name in problem.free],
+                           steps)
+
+
+def _width(bounds: tuple[float, float]) -> float:
+    """The width of a range, 1 where it is unbounded."""
+    return bounds[1] - bounds[0] if math.isfinite(bounds[1] - bounds[0]) else 1.0
 
 
 def start_spread(problem: FitProblem, name: str, value: float, error: float) -> float:

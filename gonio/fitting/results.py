@@ -425,7 +425,7 @@ class FitResult:
         """:meth:`_predict_draws` of a fit with rig errors (alignment, stray light): the draws
         as columns of one prediction of that rig per chunk (RigPrediction, as predict_quantity)."""
         chunk = max(1, _PREDICTIVE_ELEMENTS // max(geometry[0].size * 49, 1))  # 49 aperture sub-rays
-        rig = RigPrediction(model, self.dataset.quantity, geometry, self.options, self.dataset.metadata)
+        rig = RigPrediction(model, self.dataset.quantity, geometry, self.options, self.dataset.metadata, compiled=True)
         base = dict(self.least_squares.values)
         out = np.empty((draws.shape[0], geometry[0].size))
         for start in range(0, draws.shape[0], chunk):

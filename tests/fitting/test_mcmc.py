@@ -376,3 +376,25 @@ def test_the_default_moves_use_the_laplace_approximation():
     problem = FitProblem("lambert", data)
     result, _ = sample_posterior(problem, fit_least_squares(problem), **QUICK)
     assert result.moves == "laplace+de"
+
+
+def test_an_extra_noise_term_keeps_the_laplace_move():
+    """The least-squares covariance says nothing of a free extra noise (its row is NaN);
+    the Laplace move then takes the log posterior's own curvature at the optimum, which
+    matches the chain's covariance (every sd within 15 %), instead of leaving DE alone:
+    the fit converges in fewer steps than DE's with the same posterior."""
+    from gonio.fitting.mcmc import LogPosterior, laplace_covariance, resolve_priors
+    from gonio.fitting.moves import laplace_move
+
+    data = synthetic_dataset("oren-nayar", dict(rho=0.9, sigma=30.0), 0.02, relative=True, seed=3)
+    data = type(data)(*data.geometry, data.value, 0.5 * data.sigma)  # half the real scatter stated
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0}, jitter="relative")
+    start = fit_least_squares(problem)
+    assert not np.all(np.isfinite(start.covariance))
+    covariance = laplace_covariance(problem, LogPosterior(problem, resolve_priors(problem, start.values)), start)
+    laplace_move(np.zeros(problem.ndim), covariance)  # positive definite: its Cholesky exists
+    runs = {moves: sample_posterior(problem, start, moves=moves, seed=1)[0] for moves in ("de", "laplace+de")}
+    assert runs["laplace+de"].n_steps < runs["de"].n_steps
+    chain_sd = runs["laplace+de"].samples().std(axis=0)
+    np.testing.assert_allclose(np.sqrt(np.diag(covariance)), chain_sd, rtol=0.15)
+    np.testing.assert_allclose(chain_sd, runs["de"].samples().std(axis=0), rtol=0.1)
