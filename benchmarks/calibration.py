@@ -396,7 +396,8 @@ def selection_run(truth: SelectionTruth, seed: int, scratch: Path) -> dict[str, 
         "truth": truth.key, "seed": seed, "n_data": int(len(dataset.value)), "chosen": comparison.chosen,
         "chosen_model": chosen["model"], "chosen_adequate": bool(comparison.chosen_adequate),
         "chosen_verdict": comparison.chosen_verdict, "jitter": comparison.jitter,
-        "used_evidence": all(math.isfinite(r["log_evidence"]) for r in comparison.rows),
+        "used_evidence": all(math.isfinite(r["log_evidence"]) for r in comparison.rows
+                             if r["evidence_method"] != "not needed"),  # failing rows need none
         "reason": comparison.reason, "chosen_values": dict(chosen["values"]), "rows": rows,
         "measure_wall_s": measure_wall, "compare_wall_s": time.perf_counter() - compare_start,
         "wall_s": time.perf_counter() - start,

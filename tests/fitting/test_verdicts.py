@@ -146,20 +146,21 @@ def test_sequential_monte_carlo_follows_a_curved_ridge():
 
 
 def test_a_candidate_without_laplace_evidence_is_judged_by_its_evidence(monkeypatch):
-    """Where Laplace's approximation is undefined for one candidate, its evidence is sampled
-    and the choice is still by evidence, not by BIC for every row."""
+    """Where Laplace's approximation is undefined for a candidate that passes, its evidence
+    is sampled and the choice is still by evidence, not by BIC for every row."""
     real = selection.laplace_evidence
 
-    def no_gaussian_for_minnaert(problem, least_squares, priors):
-        return LaplaceEvidence(math.nan) if problem.base_model.name == "minnaert" else real(problem, least_squares,
-                                                                                            priors)
+    def no_gaussian_for_oren_nayar(problem, least_squares, priors):
+        return LaplaceEvidence(math.nan) if problem.base_model.name == "oren-nayar" else real(problem, least_squares,
+                                                                                              priors)
 
-    monkeypatch.setattr(selection, "laplace_evidence", no_gaussian_for_minnaert)
+    monkeypatch.setattr(selection, "laplace_evidence", no_gaussian_for_oren_nayar)
     data = _understated(actual=0.003)
     comparison = compare_models(data, [("oren-nayar", {"ir_weight": 1.0}), "minnaert"])
-    minnaert = comparison.row("minnaert")
-    assert minnaert["evidence_method"] == "sequential monte carlo" and math.isfinite(minnaert["log_evidence"])
-    assert 0 < minnaert["evidence_error"] < 0.5
+    chosen = comparison.row("oren-nayar (ir_weight=1)")
+    assert chosen["adequate"]
+    assert chosen["evidence_method"] == "sequential monte carlo" and math.isfinite(chosen["log_evidence"])
+    assert 0 < chosen["evidence_error"] < 0.5
     assert "BIC" not in comparison.reason and comparison.chosen == "oren-nayar (ir_weight=1)"
     assert "SMC" in comparison.summary()
 
@@ -229,3 +230,53 @@ def test_the_noise_model_spread_vanishes_where_the_model_is_the_data():
     assert spread.half_range["sigma"] < 1e-4 and spread.half_range["rho"] < 1e-6
     other = noise_model_spread(clean, "minnaert")
     assert other.half_range["k"] > 1e-3
+
+
+def test_a_failing_candidate_without_laplace_evidence_is_not_sampled(monkeypatch):
+    """A candidate that fails the goodness-of-fit test cannot be chosen while another
+    passes, so where its Laplace evidence is undefined it is not sampled (the lab rig's
+    qualitative model took more than twenty minutes of sequential Monte Carlo): its row says
+    so, and the choice among the passing ones is still by evidence."""
+    real = selection.laplace_evidence
+
+    def no_gaussian_for_lambert(problem, least_squares, priors):
+        return LaplaceEvidence(math.nan) if problem.base_model.name == "lambert" else real(problem, least_squares,
+                                                                                          priors)
+
+    def never(*args, **kwargs):
+        raise AssertionError("a failing candidate's evidence was sampled")
+
+    monkeypatch.setattr(selection, "laplace_evidence", no_gaussian_for_lambert)
+    monkeypatch.setattr(selection, "tempered_evidence", never)
+    data = _understated(actual=0.003)
+    comparison = compare_models(data, ["lambert", ("oren-nayar", {"ir_weight": 1.0})])
+    lambert = comparison.row("lambert")
+    assert lambert["verdict"] == "inadequate" and lambert["evidence_method"] == "not needed"
+    assert math.isnan(lambert["log_evidence"]) and math.isnan(lambert["delta_log_evidence"])
+    assert comparison.chosen == "oren-nayar (ir_weight=1)" and "BIC" not in comparison.reason
+    assert [row["label"] for row in comparison.rows][-1] == "lambert"  # after the rows with an evidence
+    text = comparison.summary()
+    assert "not sampled" in text and text.splitlines()[2 + 1].split()[-1] == "-"
+    assert comparison.to_dict()["rows"][-1]["evidence_method"] == "not needed"
+
+
+def test_when_no_candidate_passes_every_evidence_is_sampled(monkeypatch):
+    """With no candidate adequate the best by evidence is shown, so a failing candidate's
+    undefined Laplace evidence is sampled after all."""
+    real = selection.laplace_evidence
+    sampled = []
+
+    def no_gaussian_for_lambert(problem, least_squares, priors):
+        return LaplaceEvidence(math.nan) if problem.base_model.name == "lambert" else real(problem, least_squares,
+                                                                                          priors)
+
+    def recorded(problem, priors, *args, **kwargs):
+        sampled.append(problem.base_model.name)
+        return tempered_evidence(problem, priors, *args, **kwargs)
+
+    monkeypatch.setattr(selection, "laplace_evidence", no_gaussian_for_lambert)
+    monkeypatch.setattr(selection, "tempered_evidence", recorded)
+    comparison = compare_models(_understated(seed=3), ["lambert", "minnaert"], jitter=False)
+    assert not any(row["adequate"] for row in comparison.rows)
+    assert sampled == ["lambert"] and comparison.row("lambert")["evidence_method"] == "sequential monte carlo"
+    assert "NO candidate passes" in comparison.reason
