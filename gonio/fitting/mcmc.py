@@ -12,8 +12,8 @@ Student t about the least-squares optimum, scaled by its covariance,
 :func:`~gonio.fitting.moves.laplace_move`) and half differential evolution (a walker moves
 along the difference of two others): where the posterior is close to its Laplace
 approximation a walker forgets where it was in a step or two however strongly the
-parameters correlate, and where it is not, or the least-squares covariance is undetermined
-(a parameter at a bound), differential evolution does the work, at a quarter of the
+parameters correlate, and where it is not, or no Laplace covariance is positive definite
+(a parameter piled at a bound), differential evolution does the work, at a quarter of the
 stretch move's autocorrelation time (benchmarks/bench_moves.py, docs/fitting.md
 "Performance"). Both are exact Metropolis-Hastings steps: the approximation decides only
 how many proposals are taken. The loop is gonio's over preallocated arrays
@@ -391,9 +391,9 @@ def sample_posterior(
     moves : str
         The emcee moves (:data:`gonio.fitting.moves.MOVES`): ``"laplace+de"`` (the
         default, chosen by measurement: independence proposals from the Laplace
-        approximation 0.5 + differential evolution 0.5, DE alone where the least-squares
-        covariance is undetermined), ``"de"``, ``"stretch"`` (emcee's default move), or
-        another mixture.
+        approximation 0.5 + differential evolution 0.5, DE alone where no Laplace
+        covariance is positive definite, :func:`laplace_covariance`), ``"de"``,
+        ``"stretch"`` (emcee's default move), or another mixture.
 
     Returns
     -------
