@@ -213,17 +213,39 @@ class CCDSensor:
             # No pixel can reach full well (10 sigma): shot and read noise in one normal draw
             # with the summed variance (same distribution as drawing them one after the other).
             full = np.zeros(shape, bool)
-            electrons = mean_e + np.sqrt(mean_e + read_var) * rng.standard_normal(shape)
+            electrons = _add_scaled_noise(mean_e, read_var, rng.standard_normal(shape))
         else:  # same mean and variance as the Poisson count, clipped at full well
-            electrons = mean_e + np.sqrt(mean_e) * rng.standard_normal(shape)
+            electrons = _add_scaled_noise(mean_e, 0.0, rng.standard_normal(shape))
             full = electrons >= p.full_well_e
             np.minimum(electrons, p.full_well_e, out=electrons)
             electrons += p.read_noise_e * rng.standard_normal(shape)
         dn = electrons
         dn *= self.system_gain(gain_factor)
         if self.nonlinearity:
-            dn = nonlinear_signal(dn, self.nonlinearity, p.max_dn - p.offset_dn)
+            _nonlinear_in_place(dn, self.nonlinearity, p.max_dn - p.offset_dn)
         dn += p.offset_dn + 0.5
         np.floor(dn, out=dn)
         np.clip(dn, 0, p.max_dn, out=dn)
-        return Exposure(frame=dn.astype(np.uint16), saturated=full | (dn >= p.max_dn))
+        saturated = dn >= p.max_dn
+        saturated |= full
+        return Exposure(frame=dn.astype(np.uint16), saturated=saturated)
+
+
+def _add_scaled_noise(mean: np.ndarray, extra_variance: float, noise: np.ndarray) -> np.ndarray:
+    """``mean + sqrt(mean + extra_variance) * noise``, written into ``noise`` (a frame's
+    worth of temporaries fewer; the same numbers as the expression)."""
+    scale = mean + extra_variance
+    np.sqrt(scale, out=scale)
+    noise *= scale
+    np.add(mean, noise, out=noise)
+    return noise
+
+
+def _nonlinear_in_place(signal: np.ndarray, nonlinearity: float, full_scale: float) -> None:
+    """:func:`~drivers.emulator.systematics.nonlinear_signal` written into ``signal`` (the
+    same operations in the same order)."""
+    factor = signal / full_scale
+    factor **= 2
+    factor *= nonlinearity
+    np.subtract(1.0, factor, out=factor)
+    signal *= factor

@@ -49,6 +49,8 @@ DEFAULT_LAMP_IRRADIANCE_W_M2 = 0.057
 
 _RIGS: "weakref.WeakValueDictionary[str, EmulatedRig]" = weakref.WeakValueDictionary()
 _RIGS_LOCK = threading.Lock()
+#: Pixel patterns (:meth:`Scene.pixel_pattern`, 2 MB each) kept: a point's frames at one position.
+_PATTERN_CACHE = 4
 
 Brdf = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
@@ -139,6 +141,12 @@ class Scene:
         self.rng = rng
         self._reflectance_cache: dict[tuple[float, float, float], float] = {}
         self._coverage_cache: dict[float, np.ndarray] = {}
+        self._pattern_cache: dict[tuple[float, ...], np.ndarray] = {}
+
+    def forget(self) -> None:
+        """Clear what was cached of the mounted object (after a sample change or a remount)."""
+        self._reflectance_cache.clear()
+        self._pattern_cache.clear()
 
     def angles(self, positions: tuple[float, ...]) -> tuple[float, float, float, float]:
         """(theta_i, phi_i, theta_r, phi_r) [deg] in the sample's frame for axis positions
@@ -211,19 +219,36 @@ class Scene:
         if not np.isfinite(radiance) or radiance < 0:
             raise ValueError(f"the sample BRDF gave radiance {radiance!r} at axis positions "
                              f"{tuple(round(p, 3) for p in positions)}")
-        angles = self.angles(positions)
-        theta_i, phi_i, theta_r, _ = angles
         per_radiance = self.optics.photon_rate_per_radiance() * exposure_s
-        image = self.coverage(theta_r) * (radiance * self.holder.beam_mismatch() * per_radiance)
-        if self.systematics.beam_falloff and theta_r < 90.0:  # at 90 the sample has no image
-            image *= self.beam_map(theta_r, theta_i, phi_i)
-        if theta_r < 90.0:
-            texture = self.holder.relative_image(self.brdf, angles, key)
-            if texture is not None:
-                image *= texture
+        image = self.pixel_pattern(key) * (radiance * self.holder.beam_mismatch() * per_radiance)
         if self.systematics.stray_light:
             image += self.stray_radiance(lamp) * per_radiance
         return image
+
+    def pixel_pattern(self, positions: tuple[float, ...]) -> np.ndarray:
+        """Each pixel's radiance relative to the sample's on its axis at these true axis
+        positions, shape (height, width) [-]: the sample's coverage of the pixel, times the
+        beam profile and the texture where the rig has them.
+
+        The same for every exposure at one position (a point's frames, its repeats), so the
+        last few are kept (:meth:`forget` clears them).
+        """
+        pattern = self._pattern_cache.get(positions)
+        if pattern is not None:
+            return pattern
+        angles = self.angles(positions)
+        theta_i, phi_i, theta_r, _ = angles
+        pattern = self.coverage(theta_r).copy()
+        if self.systematics.beam_falloff and theta_r < 90.0:  # at 90 the sample has no image
+            pattern *= self.beam_map(theta_r, theta_i, phi_i)
+        if theta_r < 90.0:
+            texture = self.holder.relative_image(self.brdf, angles, positions)
+            if texture is not None:
+                pattern *= texture
+        if len(self._pattern_cache) >= _PATTERN_CACHE:
+            self._pattern_cache.pop(next(iter(self._pattern_cache)))
+        self._pattern_cache[positions] = pattern
+        return pattern
 
     def __call__(self, t_start: float, exposure_s: float) -> np.ndarray:
         """Mean photons per pixel of an exposure [photons] (:meth:`photons` with a fresh
@@ -346,7 +371,7 @@ class RigControl:
         scene = self._rig.scene
         scene.brdf = brdf
         scene.holder.mount_other()
-        scene._reflectance_cache.clear()
+        scene.forget()
         if handling_s > 0:
             self.advance(handling_s)
 
@@ -373,7 +398,7 @@ class RigControl:
         scene = self._rig.scene
         scene.brdf = self._rig.sample_brdf
         scene.holder.mount(int(mounting), rotation_deg, bool(spin))
-        scene._reflectance_cache.clear()
+        scene.forget()
         if handling_s > 0:
             self.advance(handling_s)
 

@@ -378,15 +378,17 @@ def footprints(texture: LabTexture, optics: Optics, theta_r: float) -> Footprint
     pixel_mm = optics.pixel_pitch_um * 1e-3 / optics.magnification
     half = 0.5 * pixel_mm / max(math.cos(math.radians(theta_r)), 1e-9)
     inside_x = np.isfinite(x) & (x - half >= lo) & (x + half <= hi)
-    x_lo, x_hi = np.where(inside_x, x - half, lo), np.where(inside_x, x + half, lo + 2 * half)
+    x_lo, x_hi = x[inside_x] - half, x[inside_x] + half
 
-    def integral_at(points: np.ndarray) -> np.ndarray:  # (6, grid rows, W), linear along x
+    def integral_at(points: np.ndarray) -> np.ndarray:  # (6, grid rows, columns), linear along x
         position = (points - lo) / step
         k = np.clip(np.floor(position).astype(int), 0, grid.size - 2)
         w = position - k
         return texture.integrals[..., k] * (1.0 - w) + texture.integrals[..., k + 1] * w
 
-    columns = (integral_at(x_hi) - integral_at(x_lo)) / (x_hi - x_lo)
+    # only the columns that see the sample: the others are marked outside and never read
+    columns = np.zeros(texture.integrals.shape[:2] + x.shape)
+    columns[..., inside_x] = (integral_at(x_hi) - integral_at(x_lo)) / (x_hi - x_lo)
     position = (y - lo) / step
     inside_y = (position >= 0) & (position <= grid.size - 1)
     k = np.clip(np.floor(position).astype(int), 0, grid.size - 2)

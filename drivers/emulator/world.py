@@ -23,6 +23,7 @@ __all__ = [
     "cone_half_angle_deg",
     "cone_quadrature",
     "cone_averaged_reflectance",
+    "cone_rule_pairs",
     "footprint_coverage",
     "pixel_sample_coordinates",
     "PLANCK_TIMES_C",
@@ -231,7 +232,10 @@ def cone_averaged_reflectance(
     ``E_0 = L_lamp Omega_i`` is the irradiance the lamp gives on a surface facing it and
     ``<.>`` the mean over incident directions in the lamp cone; the camera then averages
     ``L_r`` over the directions of its pupil.  Both means use :func:`cone_quadrature`
-    (7 x 7 = 49 BRDF evaluations).  Directions below the horizon contribute nothing.
+    (7 directions in each cone), combined as :func:`cone_rule_pairs` says: the sparse
+    (Smolyak) combination of 13 BRDF evaluations where the integrand is smooth over both
+    cones, the full 7 x 7 product (49) where it is not.  Directions below the horizon
+    contribute nothing.
 
     Parameters
     ----------
@@ -266,13 +270,88 @@ def cone_averaged_reflectance(
     """
     ti, pi_, wi = cone_quadrature(theta_i, phi_i, lamp_solid_angle_sr)
     tr, pr, wr = cone_quadrature(theta_r, phi_r, camera_solid_angle_sr)
-    cos_i = np.cos(np.radians(ti))
-    lit = _above_horizon(ti)
-    seen = _above_horizon(tr)
-    f = np.asarray(brdf(ti[:, None], pi_[:, None], tr[None, :], pr[None, :]), float)
-    f = np.broadcast_to(f, (ti.size, tr.size))
-    terms = np.where((lit[:, None] > 0) & (seen[None, :] > 0), f * cos_i[:, None], 0.0)
-    return float((wi * lit) @ terms @ (wr * seen))
+    lamp_index, camera_index, weights = cone_rule_pairs(
+        theta_i, theta_r, cone_half_angle_deg(lamp_solid_angle_sr), cone_half_angle_deg(camera_solid_angle_sr), wi, wr)
+    ti, pi_, tr, pr = ti[lamp_index], pi_[lamp_index], tr[camera_index], pr[camera_index]
+    f = np.broadcast_to(np.asarray(brdf(ti, pi_, tr, pr), float), ti.shape)
+    terms = np.where((_above_horizon(ti) > 0) & (_above_horizon(tr) > 0), f * np.cos(np.radians(ti)), 0.0)
+    return float(np.sum(weights * _above_horizon(ti) * _above_horizon(tr) * terms))
+
+
+#: Where the sparse combination of :func:`cone_rule_pairs` is not used: polar axes closer
+#: than this many times the sum of the two cones' half-angles [-] (the integrand's kink at
+#: theta_i = theta_r may lie inside the cones), or a cone reaching this close to the
+#: horizon [deg] (the integrand is cut there).
+KINK_CLEARANCE = 2.0
+HORIZON_CLEARANCE_DEG = 1.0
+
+
+def cone_rule_pairs(theta_i: float, theta_r: float, lamp_half_deg: float, camera_half_deg: float,
+                    lamp_weights: np.ndarray, camera_weights: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which (lamp, camera) quadrature directions the cone average evaluates, with weights.
+
+    The full product of the two cone rules takes ``n_l x n_c`` evaluations (49).  Its
+    sparse (Smolyak) combination, ``Q_l x C_c + C_l x Q_c - C_l x C_c`` with ``C`` the
+    cone's axis alone, takes ``n_l + n_c - 1`` (13) and is exact, like the product, for
+    every term of degree <= 3 in the four offsets from the axes; it misses the product
+    terms of degree 4 and higher in both cones' offsets (``x_l^2 y_c^2``: relative size
+    ``half_l^2 half_c^2 / 16`` times a fourth derivative, ~1e-8 for the rig's cones).
+
+    Decision: the sparse combination is used only where the integrand is smooth over both
+    cones.  At ``theta_i = theta_r`` in the plane of incidence the V-cavity models have a
+    kink (the shadowing and masking onsets of eq 39 coincide), and there the combination
+    was measured 1.5e-5 off the product on the Fig 16 protocol's geometries with
+    ``oren-nayar-exact`` at sigma = 30 deg (5e-3 for the functional form at retro-
+    reflection): where the polar axes are closer than :data:`KINK_CLEARANCE` times the sum
+    of the half-angles, or a cone comes within :data:`HORIZON_CLEARANCE_DEG` of the
+    horizon (the integrand is cut there), the full product is used.  With that rule the
+    average over the 135 directions the demo's two protocols measure differs from the
+    product's by at most 5.6e-7 (median 1e-8), 1/100 of the ideal rig's noise, with 2.9
+    times fewer evaluations (tests/drivers/test_emulator_world.py).
+
+    Parameters
+    ----------
+    theta_i, theta_r : float
+        Polar angles of the lamp's and the camera's axes [deg].
+    lamp_half_deg, camera_half_deg : float
+        The cones' half-angles [deg].
+    lamp_weights, camera_weights : numpy.ndarray
+        The cone rules' weights, the axis first (:func:`cone_quadrature`).
+
+    Returns
+    -------
+    lamp_index, camera_index : numpy.ndarray of int
+        The directions of each evaluation in the two cone rules.
+    weights : numpy.ndarray
+        The weight of each evaluation (summing to 1).
+
+    References
+    ----------
+    S. A. Smolyak, "Quadrature and interpolation formulas for tensor products of certain
+    classes of functions", Soviet Math. Dokl. 4, 1963; T. Gerstner, M. Griebel, "Numerical
+    integration using sparse grids", Numer. Algorithms 18, 1998 (the combination technique).
+
+    Examples
+    --------
+    >>> w = np.array([0.25] + [0.125] * 6)
+    >>> lamp, camera, weights = cone_rule_pairs(45.0, 20.0, 1.77, 0.97, w, w)
+    >>> len(weights), round(float(weights.sum()), 12)
+    (13, 1.0)
+    >>> len(cone_rule_pairs(45.0, 44.0, 1.77, 0.97, w, w)[2])   # near theta_i = theta_r: the product
+    49
+    """
+    n_l, n_c = len(lamp_weights), len(camera_weights)
+    near_kink = abs(theta_i - theta_r) < KINK_CLEARANCE * (lamp_half_deg + camera_half_deg)
+    near_horizon = max(theta_i + lamp_half_deg, theta_r + camera_half_deg) > 90.0 - HORIZON_CLEARANCE_DEG
+    if near_kink or near_horizon:
+        lamp, camera = np.meshgrid(np.arange(n_l), np.arange(n_c), indexing="ij")
+        return lamp.ravel(), camera.ravel(), np.outer(lamp_weights, camera_weights).ravel()
+    lamp = np.concatenate([np.arange(n_l), np.zeros(n_c - 1, int)])
+    camera = np.concatenate([np.zeros(n_l, int), np.arange(1, n_c)])
+    weights = np.concatenate([lamp_weights, camera_weights[1:]])
+    weights[0] += camera_weights[0] - 1.0  # + C_l x Q_c's axis term - C_l x C_c
+    return lamp, camera, weights
 
 
 def _above_horizon(theta: np.ndarray, tol: float = 1e-9) -> np.ndarray:

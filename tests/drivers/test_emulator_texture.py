@@ -150,3 +150,29 @@ def test_window_mean_texture_offsets_scatter_between_samples_as_the_texture_says
         window = image[roi.y0:roi.y0 + roi.height, roi.x0:roi.x0 + roi.width]
         offsets.append(np.sum(weights * window) / np.sum(weights) - 1.0)
     assert 0.0015 < np.std(offsets) < 0.004
+
+
+def test_a_remount_or_another_object_changes_the_image_at_the_same_axis_positions():
+    """The pixel pattern kept for an axis position (Scene.pixel_pattern) belongs to what is
+    mounted: after a remount the camera sees another part of the texture, with the reference
+    standard in the holder no texture at all, and back on the first mounting the first
+    image again."""
+    brdf = functools.partial(gonio.brdf, "lambert", rho=0.5)
+    rig = EmulatedRig(brdf, seed=4, lamp_warm=True, motors_on=True, systematics=realism("lab", 4))
+    roi = roi_for_view(INFO, 0.0)
+
+    positions = tuple(float(p) for p in rig.stage.true_positions(rig.clock.now()))
+
+    def window(image=None) -> np.ndarray:
+        image = rig.scene.pixel_pattern(positions) if image is None else image
+        return image[roi.y0:roi.y0 + roi.height, roi.x0:roi.x0 + roi.width]
+
+    first = window().copy()
+    rig.control.remount(1, handling_s=0.0)
+    assert np.abs(window() / first - 1).max() > 1e-3
+    rig.control.mount_sample(functools.partial(gonio.brdf, "lambert", rho=0.99), handling_s=0.0)
+    theta_i, phi_i, theta_r, _ = rig.scene.angles(positions)
+    untextured = rig.scene.coverage(theta_r) * rig.scene.beam_map(theta_r, theta_i, phi_i)
+    np.testing.assert_allclose(window(), window(untextured), rtol=1e-12)  # a uniform flat object
+    rig.control.remount(0, handling_s=0.0)
+    np.testing.assert_allclose(window(), first, rtol=1e-12)

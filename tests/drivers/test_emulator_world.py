@@ -101,3 +101,49 @@ def test_footprint_is_foreshortened_rectangle(theta_r):
     assert cov.sum() == pytest.approx(area, abs=1e-6)
     # Symmetric about the image centre (256, 240) in pixel-edge coordinates.
     assert np.allclose(cov, cov[::-1, ::-1])
+
+
+def _product_cone_average(brdf, theta_i, phi_i, theta_r, phi_r, lamp_sr=0.003, camera_sr=0.0009):
+    """The full 7 x 7 product of the two cone rules, written out."""
+    from drivers.emulator.world import _above_horizon
+
+    ti, pi_, wi = cone_quadrature(theta_i, phi_i, lamp_sr)
+    tr, pr, wr = cone_quadrature(theta_r, phi_r, camera_sr)
+    lit, seen = _above_horizon(ti), _above_horizon(tr)
+    f = np.broadcast_to(brdf(ti[:, None], pi_[:, None], tr[None, :], pr[None, :]), (7, 7))
+    terms = np.where((lit[:, None] > 0) & (seen[None, :] > 0), f * np.cos(np.radians(ti))[:, None], 0.0)
+    return (wi * lit) @ terms @ (wr * seen)
+
+
+def test_sparse_cone_average_agrees_with_the_product_where_the_integrand_is_smooth():
+    from drivers.emulator.world import cone_rule_pairs
+
+    import gonio
+
+    exact = lambda ti, pi, tr, pr: gonio.brdf("oren-nayar-exact", ti, pi, tr, pr, rho=0.9, sigma=30.0)
+    for geometry in [(75.0, 0.0, 40.0, 180.0), (60.0, 0.0, 20.0, 0.0), (45.0, 0.0, 83.6, 25.9), (30.0, 0.0, 10.0, 180.0)]:
+        pairs = cone_rule_pairs(geometry[0], geometry[2], 1.771, 0.97, np.full(7, 1 / 7), np.full(7, 1 / 7))
+        assert len(pairs[2]) == 13  # the sparse combination is the one used here
+        assert cone_averaged_reflectance(exact, *geometry) == pytest.approx(
+            _product_cone_average(exact, *geometry), rel=1e-6)
+
+
+def test_sparse_cone_average_misses_only_products_of_degree_four():
+    # A smooth integrand with strong terms in both cones' offsets: every term of degree <= 3
+    # is integrated exactly, the error is a degree-4 cross term, ~half_l^2 half_c^2 x its size.
+    smooth = lambda ti, pi, tr, pr: (1 + 0.5 * np.sin(np.radians(3 * ti + 2 * pi)) * np.cos(np.radians(4 * tr - pr)))
+    value = cone_averaged_reflectance(smooth, 50.0, 10.0, 20.0, 170.0)
+    product = _product_cone_average(smooth, 50.0, 10.0, 20.0, 170.0)
+    assert value == pytest.approx(product, rel=1e-7)
+    assert value != product  # two different rules, not one rule twice
+
+
+def test_cone_average_uses_the_full_product_near_the_kink_and_the_horizon():
+    import gonio
+
+    approx = lambda ti, pi, tr, pr: gonio.brdf("oren-nayar", ti, pi, tr, pr, rho=0.9, sigma=30.0)
+    # Retro-reflection (theta_i = theta_r, same azimuth): the functional form's kink lies inside
+    # both cones; the sparse combination would be 5e-3 off, the product is used.
+    for geometry in [(75.0, 0.0, 75.0, 0.0), (60.0, 0.0, 58.0, 180.0), (30.0, 0.0, 89.5, 180.0)]:
+        assert cone_averaged_reflectance(approx, *geometry) == pytest.approx(
+            _product_cone_average(approx, *geometry), rel=1e-13)
