@@ -48,7 +48,7 @@ from _common import OUT, machine  # noqa: E402
 
 MODEL, TRUTH, FIXED = "oren-nayar", {"rho": 0.9, "sigma": 30.0}, {"ir_weight": 1.0}
 #: Ensemble sizes of gonio's runs (the default is chosen from these).
-WALKERS = (16, 32, 64, 128, 256)
+WALKERS = (16, 24, 32, 64, 128, 256)
 #: Seeds of each configuration (medians are reported).
 SEEDS = (1, 2, 3)
 

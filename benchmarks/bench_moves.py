@@ -16,7 +16,7 @@ moves and mixtures of them, for 16 to 256 walkers and three seeds each, on four 
   (lab) emulated rig, ``oren-nayar-tabulated`` through the apertures with the rig's seven
   alignment parameters and its stray light free and the calibration per incidence (126
   values, 11 parameters, alignment pairs correlated at 0.96-0.99). Its model costs about
-  0.4 ms per walker, so it runs at 32 walkers only, against a reference of DE (32 walkers
+  0.4 ms per walker, so it runs at 24 and 32 walkers only (22 is emcee's least for 11 parameters), against a reference of DE (32 walkers
   x 20000 steps, burn-in 2000; the stretch move's reference would take hours).
 
 Moves (gonio.fitting.moves): ``stretch`` (emcee's default, the affine-invariant stretch
@@ -47,7 +47,6 @@ move sets only and replaces their rows in the existing moves.json (same referenc
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import subprocess
@@ -70,8 +69,10 @@ SEEDS = (0, 1, 2)
 REFERENCE_WALKERS, REFERENCE_STEPS, REFERENCE_BURN = 256, 20000, 2000
 #: Problems whose reference chain is not the stretch move's default one: (moves, walkers).
 REFERENCE_OF = {"rig": ("de", 32)}
+#: The problems, in the order they run.
+PROBLEMS = ("fig16", "gaussian", "bound", "skewed", "rig")
 #: Problems run at these ensemble sizes only (a costly model).
-WALKERS_OF = {"rig": (32,)}
+WALKERS_OF = {"rig": (24, 32)}
 
 
 def fig16_problem(scratch: Path):
@@ -232,7 +233,7 @@ def chart(summary: list[dict], path: Path) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--problems", default="fig16,gaussian,bound,skewed,rig")
+    parser.add_argument("--problems", default=",".join(PROBLEMS))
     parser.add_argument("--moves", default=",".join(MOVES))
     parser.add_argument("--walkers", default=",".join(map(str, WALKERS)))
     parser.add_argument("--chart-only", action="store_true", help="redraw moves.png from moves.json")
@@ -266,11 +267,12 @@ def main() -> int:
     arviz()  # imported before any run: no import time in the measurements
     load_before = os.getloadavg()[0]
     moves = args.moves.split(",")
+    problems = args.problems.split(",")
     walkers = [int(w) for w in args.walkers.split(",")]
     rows, references = [], {}
     with tempfile.TemporaryDirectory(prefix="gonio-moves-") as scratch:
         others = accuracy_problems()
-        for name in args.problems.split(","):
+        for name in problems:
             if name in ("fig16", "rig"):
                 problem, priors = (fig16_problem if name == "fig16" else rig_problem)(Path(scratch))
             else:
@@ -285,11 +287,14 @@ def main() -> int:
             rows += runs(name, problem, start, priors, ref, moves, WALKERS_OF.get(name, walkers), SEEDS)
     loads = [load_before, os.getloadavg()[0]]
     previous = OUT / "moves.json"
-    if set(moves) != set(MOVES) and previous.exists():  # a partial run: keep the other move sets' rows
+    if previous.exists() and (set(moves) != set(MOVES) or set(problems) != set(PROBLEMS) or args.walkers != ",".join(map(str, WALKERS))):
+        # a partial run: keep the rows and references of the (problem, moves, walkers) it did not run
         import json
 
         kept = json.loads(previous.read_text())
-        rows = [r for r in kept["runs"] if r["moves"] not in moves] + rows
+        ran = {(r["problem"], r["moves"], r["walkers"]) for r in rows}
+        rows = [r for r in kept["runs"] if (r["problem"], r["moves"], r["walkers"]) not in ran] + rows
+        references = {**kept["reference"]["problems"], **references}
         loads = kept["load_average_before_after"] + loads
     summary = summarise(rows)
     with tempfile.TemporaryDirectory(prefix="gonio-moves-") as scratch:

@@ -271,7 +271,7 @@ def fit_dataset(dataset: Dataset, models: str | Sequence[str], *, data_priors: M
     candidates = model_candidates(models, fixed)
     say = announce or (lambda text: None)
     all_priors = {**dict(data_priors or {}), **dict(priors or {})}
-    comparison = None
+    comparison = least_squares = None
     name, fixed = candidates[0]
     if len(candidates) > 1:
         say(f"comparing {len(candidates)} models on {dataset.n} {dataset.quantity} values (least squares)")
@@ -281,10 +281,12 @@ def fit_dataset(dataset: Dataset, models: str | Sequence[str], *, data_priors: M
         chosen = comparison.row(comparison.chosen)
         name, fixed = chosen["model"], dict(chosen["fixed"])
         jitter = comparison.jitter or jitter  # the noise the candidates were compared with, as gonio demo
+        if not options:  # the comparison's fit, made without options, is this fit's least squares
+            least_squares = comparison.fits[comparison.chosen]
     say(f"fitting {name} to {dataset.n} {dataset.quantity} values" + (" (least squares, then MCMC)" if mcmc else ""))
     result = fit(dataset, name, fixed=fixed, priors=all_priors, mcmc=mcmc, jitter=jitter, options=options,
                  n_walkers=n_walkers, max_steps=max_steps, rhat_limit=rhat_limit, seed=seed, progress=progress,
-                 alignment=alignment, stray_light=stray_light)
+                 alignment=alignment, stray_light=stray_light, least_squares=least_squares)
     if comparison is not None:
         result.comparison = comparison.to_dict()
     return result

@@ -460,7 +460,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     fitting.add_argument("--no-jitter", dest="jitter", action="store_const", const="none",
                          help="the same as --jitter none")
     fitting.add_argument("--walkers", type=int, default=None,
-                         help="emcee walkers (default 32, for every model: gonio.fitting.mcmc.default_walkers)")
+                         help="emcee walkers (default 24, for every model with up to 11 free parameters, 2 k + 2 for k above: gonio.fitting.mcmc.default_walkers)")
     fitting.add_argument("--max-steps", type=int, default=20000, help="step limit of each chain (default 20000)")
     fitting.add_argument("--tau-multiple", type=float, default=50.0,
                          help="chain length required, in autocorrelation times (default 50)")

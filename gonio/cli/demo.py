@@ -190,7 +190,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "demo",
         help="measure the paper's wall plaster on the emulated rig, choose and fit a model with MCMC, write the report",
-        description=__doc__.split("\n\n")[0] + " Takes about a minute on two cores. Exit status: 0 converged and "
+        description=__doc__.split("\n\n")[0] + " Takes 20-25 s on two cores. Exit status: 0 converged and "
                     "adequate, 3 chain not converged, 4 model inadequate, 5 noise understated, 2 bad input "
                     "(docs/fitting.md).",
     )
@@ -334,7 +334,7 @@ def fit_demo(reduced, seed: int = 0, quiet: bool = True, realism: str = DEFAULT_
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)  # reported in the result, loudly
         result = fit(dataset, chosen["model"], fixed=chosen["fixed"], priors=priors, seed=seed, progress=progress,
-                     jitter=comparison.jitter or "auto", **errors)
+                     jitter=comparison.jitter or "auto", least_squares=comparison.fits[comparison.chosen], **errors)
     if line is not None and result.mcmc is not None:
         line.update(result.mcmc.n_steps, result.mcmc.n_steps, None, "converged" if result.converged else
                     "step limit reached: NOT converged")

@@ -78,7 +78,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--linearity-correction", action=argparse.BooleanOptionalAction, default=True,
                         help="correct a recording's readings by its camera linearity series (default: yes)")
     parser.add_argument("--walkers", type=int, default=None,
-                        help="number of emcee walkers (default 32, for every model: gonio.fitting.mcmc.default_walkers, chosen by measurement)")
+                        help="number of emcee walkers (default 24, for every model with up to 11 free parameters, 2 k + 2 for k above: gonio.fitting.mcmc.default_walkers, chosen by measurement)")
     parser.add_argument("--max-steps", type=int, default=20000, help="step limit of the chain (default 20000)")
     parser.add_argument("--rhat-limit", type=float, default=1.01,
                         help="largest rank-normalised split R-hat accepted for convergence (default 1.01)")

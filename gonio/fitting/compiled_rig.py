@@ -27,7 +27,8 @@ the Fig 16 recording).  This module computes the same number in one compiled loo
   unit vectors, ``tan((alpha + beta)/2) = (sin a + sin b)/(cos a + cos b)``), floored at 0,
   weighted by the cubature and the lamp sub-ray's ``cos(theta_i)``.
 
-Lambert is the same loop with the coefficients (rho/pi, 0, 0).  The lamp sub-rays depend on
+Lambert is the same loop with the coefficients (rho/pi, 0, 0); the qualitative model (eq 36)
+the same loop with its own shape, ``a + b max(0, cos dphi) sin(alpha) tan(beta)``.  The lamp sub-rays depend on
 the lamp direction only and the camera sub-rays on the camera direction only, so a
 recording's three lamp directions cost 3 x 11 sub-rays per walker, not N x 11.
 
@@ -77,6 +78,8 @@ __all__ = ["CompiledRigRadiance", "rig_radiance", "rig_radiance_table"]
 
 #: The model whose table the compiled loop reads (:func:`rig_radiance_table`).
 TABULATED = "oren-nayar-tabulated"
+#: The model whose shape is eq 36's (:func:`_qualitative`), not eq 33-35's.
+QUALITATIVE = "oren-nayar-qualitative"
 
 _RAD = math.pi / 180.0
 _HALF_PI = 0.5 * math.pi
@@ -180,6 +183,19 @@ def _oren_nayar(t_i: float, cp_i: float, sp_i: float, s_i: float, c_i: float, ta
 
 
 @njit(**JIT_OPTIONS)
+def _qualitative(t_i: float, cp_i: float, sp_i: float, s_i: float, tan_i: float,
+                 t_r: float, cp_r: float, sp_r: float, s_r: float, tan_r: float, a: float, b: float) -> float:
+    """``a + b max(0, cos dphi) sin(alpha) tan(beta)`` of one (lamp, camera) sub-ray pair:
+    the qualitative model, eq 36 (as :func:`gonio.models.oren_nayar.functional._prepare_qualitative`
+    forms it), from the per-direction values of :func:`_oren_nayar`."""
+    cos_dphi = min(max(cp_i * cp_r + sp_i * sp_r, -1.0), 1.0)
+    if cos_dphi <= 0.0:
+        return a
+    sin_alpha, tan_beta = (s_i, tan_r) if t_i >= t_r else (s_r, tan_i)
+    return a + b * cos_dphi * sin_alpha * tan_beta
+
+
+@njit(**JIT_OPTIONS)
 def _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camera_rule, ring, lamp_rays, camera_rays,
                  lamp_cos, camera_cos, w) -> None:
     """The sub-rays of every distinct lamp and camera direction at walker ``w``'s alignment
@@ -202,7 +218,7 @@ def _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camer
 
 @njit(**JIT_OPTIONS)
 def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignment, coefficients,
-                 lamp_rule, camera_rule, ring, weights, compact, out) -> None:
+                 lamp_rule, camera_rule, ring, weights, compact, qualitative, out) -> None:
     """``<f cos theta_i>`` through the apertures at the true geometry of every alignment [1/sr].
 
     Parameters
@@ -214,7 +230,7 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
     alignment : numpy.ndarray
         (W, 5) view_offset, theta_i_offset, phi_i_offset, tilt_x, tilt_y [deg].
     coefficients : numpy.ndarray
-        (W, 3) the model's a, b, c (:func:`_oren_nayar`).
+        (W, 3) the model's a, b, c (:func:`_oren_nayar`; :func:`_qualitative` takes a, b).
     lamp_rule, camera_rule : numpy.ndarray
         (2, 11) cos and sin of each cubature point's angle from its cone's axis (the full
         rule's 7 points, then the compact rule's 4, :func:`_rule`).
@@ -223,6 +239,8 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
         (each rule's summing to 1).
     compact : bool
         Whether the model may take the compact rule (:func:`_rule_range`).
+    qualitative : bool
+        The qualitative model's shape (eq 36, :func:`_qualitative`) instead of eq 33-35's.
     out : numpy.ndarray
         (W, N), written: 0 where a true axis lies below the horizon.
     """
@@ -253,9 +271,15 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
                     c_r = camera_rays[camera, j, 4]
                     if c_r < 0.0:
                         continue
-                    total += weight * weights[j] * _oren_nayar(
-                        t_i, cp_i, sp_i, s_i, c_i, tan_i, camera_rays[camera, j, 0], camera_rays[camera, j, 1],
-                        camera_rays[camera, j, 2], camera_rays[camera, j, 3], c_r, camera_rays[camera, j, 5], a, b, c)
+                    if qualitative:
+                        value = _qualitative(t_i, cp_i, sp_i, s_i, tan_i, camera_rays[camera, j, 0],
+                                             camera_rays[camera, j, 1], camera_rays[camera, j, 2],
+                                             camera_rays[camera, j, 3], camera_rays[camera, j, 5], a, b)
+                    else:
+                        value = _oren_nayar(t_i, cp_i, sp_i, s_i, c_i, tan_i, camera_rays[camera, j, 0],
+                                            camera_rays[camera, j, 1], camera_rays[camera, j, 2],
+                                            camera_rays[camera, j, 3], c_r, camera_rays[camera, j, 5], a, b, c)
+                    total += weight * weights[j] * value
             out[w, n] = total * lamp_cos[lamp] if grazing else total
 
 
@@ -460,7 +484,8 @@ class CompiledRigRadiance:
         else:
             coefficients = np.ascontiguousarray(np.broadcast_to(coefficients, (rows, 3)))
             rig_radiance(self._lamp, self._camera, self._lamp_of, self._camera_of, offsets, coefficients,
-                         self._rules[0], self._rules[1], self._ring, self._weights, self._compact, out)
+                         self._rules[0], self._rules[1], self._ring, self._weights, self._compact,
+                         self.base.name == QUALITATIVE, out)
         if all(np.ndim(v) == 0 for v in (*params.values(), *alignment.values())):
             return out[0]
         return out

@@ -83,11 +83,15 @@ class LaplaceEvidence:
     shape : dict
         Per parameter whose profile is not Gaussian near a bound: ln(profile integral /
         Gaussian integral along it).
+    profiles_skipped : tuple of str
+        Parameters near a bound whose profile was not checked (``laplace_evidence(...,
+        profiles=False)``): ``log_evidence`` then lacks their shape corrections, if any.
     """
 
     raw: float
     truncation: float = 0.0
     shape: dict[str, float] = field(default_factory=dict)
+    profiles_skipped: tuple[str, ...] = ()
 
     @property
     def log_evidence(self) -> float:
@@ -112,8 +116,14 @@ def laplace_log_evidence(problem, least_squares, priors, corrected: bool = True)
     return evidence.log_evidence if corrected else evidence.raw
 
 
-def laplace_evidence(problem, least_squares, priors) -> LaplaceEvidence:
-    """The terms of ln Z (:class:`LaplaceEvidence`) of a fit."""
+def laplace_evidence(problem, least_squares, priors, profiles: bool = True) -> LaplaceEvidence:
+    """The terms of ln Z (:class:`LaplaceEvidence`) of a fit.
+
+    ``profiles=False`` leaves out the shape corrections, whose profiles cost a
+    least-squares fit per node (about 30 a parameter near a bound), and lists the
+    parameters they would have checked in ``profiles_skipped``: for a candidate whose
+    evidence cannot change a comparison's choice (:mod:`gonio.fitting.selection`).
+    """
     names = list(problem.free)
     covariance = np.asarray(least_squares.covariance, float)
     if not np.all(np.isfinite(covariance)):
@@ -134,6 +144,10 @@ def laplace_evidence(problem, least_squares, priors) -> LaplaceEvidence:
     raw = log_posterior + 0.5 * len(names) * math.log(2.0 * math.pi) + 0.5 * log_det
     supports = [_support(problem, priors[n], n) for n in names]
     truncation = _log_mass_inside(mode, covariance, supports)
+    if not profiles:
+        skipped = tuple(n for k, n in enumerate(names)
+                        if _near_bound(mode[k], math.sqrt(covariance[k, k]), supports[k]))
+        return LaplaceEvidence(raw, truncation, {}, skipped)
     shape = {}
     for k, name in enumerate(names):
         try:
@@ -207,7 +221,7 @@ def _shape_correction(problem, least_squares, priors, k: int, covariance: np.nda
     centre = float(least_squares.values[name])
     sd = math.sqrt(covariance[k, k])
     lo, hi = support
-    if not (centre - lo < SHAPE_SDS * sd or hi - centre < SHAPE_SDS * sd):
+    if not _near_bound(centre, sd, support):
         return None
 
     def profile(x: float) -> float:
@@ -223,6 +237,13 @@ def _shape_correction(problem, least_squares, priors, k: int, covariance: np.nda
     integral = sum(_side_integral(profile, centre, edge, sd) for edge in (lo, hi))
     gaussian = math.sqrt(2 * math.pi) * sd * (stats.norm.cdf(hi, centre, sd) - stats.norm.cdf(lo, centre, sd))
     return math.log(integral) - math.log(gaussian) if integral > 0 and gaussian > 0 else None
+
+
+def _near_bound(centre: float, sd: float, support: tuple[float, float]) -> bool:
+    """Whether a bound of ``support`` lies within :data:`SHAPE_SDS` standard deviations of
+    ``centre``, so that the parameter's profile is checked."""
+    lo, hi = support
+    return centre - lo < SHAPE_SDS * sd or hi - centre < SHAPE_SDS * sd
 
 
 def _side_integral(profile, centre: float, edge: float, sd: float) -> float:

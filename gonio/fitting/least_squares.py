@@ -85,6 +85,11 @@ class LeastSquaresResult:
         Parameters whose Gaussian prior entered the fit (a maximum a posteriori fit: the
         values are the posterior mode and the covariance its Laplace approximation;
         ``chi2`` and ``log_likelihood`` remain those of the data alone).
+    table_error : float
+        For a tabulated model: rms of (table - exact) / sigma at ``values``
+        (:func:`gonio.fitting.polish.table_error`), once measured (NaN before); a later
+        polish of the same fit (:func:`gonio.fitting.fit` given a comparison's least
+        squares) reuses it instead of evaluating the exact model again.
     """
 
     values: dict[str, float]
@@ -104,6 +109,7 @@ class LeastSquaresResult:
     degenerate: list[list[str]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     gaussian_priors: tuple[str, ...] = ()
+    table_error: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (NaN written as null by the caller)."""
@@ -125,6 +131,7 @@ class LeastSquaresResult:
             "degenerate": self.degenerate,
             "warnings": self.warnings,
             "gaussian_priors": list(self.gaussian_priors),
+            "table_error": self.table_error,
         }
 
     @classmethod
@@ -138,6 +145,7 @@ class LeastSquaresResult:
             ).reshape(len(kwargs["free"]), len(kwargs["free"]))
         kwargs["stderr"] = {k: (math.nan if v is None else v) for k, v in kwargs["stderr"].items()}
         kwargs["gaussian_priors"] = tuple(kwargs.get("gaussian_priors", ()))
+        kwargs["table_error"] = math.nan if kwargs.get("table_error") is None else float(kwargs["table_error"])
         return cls(**kwargs)
 
 
@@ -289,6 +297,30 @@ def _best_jitter(problem: FitProblem, vector: np.ndarray) -> float:
     return float(found.x) if negative_log_likelihood(found.x) < negative_log_likelihood(0.0) else 0.0
 
 
+def _finite(residuals: np.ndarray) -> np.ndarray:
+    """Residuals with undefined values (normalised data of a black sample) replaced by a
+    large finite one, which least squares moves away from (it cannot take NaN)."""
+    return np.where(np.isfinite(residuals), residuals, 1e10)
+
+
+def _forward_steps(x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Forward-difference steps of a least-squares Jacobian at ``x`` inside [lower, upper].
+
+    scipy's ``2-point`` rule (``least_squares``' default): ``sqrt(eps) max(1, |x|)`` with
+    the sign of ``x`` (+ at 0), turned back where it would leave the bounds and the other
+    side has room, else the larger room; each step is the representable difference
+    ``(x + h) - x``.
+    """
+    h = np.sqrt(np.finfo(float).eps) * np.where(x >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
+    h = (x + h) - x
+    outside = (x + h < lower) | (x + h > upper)
+    room_below, room_above = x - lower, upper - x
+    fits = np.abs(h) <= np.maximum(room_below, room_above)
+    h = np.where(outside & fits, -h, h)
+    h = np.where(~fits, np.where(room_above >= room_below, room_above, -room_below), h)
+    return h
+
+
 def _whitened(problem: FitProblem, vector: np.ndarray) -> np.ndarray:
     """Residuals whitened by the total uncertainty (the extra noise at its value in ``vector``,
     or held fixed)."""
@@ -413,23 +445,33 @@ def fit_least_squares(
 
     def solve(template: np.ndarray, x0: np.ndarray):
         """Least squares of the model parameters, the others held at ``template``."""
-
         def residuals(x: np.ndarray) -> np.ndarray:
             heartbeat.beat()
             vector = template.copy()
             vector[index] = x
-            r = _whitened(problem, vector)
-            if gaussian:
-                r = np.concatenate([r, (x[prior_at] - prior_mean) / prior_sd])
-            # Undefined predictions (normalised data of a black sample) are pushed away
-            # from with a large finite residual; least_squares cannot take NaN.
-            return np.where(np.isfinite(r), r, 1e10)
+            return _finite(_with_priors(_whitened(problem, vector), x))
+
+        def _with_priors(r: np.ndarray, x: np.ndarray) -> np.ndarray:
+            return np.concatenate([r, (x[..., prior_at] - prior_mean) / prior_sd], axis=-1) if gaussian else r
+
+        def jacobian(x: np.ndarray) -> np.ndarray:
+            """Forward differences of :func:`residuals`, the point and every step in one
+            batch (all through the same whitening, so that its rounding cancels)."""
+            heartbeat.beat()
+            x = np.asarray(x, float)
+            steps = _forward_steps(x, lower, upper)
+            vectors = np.repeat(template[None, :], len(x) + 1, axis=0)
+            vectors[:, index] = x
+            vectors[1:, index] += np.diag(steps)
+            rows = _finite(_with_priors(problem.residuals_batch(vectors), vectors[:, index]))
+            return ((rows[1:] - rows[0]) / steps[:, None]).T
 
         if not np.all(np.isfinite(residuals(x0))):
             return None
         from scipy import optimize
 
-        return optimize.least_squares(residuals, x0, bounds=(lower, upper), x_scale="jac", method="trf")
+        jac = jacobian if not problem.jitter else "2-point"
+        return optimize.least_squares(residuals, x0, jac=jac, bounds=(lower, upper), x_scale="jac", method="trf")
 
     for point in _start_points(problem, start, n_starts, rng):
         heartbeat.start += 1

@@ -60,23 +60,29 @@ __all__ = ["DEFAULT_WALKERS", "SERIAL_WALKERS", "default_walkers", "VectorisedSt
 #: broadcast their parameters or are linear in their coefficients), chosen by measurement:
 #: the run ends when every walker's chain has an R-hat below 1.01, which takes about 100
 #: autocorrelation times whatever the ensemble, so the time to convergence is least for a
-#: small ensemble whose steps cost little; with the DE move, 32 walkers converge fastest
-#: on the Fig 16 recording and the near-Gaussian problem (16 need more steps, 64 and more
-#: cost more per step) with a bulk ESS of about 2,500 (benchmarks/bench_moves.py,
-#: docs/fitting.md "Performance").
-DEFAULT_WALKERS = 32
+#: small ensemble whose steps cost little. With the default moves (Laplace + DE) 24 walkers
+#: take as many steps as 32 or fewer on all five problems of benchmarks/bench_moves.py
+#: (medians of 3 seeds: Fig 16 400 against 500, near-Gaussian 300 and 300, bound 1000 and
+#: 1000, skewed 500 and 600, the demo's 11-parameter rig fit 800 and 800, 3.8 s against
+#: 5.2 s), each step a quarter cheaper where the model dominates it; 16 need more steps
+#: where they are allowed at all (emcee needs twice the free parameters), and their 95 %
+#: endpoints stray further (docs/fitting.md "Performance"). More parameters than 11 get
+#: :func:`default_walkers`' 2 k + 2.
+DEFAULT_WALKERS = 24
 #: Most memory a chain may take at ``max_steps`` [bytes]: walkers x steps x (parameters
-#: + 1) x 8 bytes (the defaults: 32 walkers, 20,000 steps, 11 parameters: 61 MB).
+#: + 1) x 8 bytes (the defaults: 24 walkers, 20,000 steps, 11 parameters: 46 MB).
 CHAIN_MEMORY_LIMIT = 2 * 2**30
-#: Default ensemble size where the model is evaluated one walker at a time (a step costs
-#: in proportion to the walkers, so more of them only lengthen the run).
-SERIAL_WALKERS = 32
+#: Default ensemble size where the model is evaluated one walker at a time or a walker at
+#: a time's cost (a step costs in proportion to the walkers, so more of them only lengthen
+#: the run; the demo's rig fit above, whose compiled aperture loop costs 0.2 ms a walker).
+SERIAL_WALKERS = 24
 
 
 def default_walkers(problem: FitProblem) -> int:
     """:data:`DEFAULT_WALKERS` when ``problem`` evaluates all walkers at once, else
-    :data:`SERIAL_WALKERS`."""
-    return DEFAULT_WALKERS if problem.vectorised else SERIAL_WALKERS
+    :data:`SERIAL_WALKERS`; at least 2 k + 2 for k free parameters (emcee's moves need
+    twice k, and two more keep each half-ensemble larger than k)."""
+    return max(DEFAULT_WALKERS if problem.vectorised else SERIAL_WALKERS, 2 * problem.ndim + 2)
 
 #: Growth of the chain between autocorrelation estimates (a fraction of its length): the
 #: stopping rule is met at most this much later than with a check every ``check_every`` steps.

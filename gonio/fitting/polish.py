@@ -23,7 +23,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["POLISH_LIMIT", "Polish", "exact_reference", "table_error", "polish", "shifted_chain"]
+__all__ = ["POLISH_LIMIT", "Polish", "exact_reference", "table_error", "with_table_error", "polish", "shifted_chain"]
 
 #: Table error (rms, in units of the data's uncertainties) above which a fit is polished.
 POLISH_LIMIT = 0.1
@@ -74,6 +74,27 @@ def table_error(problem, exact_problem, values: Mapping[str, float]) -> float:
     return float(np.sqrt(np.mean((difference / problem.dataset.sigma) ** 2)))
 
 
+def with_table_error(problem, least_squares, build_problem):
+    """``least_squares`` with its :attr:`~gonio.fitting.least_squares.LeastSquaresResult.table_error`
+    measured: itself for a model read from no table or an error already measured, else a
+    copy carrying :func:`table_error` at its optimum (one evaluation of the exact model at
+    every value's geometry).
+
+    Parameters
+    ----------
+    problem : FitProblem
+        The tabulated model's problem.
+    least_squares : LeastSquaresResult
+        Its fit.
+    build_problem : callable
+        ``build_problem(model_name)`` -> the same problem with another model.
+    """
+    exact = exact_reference(problem.base_model.name)
+    if exact is None or math.isfinite(least_squares.table_error):
+        return least_squares
+    return replace(least_squares, table_error=table_error(problem, build_problem(exact), least_squares.values))
+
+
 def polish(problem, least_squares, priors, build_problem) -> Polish | None:
     """The exact model's optimum, when the table's error matters (module docstring).
 
@@ -82,7 +103,8 @@ def polish(problem, least_squares, priors, build_problem) -> Polish | None:
     problem : FitProblem
         The tabulated model's problem.
     least_squares : LeastSquaresResult
-        Its fit.
+        Its fit; its ``table_error``, where already measured (:func:`with_table_error`),
+        is used instead of evaluating the exact model again.
     priors : mapping of Prior
         The fit's priors.
     build_problem : callable
@@ -99,10 +121,10 @@ def polish(problem, least_squares, priors, build_problem) -> Polish | None:
     exact = exact_reference(problem.base_model.name)
     if exact is None:
         return None
-    exact_problem = build_problem(exact)
-    error = table_error(problem, exact_problem, least_squares.values)
+    error = with_table_error(problem, least_squares, build_problem).table_error
     if not error > POLISH_LIMIT:
         return None
+    exact_problem = build_problem(exact)
     fitted = fit_least_squares(exact_problem, start=least_squares.values, n_starts=1, priors=priors)
     shift = {name: fitted.values[name] - least_squares.values[name] for name in problem.free}
     return Polish(exact, error, fitted, shift, exact_problem)

@@ -543,6 +543,23 @@ class FitProblem:
             return np.full(difference.shape, np.nan)
         return self.whiten(difference)[0]
 
+    def residuals_batch(self, vectors: Any) -> np.ndarray:
+        """:meth:`residuals` of every row of ``vectors`` (shape (W, n_free), inside the
+        physical bounds) in one model evaluation, shape (W, N): a least-squares Jacobian's
+        differences at once (:func:`gonio.fitting.least_squares.fit_least_squares`). Equal
+        to the one-by-one values to rounding; a row whose prediction is undefined is NaN.
+        """
+        values = self.batch_values(vectors)
+        difference = self._batch_prediction(values) - self.dataset.value
+        self.evaluations += difference.shape[0] - 1
+        if not self.noise.correlated:
+            return difference / self.dataset.sigma
+        finite = np.all(np.isfinite(difference), axis=1)
+        out = np.full(difference.shape, np.nan)
+        if finite.any():
+            out[finite] = self.noise.whiten_rows(difference[finite])
+        return out
+
     def log_likelihood(self, vector: Any) -> float:
         """Gaussian log-likelihood of the data (with the extra noise when it is a parameter).
 

@@ -58,8 +58,12 @@ CHAIN_FILE = "chain.npz"
 COVARIANCE_FILE = "covariance.npz"
 #: The version of result.json: 2 keeps the covariance in :data:`COVARIANCE_FILE`.
 RESULT_FORMAT_VERSION = 2
-#: Largest number of posterior draws (walkers x steps) in an InferenceData / posterior.nc.
-INFERENCE_DRAWS = 8000
+#: Largest number of posterior draws (walkers x steps) in an InferenceData / posterior.nc:
+#: Stan's default (4 chains x 1000 draws), enough for PSIS-LOO, whose Pareto-k threshold
+#: min(1 - 1/log10(S), 0.7) is 0.7 for any S above 2,200 draws (Vehtari et al. 2024,
+#: "Pareto smoothed importance sampling", JMLR 25); every further draw costs one
+#: prediction of every value when the result is saved.
+INFERENCE_DRAWS = 4000
 #: Most replicated datasets in posterior.nc's posterior_predictive group (the last steps of
 #: the chain, every walker).
 PREDICTIVE_DRAWS = 1000
@@ -424,8 +428,10 @@ class FitResult:
     def _predict_rig_draws(self, model, draws: np.ndarray, geometry: list[np.ndarray]) -> np.ndarray:
         """:meth:`_predict_draws` of a fit with rig errors (alignment, stray light): the draws
         as columns of one prediction of that rig per chunk (RigPrediction, as predict_quantity)."""
-        chunk = max(1, _PREDICTIVE_ELEMENTS // max(geometry[0].size * 49, 1))  # 49 aperture sub-rays
         rig = RigPrediction(model, self.dataset.quantity, geometry, self.options, self.dataset.metadata, compiled=True)
+        # the numpy path holds every value's 49 aperture sub-rays per draw, the compiled loop none
+        rays = 1 if rig.compiled else 49
+        chunk = max(1, _PREDICTIVE_ELEMENTS // max(geometry[0].size * rays, 1))
         base = dict(self.least_squares.values)
         out = np.empty((draws.shape[0], geometry[0].size))
         for start in range(0, draws.shape[0], chunk):

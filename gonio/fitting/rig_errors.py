@@ -307,7 +307,8 @@ class RigPrediction:
     compiled : bool
         Evaluate misaligned geometries with the compiled kernel
         (:mod:`gonio.fitting.compiled_rig`) when the model is one it knows (``oren-nayar``,
-        ``lambert``, ``oren-nayar-tabulated``) seen through the rig's apertures: the same values to rounding, about
+        ``lambert``, ``oren-nayar-qualitative``, ``oren-nayar-tabulated``, with their default
+        options) seen through the rig's apertures: the same values to rounding, about
         15 times faster, after loading numba (worth it for a fit, which evaluates the rig
         thousands of times; not for one prediction).
     """
@@ -370,6 +371,11 @@ class RigPrediction:
             return 1.0 / ((true / recorded) @ self.value_weights.T)
         return 1.0 / np.sum(weights * true / recorded, axis=-1, keepdims=True)
 
+    @property
+    def compiled(self) -> bool:
+        """Whether misaligned geometries go through the compiled kernel (:mod:`gonio.fitting.compiled_rig`)."""
+        return self._kernel is not None
+
     def _compiled_radiance(self, which: str, alignment: Mapping[str, Any], params: Mapping[str, Any]) -> np.ndarray:
         """The compiled ``<f cos theta_i>`` at the true geometry of the recorded ``which``
         ('data', 'normal' view or 'reference' standard) geometries [1/sr]."""
@@ -427,11 +433,15 @@ class RigPrediction:
 def _kernel_model(model: Model, options: Mapping[str, Any], apertures) -> tuple[Model, tuple[float, float]] | None:
     """(base model, apertures) when ``model`` is a model of the compiled kernel averaged over
     the dataset's apertures (``NAME@aperture``, :func:`gonio.fitting.problem.evaluated_model`)
-    without options; else None."""
+    with its default options (the kernel knows no others, e.g. the qualitative model's
+    ``variant`` "eq36"); else None."""
     name, _, through = model.name.partition("@")
-    if through != "aperture" or name not in COMPILED_MODELS or options or not apertures:
+    if through != "aperture" or name not in COMPILED_MODELS or not apertures:
         return None
-    return models.get(name), (float(apertures[0]), float(apertures[1]))
+    base = models.get(name)
+    if options and dict(options) != base.resolve({})[1]:
+        return None
+    return base, (float(apertures[0]), float(apertures[1]))
 
 
 def is_identity(alignment: Mapping[str, Any]) -> bool:

@@ -44,8 +44,11 @@ while another passes, so its evidence cannot change the choice: where its Laplac
 approximation is undefined its evidence is not sampled (``evidence_method`` "not needed",
 "-" in the table; on the lab rig's demo the qualitative model's sequential Monte Carlo,
 through the numpy aperture path at a reduced chi-square near 1,400, took more than twenty
-minutes of a comparison that is otherwise about fifteen seconds). Only when no candidate
-passes, and the best by evidence is shown, are those evidences sampled too. Only where
+minutes of a comparison that is otherwise about fifteen seconds), and where it would need
+the profiles of its shape corrections (a parameter near a bound: about 30 least-squares
+fits each: 1.6-1.8 s for each of two failing candidates of the demo's comparison, which
+took 6.8 s) it is not computed either. Only when no candidate passes, and the best by evidence is shown, are
+those evidences computed in full. Only where
 sampling fails as well does the rule use Delta BIC / 2, which approximates -Delta ln Z for
 large n, naming the candidate.
 
@@ -115,6 +118,10 @@ class ModelComparison:
         Why.
     jitter : str or None
         The extra-noise term every candidate was compared with.
+    fits : dict
+        Per label, the candidate's own least-squares fit (its model's, before any polish
+        with the exact model; with the table's error measured where it has one), which
+        :func:`gonio.fitting.fit` takes as ``least_squares`` instead of fitting again.
     """
 
     rows: list[dict[str, Any]]
@@ -185,7 +192,7 @@ def comparison_text(comparison: Mapping[str, Any]) -> str:
             lines.append(f"note: {row['label']}: {name} is undetermined, only {name} x scale is (relative radiance "
                          f"without a calibration prior); its evidence integrates over the product")
     lines.append("lnZ by: Laplace = corrected Laplace approximation; SMC+-error = sequential Monte Carlo, where "
-                 "Laplace has no Gaussian to expand" + ("; - = not sampled: the candidate fails the goodness-of-fit "
+                 "Laplace has no Gaussian to expand" + ("; - = not computed: the candidate fails the goodness-of-fit "
                  "test, so its evidence cannot change the choice" if any(r["evidence_method"] == NOT_NEEDED
                                                                         for r in comparison["rows"]) else ""))
     lines.append(f"chosen: {chosen} ({comparison['reason']})")
@@ -313,7 +320,7 @@ def compare_models(
     if not any(r["verdict"] in _passing(bool(noise)) for r in rows):  # the best of all is shown: every evidence
         for row in rows:
             if row["evidence_method"] == NOT_NEEDED:
-                row.update(_sampled_evidence(*deferred[row["label"]]))
+                row.update(_evidence_terms(*deferred[row["label"]]))
     use_evidence = _annotate_deltas(rows)
     chosen, reason = _choose(rows, threshold, use_evidence, accept_understated=bool(noise))
     # best first; a candidate whose evidence was not needed after those with one, by BIC
@@ -333,26 +340,27 @@ def _passing(accept_understated: bool) -> tuple[str, ...]:
 
 
 def _fit_candidates(dataset, pairs, n_starts, priors, jitter, alignment, stray_light):
-    """The comparison's row and least-squares fit of every candidate, by label, and the
-    (problem, priors) of each whose evidence was left unsampled."""
+    """The comparison's row and own least-squares fit of every candidate, by label, and the
+    (problem, least squares, priors) it is judged by of each whose evidence was left
+    uncomputed."""
     rows, fits, deferred = [], {}, {}
     for name, fixed in pairs:
-        row, ls, problem, candidate_priors = _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment,
-                                                            stray_light)
+        row, own, judged = _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, stray_light)
         rows.append(row)
-        fits[row["label"]] = ls
+        fits[row["label"]] = own
         if row["evidence_method"] == NOT_NEEDED:
-            deferred[row["label"]] = (problem, candidate_priors)
+            deferred[row["label"]] = judged
     return rows, fits, deferred
 
 
 def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, stray_light):
-    """Fit one candidate by least squares: its row of the comparison, the fit, and the
-    problem and priors its evidence is computed with."""
+    """Fit one candidate by least squares: its row of the comparison, its own model's fit
+    (:attr:`ModelComparison.fits`), and the problem, fit and priors it is judged by (the
+    exact model's where a table's fit was polished)."""
     from .adequacy import assess
     from .least_squares import fit_least_squares
     from .mcmc import resolve_priors
-    from .polish import polish
+    from .polish import polish, with_table_error
     from .problem import FitProblem
 
     def problem_of(model: str) -> FitProblem:
@@ -360,7 +368,7 @@ def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, st
 
     problem = problem_of(name)
     given = {k: v for k, v in problem.priors_with_defaults(priors).items() if k in problem.free}
-    ls = fit_least_squares(problem, n_starts=n_starts, priors=given)
+    ls = own = with_table_error(problem, fit_least_squares(problem, n_starts=n_starts, priors=given), problem_of)
     polished = polish(problem, ls, given, problem_of)
     if polished is not None:  # the table's error matters: judge the candidate by its exact model
         problem, ls = polished.problem, replace(polished.least_squares,
@@ -385,7 +393,7 @@ def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, st
         "values": ls.values,
         "warnings": ls.warnings,
     }
-    return row, ls, problem, candidate_priors
+    return row, own, (problem, ls, candidate_priors)
 
 
 def _evidence_terms(problem, least_squares, priors, sample: bool = True) -> dict[str, Any]:
@@ -398,16 +406,19 @@ def _evidence_terms(problem, least_squares, priors, sample: bool = True) -> dict
     by the same quantity, unless ``sample`` is false (a candidate that fails the
     goodness-of-fit test: :data:`NOT_NEEDED`, module docstring). ``evidence_method`` says
     which, ``evidence_error`` the estimate's standard error (0 for Laplace, a
-    deterministic approximation).
+    deterministic approximation). A failing candidate's profiles (the shape corrections,
+    about 30 least-squares fits a parameter near a bound) are not computed either: its
+    evidence is then :data:`NOT_NEEDED` too, and computed in full only if no candidate
+    passes.
     """
-    laplace = laplace_evidence(problem, least_squares, priors)
+    laplace = laplace_evidence(problem, least_squares, priors, profiles=sample)
     terms = {"log_evidence": laplace.log_evidence, "log_evidence_laplace": laplace.raw,
              "evidence_truncation": laplace.truncation, "evidence_shape": dict(laplace.shape),
              "evidence_method": "laplace", "evidence_error": 0.0}
-    if math.isfinite(laplace.log_evidence):
+    if math.isfinite(laplace.log_evidence) and not laplace.profiles_skipped:
         return terms
     if not sample:
-        return {**terms, "evidence_method": NOT_NEEDED, "evidence_error": math.nan}
+        return {**terms, "log_evidence": math.nan, "evidence_method": NOT_NEEDED, "evidence_error": math.nan}
     return {**terms, **_sampled_evidence(problem, priors)}
 
 

@@ -10,7 +10,7 @@ from gonio.models import Model
 from .csv_table import ASSUMED_SIGMA, data_notes
 from .dataset import Dataset
 from .adequacy import assess
-from .least_squares import fit_least_squares
+from .least_squares import LeastSquaresResult, fit_least_squares
 from .mcmc import resolve_priors, sample_posterior
 from .polish import polish, shifted_chain
 from .priors import Prior
@@ -46,6 +46,7 @@ def fit(
     stray_light: bool = False,
     polish_table: bool = True,
     blas_threads: int | None = BLAS_THREADS,
+    least_squares: LeastSquaresResult | None = None,
 ) -> FitResult:
     """Fit a registered model to a dataset: least squares, then (optionally) MCMC.
 
@@ -96,6 +97,12 @@ def fit(
         and takes the cores other work needs, and a product's rounding, so the chain,
         depends on the thread count; with one thread the same seed and data give the same
         chain on any machine (docs/fitting.md, "Performance").
+    least_squares : LeastSquaresResult, optional
+        This fit's least squares, already made on the same dataset with the same priors
+        (a comparison's, :attr:`gonio.fitting.ModelComparison.fits`): used as it is
+        instead of fitting again, with its measured table error (:mod:`gonio.fitting.polish`).
+        Its free parameters must be the fit's (with ``jitter="auto"``, those of the fit
+        without or with ``rel_jitter``).
 
     Returns
     -------
@@ -118,16 +125,16 @@ def fit(
         return _fit(dataset, model, fixed=fixed, priors=priors, mcmc=mcmc, jitter=jitter, options=options, start=start,
                     n_walkers=n_walkers, max_steps=max_steps, tau_multiple=tau_multiple, rhat_limit=rhat_limit,
                     seed=seed, progress=progress, alignment=alignment, stray_light=stray_light,
-                    polish_table=polish_table)
+                    polish_table=polish_table, given=least_squares)
 
 
 def _fit(dataset, model, *, fixed, priors, mcmc, jitter, options, start, n_walkers, max_steps, tau_multiple,
-         rhat_limit, seed, progress, alignment, stray_light, polish_table) -> FitResult:
+         rhat_limit, seed, progress, alignment, stray_light, polish_table, given) -> FitResult:
     """:func:`fit`'s work, with its BLAS threads set."""
     def problem_of(name: str | Model, noise: str | None) -> FitProblem:
         return FitProblem(name, dataset, fixed, options, noise, alignment, stray_light)
 
-    problem, least_squares, all_priors, flags = _least_squares(problem_of, model, jitter, priors, start, seed)
+    problem, least_squares, all_priors, flags = _least_squares(problem_of, model, jitter, priors, start, seed, given)
     validity = check_validity(problem, least_squares, _other_problem(problem, fixed, alignment, stray_light))
     flags += regime_flags(problem, all_priors)
     polished = polish(problem, least_squares, all_priors, lambda name: problem_of(name, problem.jitter)) \
@@ -164,16 +171,35 @@ def _other_problem(problem: FitProblem, fixed, alignment, stray_light) -> Callab
     return build
 
 
-def _least_squares(problem_of, model, jitter, priors, start, seed):
+def _least_squares(problem_of, model, jitter, priors, start, seed, given=None):
     """The least-squares fit, redone with ``rel_jitter`` when ``jitter="auto"`` and the verdict
-    is "noise understated": (problem, least squares, priors, flags)."""
+    is "noise understated": (problem, least squares, priors, flags). ``given`` (:func:`fit`'s
+    ``least_squares``) stands in for the fit of the problem whose free parameters it has."""
+    if given is not None:
+        noises = (None, "relative") if jitter == AUTO else (jitter,)
+        expected = [list(problem_of(model, noise).free) for noise in noises]
+        if list(given.free) not in expected:
+            raise ValueError(f"least_squares: its free parameters {list(given.free)} are not those of this fit "
+                             f"({' or '.join(map(str, expected))}); pass the least squares of the same model, fixed "
+                             "parameters, rig errors and noise term")
+
+    def solve(problem: FitProblem, all_priors) -> LeastSquaresResult:
+        if given is not None and tuple(given.free) == tuple(problem.free):
+            return given
+        return fit_least_squares(problem, start=start, seed=seed, priors=all_priors)
+
+    return _noise_and_fit(problem_of, model, jitter, priors, solve)
+
+
+def _noise_and_fit(problem_of, model, jitter, priors, solve):
+    """:func:`_least_squares` with ``solve(problem, priors)`` making each least-squares fit."""
     if jitter == AUTO and problem_of(model, None).dataset.metadata.get(ASSUMED_SIGMA):  # nothing stated to judge
         problem = problem_of(model, "relative")
         all_priors = problem.priors_with_defaults(priors)
-        return problem, fit_least_squares(problem, start=start, seed=seed, priors=all_priors), all_priors, []
+        return problem, solve(problem, all_priors), all_priors, []
     problem = problem_of(model, None if jitter == AUTO else jitter)
     all_priors = problem.priors_with_defaults(priors)
-    least_squares = fit_least_squares(problem, start=start, seed=seed, priors=all_priors)
+    least_squares = solve(problem, all_priors)
     if jitter != AUTO:
         return problem, least_squares, all_priors, []
     verdict = assess(problem, least_squares)
@@ -184,4 +210,4 @@ def _least_squares(problem_of, model, jitter, priors, start, seed):
             "those of the data's real scatter")
     problem = problem_of(model, "relative")
     all_priors = problem.priors_with_defaults(priors)
-    return problem, fit_least_squares(problem, start=start, seed=seed, priors=all_priors), all_priors, [flag]
+    return problem, solve(problem, all_priors), all_priors, [flag]

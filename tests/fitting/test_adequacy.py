@@ -171,7 +171,12 @@ def test_posterior_exports_to_arviz_and_offers_psis_loo(tmp_path):
     result.save(tmp_path / "fit")
     idata = az.from_netcdf(tmp_path / "fit" / "posterior.nc")
     m = result.mcmc
-    kept = m.chain[m.burn_in :: m.thin]
+    from gonio.fitting.results import INFERENCE_DRAWS
+
+    # thinned further where the chain holds more than INFERENCE_DRAWS draws
+    thin = max(m.thin, math.ceil((m.n_steps - m.burn_in) / (INFERENCE_DRAWS // m.n_walkers)))
+    kept = m.chain[m.burn_in :: thin]
+    assert kept.size // 2 <= INFERENCE_DRAWS
     assert idata.posterior["rho"].shape == (m.n_walkers, kept.shape[0])
     np.testing.assert_allclose(idata.posterior["k"].values.T, kept[:, :, 1])
     assert idata.log_likelihood["y"].shape[-1] == data.n

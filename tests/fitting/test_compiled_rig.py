@@ -53,6 +53,7 @@ def _numpy_path(model: str, geometry, params, alignment) -> np.ndarray:
     ("oren-nayar", {"rho": 0.9, "sigma": 30.0, "ir_weight": 1.0}),
     ("oren-nayar", {"rho": 0.3, "sigma": 85.0, "ir_weight": 0.0}),  # eq 33's floor at 0 acts (forward grazing)
     ("lambert", {"rho": 0.7}),
+    ("oren-nayar-qualitative", {"rho": 0.8, "sigma": 25.0}),  # eq 36's shape
     ("oren-nayar-tabulated", {"rho": 0.9, "sigma": 30.0}),  # the exact model's table
     ("oren-nayar-tabulated", {"rho": 0.5, "sigma": 60.0}),
 ])
@@ -94,8 +95,8 @@ def test_the_tabulated_model_at_sigma_zero_is_lambert_in_both_paths():
 
 
 def test_other_models_are_refused():
-    with pytest.raises(ValueError, match="oren-nayar-qualitative"):
-        CompiledRigRadiance(gonio.models.get("oren-nayar-qualitative"), _geometry(), APERTURES)
+    with pytest.raises(ValueError, match="minnaert"):
+        CompiledRigRadiance(gonio.models.get("minnaert"), _geometry(), APERTURES)
 
 
 def _dataset(quantity: str) -> Dataset:
@@ -130,6 +131,19 @@ def test_fits_with_free_alignment_take_the_compiled_path_and_the_same_likelihood
     assert free._rig._kernel is not None and fixed._rig._kernel is None  # a fixed alignment: numpy
     vector = [0.9, 30.0, 2.0, 0.1, -0.2]
     assert free.log_likelihood(vector) == pytest.approx(fixed.log_likelihood(vector[:3]), rel=1e-12)
+
+
+def test_the_qualitative_model_takes_the_compiled_path_with_its_default_variant_only():
+    """The loop knows eq 36 with its constant 0.33 (the default ``variant``); footnote 11's
+    0.57 goes through the numpy path, and both give the fit's likelihood."""
+    dataset = _dataset("radiance")
+    default = FitProblem("oren-nayar-qualitative", dataset, alignment="tilt_x")
+    footnote = FitProblem("oren-nayar-qualitative", dataset, alignment="tilt_x", options={"variant": "footnote11"})
+    assert default._rig._kernel is not None and footnote._rig._kernel is None
+    fixed = FitProblem("oren-nayar-qualitative", dataset, {"tilt_x": 0.3})
+    vector = [0.8, 25.0, 2.0, 0.3]
+    assert default.log_likelihood(vector) == pytest.approx(fixed.log_likelihood(vector[:3]), rel=1e-12)
+    assert footnote.log_likelihood(vector) != pytest.approx(default.log_likelihood(vector), rel=1e-6)
 
 
 def test_the_compiled_loop_chooses_the_aperture_rule_the_numpy_path_chooses():

@@ -166,3 +166,60 @@ def test_a_refractive_index_is_fitted_from_starts_inside_its_one_sided_range(mod
     result = fit_least_squares(problem, n_starts=12, seed=1)
     assert result.values["n"] > 1.0
     assert result.chi2 / result.dof < 3.0
+
+
+def test_forward_steps_stay_inside_the_bounds():
+    """scipy's 2-point steps: sqrt(eps) max(1, |x|) with the sign of x, turned back at a
+    bound, the larger room where neither side has the step."""
+    from gonio.fitting.least_squares import _forward_steps
+
+    eps = math.sqrt(np.finfo(float).eps)
+    x = np.array([0.5, -3.0, 1.0, 0.0])
+    lower = np.array([0.0, -10.0, 0.0, 0.0])
+    upper = np.array([1.0, 10.0, 1.0, 1e-9])
+    steps = _forward_steps(x, lower, upper)
+    assert steps[0] == pytest.approx(eps) and steps[1] == pytest.approx(-3.0 * eps)
+    assert steps[2] == pytest.approx(-eps)  # at the upper bound: backwards
+    assert steps[3] == 1e-9  # no room for the step on either side: the larger room
+    assert np.all((x + steps >= lower) & (x + steps <= upper))
+
+
+@pytest.mark.parametrize("correlated", [False, True])
+def test_batched_residuals_equal_the_one_by_one_values(correlated):
+    data = synthetic_dataset("oren-nayar", {"rho": 0.8, "sigma": 25.0}, 0.01, seed=3)
+    if correlated:
+        covariance = 0.7 * np.diag(data.sigma**2) + 0.3 * np.outer(data.sigma, data.sigma)
+        data = Dataset(data.theta_i, data.phi_i, data.theta_r, data.phi_r, data.value, data.sigma,
+                       covariance=covariance)
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0})
+    vectors = np.array([[0.8, 25.0], [0.7, 10.0], [0.9, 40.0]])
+    rows = problem.residuals_batch(vectors)
+    for vector, row in zip(vectors, rows):
+        np.testing.assert_allclose(row, problem.residuals(vector), rtol=1e-10, atol=1e-12)
+
+
+def test_the_batched_jacobian_reaches_the_optimum_scipy_s_reaches():
+    """The least squares' Jacobian in one batch gives the optimum, errors and chi-square of
+    scipy's own 2-point differences (independent and correlated data, a Gaussian prior)."""
+    import scipy.optimize
+
+    from gonio.fitting.priors import Normal
+
+    data = synthetic_dataset("oren-nayar", {"rho": 0.8, "sigma": 25.0}, 0.01, seed=5)
+    covariance = 0.8 * np.diag(data.sigma**2) + 0.2 * np.outer(data.sigma, data.sigma)
+    correlated = Dataset(data.theta_i, data.phi_i, data.theta_r, data.phi_r, data.value, data.sigma,
+                         covariance=covariance)
+    for dataset in (data, correlated):
+        problem = FitProblem("oren-nayar", dataset, {"ir_weight": 1.0})
+        priors = {"rho": Normal(0.8, 0.05)}
+        batched = fit_least_squares(problem, priors=priors)
+        real = scipy.optimize.least_squares
+        try:
+            scipy.optimize.least_squares = lambda *a, **k: real(*a, **{**k, "jac": "2-point"})
+            reference = fit_least_squares(problem, priors=priors)
+        finally:
+            scipy.optimize.least_squares = real
+        for name in problem.free:
+            assert batched.values[name] == pytest.approx(reference.values[name], abs=1e-4 * reference.stderr[name])
+            assert batched.stderr[name] == pytest.approx(reference.stderr[name], rel=1e-4)
+        assert batched.chi2 == pytest.approx(reference.chi2, rel=1e-8)

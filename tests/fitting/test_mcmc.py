@@ -183,6 +183,21 @@ def test_default_ensemble_size_follows_the_likelihood():
     assert default_walkers(FitProblem("oren-nayar-tabulated", data)) == SERIAL_WALKERS
 
 
+def test_default_ensemble_keeps_two_walkers_more_than_twice_the_parameters():
+    """emcee's moves need at least twice as many walkers as free parameters: a model with
+    the rig's errors as parameters beyond 11 gets 2 k + 2."""
+    from gonio.fitting import FitProblem
+    from gonio.fitting.mcmc import DEFAULT_WALKERS, default_walkers
+
+    from .synthetic import synthetic_dataset
+
+    data = synthetic_dataset("oren-nayar", {"rho": 0.9, "sigma": 30.0}, 0.01)
+    small = FitProblem("oren-nayar", data, {"ir_weight": 1.0}, alignment="all")
+    large = FitProblem("oren-nayar+torrance-sparrow", data, alignment="all", stray_light=True)
+    assert small.ndim <= 11 and default_walkers(small) == DEFAULT_WALKERS
+    assert large.ndim > 11 and default_walkers(large) == 2 * large.ndim + 2
+
+
 def test_vectorised_stretch_move_is_emcees_stretch_move():
     """Same proposals, same acceptance rule, same random stream: the chain equals emcee's
     own StretchMove to the last bit (only the loops over walkers are vectorised)."""

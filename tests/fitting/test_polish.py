@@ -8,7 +8,7 @@ import pytest
 
 from gonio.fitting import Dataset, fit
 from gonio.fitting import polish as polish_module
-from gonio.fitting.problem import predict_quantity
+from gonio.fitting.problem import FitProblem, predict_quantity
 
 from .synthetic import in_plane_geometry
 
@@ -52,3 +52,27 @@ def test_the_posterior_moves_with_the_optimum():
     for name, truth in TRUTH.items():
         assert result.posterior["p2_5"][name] < truth < result.posterior["p97_5"][name], name
     assert result.posterior["median"]["rho"] == pytest.approx(result.least_squares.values["rho"], abs=2e-5)
+
+
+def test_a_comparison_s_fit_is_reused_with_its_table_error(monkeypatch):
+    """``fit(least_squares=...)`` takes a comparison's least squares as they are: no second
+    least-squares fit, no second evaluation of the exact model for the table's error, and
+    the same result as fitting again; a fit of other parameters is refused."""
+    from gonio.fitting import compare_models
+    from gonio.fitting import workflow
+
+    data = _exact_data(3e-3)
+    comparison = compare_models(data, ["lambert", "oren-nayar-tabulated"])
+    given = comparison.fits["oren-nayar-tabulated"]
+    assert given.table_error == pytest.approx(polish_module.table_error(
+        FitProblem("oren-nayar-tabulated", data), FitProblem("oren-nayar-exact", data), given.values))
+    again = fit(data, "oren-nayar-tabulated", mcmc=False, jitter=False)
+    calls = []
+    monkeypatch.setattr(workflow, "fit_least_squares", lambda *a, **k: calls.append("least squares"))
+    monkeypatch.setattr(polish_module, "table_error", lambda *a, **k: calls.append("table error"))
+    reused = fit(data, "oren-nayar-tabulated", mcmc=False, jitter=False, least_squares=given)
+    assert calls == []
+    for name in ("rho", "sigma"):
+        assert reused.best_values()[name] == pytest.approx(again.best_values()[name], rel=1e-6)
+    with pytest.raises(ValueError, match=r"least_squares: its free parameters \['rho'\] are not those"):
+        fit(data, "oren-nayar-tabulated", mcmc=False, jitter=False, least_squares=comparison.fits["lambert"])

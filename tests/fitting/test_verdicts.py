@@ -150,9 +150,9 @@ def test_a_candidate_without_laplace_evidence_is_judged_by_its_evidence(monkeypa
     is sampled and the choice is still by evidence, not by BIC for every row."""
     real = selection.laplace_evidence
 
-    def no_gaussian_for_oren_nayar(problem, least_squares, priors):
+    def no_gaussian_for_oren_nayar(problem, least_squares, priors, **kwargs):
         return LaplaceEvidence(math.nan) if problem.base_model.name == "oren-nayar" else real(problem, least_squares,
-                                                                                              priors)
+                                                                                              priors, **kwargs)
 
     monkeypatch.setattr(selection, "laplace_evidence", no_gaussian_for_oren_nayar)
     data = _understated(actual=0.003)
@@ -239,9 +239,9 @@ def test_a_failing_candidate_without_laplace_evidence_is_not_sampled(monkeypatch
     so, and the choice among the passing ones is still by evidence."""
     real = selection.laplace_evidence
 
-    def no_gaussian_for_lambert(problem, least_squares, priors):
+    def no_gaussian_for_lambert(problem, least_squares, priors, **kwargs):
         return LaplaceEvidence(math.nan) if problem.base_model.name == "lambert" else real(problem, least_squares,
-                                                                                          priors)
+                                                                                          priors, **kwargs)
 
     def never(*args, **kwargs):
         raise AssertionError("a failing candidate's evidence was sampled")
@@ -256,7 +256,7 @@ def test_a_failing_candidate_without_laplace_evidence_is_not_sampled(monkeypatch
     assert comparison.chosen == "oren-nayar (ir_weight=1)" and "BIC" not in comparison.reason
     assert [row["label"] for row in comparison.rows][-1] == "lambert"  # after the rows with an evidence
     text = comparison.summary()
-    assert "not sampled" in text and text.splitlines()[2 + 1].split()[-1] == "-"
+    assert "not computed" in text and text.splitlines()[2 + 1].split()[-1] == "-"
     assert comparison.to_dict()["rows"][-1]["evidence_method"] == "not needed"
 
 
@@ -266,9 +266,9 @@ def test_when_no_candidate_passes_every_evidence_is_sampled(monkeypatch):
     real = selection.laplace_evidence
     sampled = []
 
-    def no_gaussian_for_lambert(problem, least_squares, priors):
+    def no_gaussian_for_lambert(problem, least_squares, priors, **kwargs):
         return LaplaceEvidence(math.nan) if problem.base_model.name == "lambert" else real(problem, least_squares,
-                                                                                          priors)
+                                                                                          priors, **kwargs)
 
     def recorded(problem, priors, *args, **kwargs):
         sampled.append(problem.base_model.name)
@@ -280,3 +280,64 @@ def test_when_no_candidate_passes_every_evidence_is_sampled(monkeypatch):
     assert not any(row["adequate"] for row in comparison.rows)
     assert sampled == ["lambert"] and comparison.row("lambert")["evidence_method"] == "sequential monte carlo"
     assert "NO candidate passes" in comparison.reason
+
+
+def test_laplace_evidence_without_profiles_names_what_it_left_out():
+    """``profiles=False`` gives the Laplace terms without the shape corrections and names
+    the parameters near a bound whose profiles it did not compute; with them, the sigma of
+    the Oren-Nayar model fitted to a Lambertian sample (stationary at its bound 0) gets its
+    correction."""
+    views = np.arange(-80.0, 81.0, 5.0)
+    geometry = in_plane_geometry(incidences=(30.0, 60.0), views=views)
+    values = predict_quantity("lambert", "brdf", *geometry, {"rho": 0.5})
+    data = Dataset(*geometry, values * (1 + 0.003 * np.random.default_rng(1).standard_normal(values.size)),
+                   0.003 * values)
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0})
+    least_squares = fit_least_squares(problem)
+    priors = resolve_priors(problem, least_squares.values)
+    full = laplace_evidence(problem, least_squares, priors)
+    quick = laplace_evidence(problem, least_squares, priors, profiles=False)
+    assert "sigma" in full.shape and full.profiles_skipped == ()
+    assert quick.profiles_skipped == ("sigma",) and quick.shape == {}
+    assert quick.raw == full.raw and quick.truncation == full.truncation
+
+
+def test_a_failing_candidate_s_profiles_are_computed_only_when_no_candidate_passes(monkeypatch):
+    """A failing candidate whose evidence would need profiles (a parameter near a bound) is
+    "not needed" while another passes, without one profile fit; when none passes its
+    evidence is computed in full, profiles included."""
+    from gonio.fitting import evidence
+
+    real = selection.laplace_evidence
+    profiled = []
+
+    def lambert_near_a_bound(problem, least_squares, priors, profiles=True):
+        terms = real(problem, least_squares, priors, profiles=profiles)
+        if problem.base_model.name == "lambert":
+            profiled.append(profiles)
+            return LaplaceEvidence(terms.raw, terms.truncation, {"rho": -0.5} if profiles else {},
+                                   () if profiles else ("rho",))
+        return terms
+
+    monkeypatch.setattr(selection, "laplace_evidence", lambert_near_a_bound)
+    real_profile = evidence._profile_log_posterior
+    forbidden = [True]
+
+    def guarded(*args, **kwargs):
+        assert not forbidden[0], "a profile was computed"
+        return real_profile(*args, **kwargs)
+
+    monkeypatch.setattr(evidence, "_profile_log_posterior", guarded)
+    passing = compare_models(_understated(actual=0.003), ["lambert", ("oren-nayar", {"ir_weight": 1.0})])
+    lambert = passing.row("lambert")
+    assert lambert["evidence_method"] == "not needed" and math.isnan(lambert["log_evidence"])
+    assert profiled == [False] and passing.chosen == "oren-nayar (ir_weight=1)"
+
+    profiled.clear()
+    forbidden[0] = False  # with no candidate passing, every evidence is computed in full
+    failing = compare_models(_understated(seed=3), ["lambert", "minnaert"], jitter=False)
+    assert not any(row["adequate"] for row in failing.rows)
+    lambert = failing.row("lambert")
+    assert profiled == [False, True] and lambert["evidence_method"] == "laplace"
+    assert lambert["log_evidence"] == pytest.approx(lambert["log_evidence_laplace"] + lambert["evidence_truncation"]
+                                                    - 0.5)
