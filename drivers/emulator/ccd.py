@@ -222,7 +222,7 @@ class CCDSensor:
         dn = electrons
         dn *= self.system_gain(gain_factor)
         if self.nonlinearity:
-            _nonlinear_in_place(dn, self.nonlinearity, p.max_dn - p.offset_dn)
+            nonlinear_signal(dn, self.nonlinearity, p.max_dn - p.offset_dn, out=dn)
         dn += p.offset_dn + 0.5
         np.floor(dn, out=dn)
         np.clip(dn, 0, p.max_dn, out=dn)
@@ -239,13 +239,3 @@ def _add_scaled_noise(mean: np.ndarray, extra_variance: float, noise: np.ndarray
     noise *= scale
     np.add(mean, noise, out=noise)
     return noise
-
-
-def _nonlinear_in_place(signal: np.ndarray, nonlinearity: float, full_scale: float) -> None:
-    """:func:`~drivers.emulator.systematics.nonlinear_signal` written into ``signal`` (the
-    same operations in the same order)."""
-    factor = signal / full_scale
-    factor **= 2
-    factor *= nonlinearity
-    np.subtract(1.0, factor, out=factor)
-    signal *= factor

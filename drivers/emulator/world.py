@@ -274,8 +274,8 @@ def cone_averaged_reflectance(
         theta_i, theta_r, cone_half_angle_deg(lamp_solid_angle_sr), cone_half_angle_deg(camera_solid_angle_sr), wi, wr)
     ti, pi_, tr, pr = ti[lamp_index], pi_[lamp_index], tr[camera_index], pr[camera_index]
     f = np.broadcast_to(np.asarray(brdf(ti, pi_, tr, pr), float), ti.shape)
-    terms = np.where((_above_horizon(ti) > 0) & (_above_horizon(tr) > 0), f * np.cos(np.radians(ti)), 0.0)
-    return float(np.sum(weights * _above_horizon(ti) * _above_horizon(tr) * terms))
+    visible = _above_horizon(ti) * _above_horizon(tr)
+    return float(np.sum(weights * visible * np.where(visible > 0, f * np.cos(np.radians(ti)), 0.0)))
 
 
 #: Where the sparse combination of :func:`cone_rule_pairs` is not used: polar axes closer

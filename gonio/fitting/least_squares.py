@@ -445,14 +445,16 @@ def fit_least_squares(
 
     def solve(template: np.ndarray, x0: np.ndarray):
         """Least squares of the model parameters, the others held at ``template``."""
+
+        def with_priors(r: np.ndarray, x: np.ndarray) -> np.ndarray:
+            """The Gaussian priors' residuals (x - mean) / sd appended (rows: one per x row)."""
+            return np.concatenate([r, (x[..., prior_at] - prior_mean) / prior_sd], axis=-1) if gaussian else r
+
         def residuals(x: np.ndarray) -> np.ndarray:
             heartbeat.beat()
             vector = template.copy()
             vector[index] = x
-            return _finite(_with_priors(_whitened(problem, vector), x))
-
-        def _with_priors(r: np.ndarray, x: np.ndarray) -> np.ndarray:
-            return np.concatenate([r, (x[..., prior_at] - prior_mean) / prior_sd], axis=-1) if gaussian else r
+            return _finite(with_priors(_whitened(problem, vector), x))
 
         def jacobian(x: np.ndarray) -> np.ndarray:
             """Forward differences of :func:`residuals`, the point and every step in one
@@ -463,7 +465,7 @@ def fit_least_squares(
             vectors = np.repeat(template[None, :], len(x) + 1, axis=0)
             vectors[:, index] = x
             vectors[1:, index] += np.diag(steps)
-            rows = _finite(_with_priors(problem.residuals_batch(vectors), vectors[:, index]))
+            rows = _finite(with_priors(problem.residuals_batch(vectors), vectors[:, index]))
             return ((rows[1:] - rows[0]) / steps[:, None]).T
 
         if not np.all(np.isfinite(residuals(x0))):

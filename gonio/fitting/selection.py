@@ -106,7 +106,7 @@ class ModelComparison:
         headline), ``aic``, ``aicc``, ``bic``, ``delta_bic``, ``log_evidence`` with
         ``evidence_method`` ("laplace", "sequential monte carlo", "not needed" (a
         candidate that fails the goodness-of-fit test, whose evidence could not change the
-        choice and was not sampled: ``log_evidence`` NaN) or "undefined") and
+        choice and was not computed: ``log_evidence`` NaN) or "undefined") and
         ``evidence_error`` (the Laplace terms ``log_evidence_laplace``,
         ``evidence_truncation`` and ``evidence_shape``,
         :class:`gonio.fitting.evidence.LaplaceEvidence`), ``delta_log_evidence``,
@@ -330,7 +330,7 @@ def compare_models(
                            jitter=jitter_mode(noise))
 
 
-#: ``evidence_method`` of a failing candidate whose evidence was not sampled (module docstring).
+#: ``evidence_method`` of a failing candidate whose evidence was not computed (module docstring).
 NOT_NEEDED = "not needed"
 
 

@@ -175,9 +175,16 @@ def _least_squares(problem_of, model, jitter, priors, start, seed, given=None):
     """The least-squares fit, redone with ``rel_jitter`` when ``jitter="auto"`` and the verdict
     is "noise understated": (problem, least squares, priors, flags). ``given`` (:func:`fit`'s
     ``least_squares``) stands in for the fit of the problem whose free parameters it has."""
+    built: dict[str | None, FitProblem] = {}
+
+    def problem_with(name, noise: str | None) -> FitProblem:  # each noise's problem built once
+        if noise not in built:
+            built[noise] = problem_of(name, noise)
+        return built[noise]
+
     if given is not None:
         noises = (None, "relative") if jitter == AUTO else (jitter,)
-        expected = [list(problem_of(model, noise).free) for noise in noises]
+        expected = [list(problem_with(model, noise).free) for noise in noises]
         if list(given.free) not in expected:
             raise ValueError(f"least_squares: its free parameters {list(given.free)} are not those of this fit "
                              f"({' or '.join(map(str, expected))}); pass the least squares of the same model, fixed "
@@ -188,7 +195,7 @@ def _least_squares(problem_of, model, jitter, priors, start, seed, given=None):
             return given
         return fit_least_squares(problem, start=start, seed=seed, priors=all_priors)
 
-    return _noise_and_fit(problem_of, model, jitter, priors, solve)
+    return _noise_and_fit(problem_with, model, jitter, priors, solve)
 
 
 def _noise_and_fit(problem_of, model, jitter, priors, solve):
