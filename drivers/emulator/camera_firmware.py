@@ -144,7 +144,7 @@ class CameraFirmware(ScpiInstrument):
         cache = self._saturation_cache
         if cache is None or cache[:2] != key:
             x0, y0, w, h = self.roi
-            cache = (*key, bool(self.last.saturated[y0:y0 + h, x0:x0 + w].any()))
+            cache = (*key, bool(self.last.region(x0, y0, w, h)[1].any()))
             self._saturation_cache = cache
         return cache[2]
 
@@ -212,7 +212,9 @@ class CameraFirmware(ScpiInstrument):
     def _roi_stat(self, args: list[str]) -> str:
         expect_args(args, 0)
         shot = self._need_frame()
-        mean, std, n, sat = roi_statistics(shot.frame, shot.saturated, self.roi)
+        x0, y0, w, h = self.roi
+        frame, saturated = shot.region(x0, y0, w, h)
+        mean, std, n, sat = roi_statistics(frame, saturated, (0, 0, w, h))
         return f"{mean:.4f},{std:.4f},{n},{sat}"
 
     def _frame(self, args: list[str]) -> bytes:
@@ -224,7 +226,7 @@ class CameraFirmware(ScpiInstrument):
         expect_args(args, 0)
         shot = self._need_frame()
         x0, y0, w, h = self.roi
-        return definite_length_block(shot.frame[y0:y0 + h, x0:x0 + w].astype("<u2").tobytes())
+        return definite_length_block(shot.region(x0, y0, w, h)[0].astype("<u2").tobytes())
 
     def _info(self, args: list[str]) -> str:
         expect_args(args, 0)

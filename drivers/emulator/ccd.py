@@ -7,8 +7,8 @@ Per pixel and exposure (EMVA Standard 1288, release 4.0 "Linear", section 2, Fig
 - a dark current ``I_d`` [e-/s] adds Poisson distributed thermal electrons ``I_d t``;
 - (by default the sum of both Poisson counts is drawn from the normal distribution with
   the same mean and variance: EMVA 1288 uses only these two moments, the read noise
-  hides the difference at low counts, and it is 10 times faster than exact Poisson
-  draws for a full frame; ``shot_noise="poisson"`` draws exact Poisson counts);
+  hides the difference at low counts, and a pixel's deviate can be drawn without the
+  others', see below; ``shot_noise="poisson"`` draws exact Poisson counts);
 - the charge saturates at the full-well capacity;
 - the read-out adds Gaussian read noise ``sigma_r`` [e-];
 - the amplifier and ADC convert with the system gain ``K`` [DN/e-] plus an offset, round to
@@ -21,6 +21,11 @@ the EMVA 1288 characterisation measures.  Spatial non-uniformities are fixed per
 PRNU scales ``eta`` per pixel, DSNU scales ``I_d`` per pixel, and a few hot pixels have a
 large dark current.  They are fixed patterns, so they cancel in the difference of two
 frames (EMVA 1288 computes temporal variances from such differences).
+
+A frame is rendered where it is read (:class:`Exposure`): the rig reads the statistics of
+its radiance window, a few percent of the sensor, and only those pixels are computed. Each
+pixel's noise is the deviate at its own position in a counter-based stream keyed per frame
+(:func:`normal_field`), so a pixel has the same value whichever region it is read in.
 
 References
 ----------
@@ -97,20 +102,104 @@ class CCDParams:
         return (1 << self.bits) - 1
 
 
-@dataclass(frozen=True)
 class Exposure:
-    """One rendered frame.
+    """One frame, rendered where it is read.
 
-    Attributes
+    A camera that reports the statistics of a region of interest reads a few percent of
+    its pixels (the rig's radiance window is about 120 x 120 of 512 x 480); the frame's
+    noise is therefore drawn pixel by pixel from a counter-based generator keyed per frame
+    (:func:`normal_field`), and only the pixels asked for are rendered. A pixel's value
+    does not depend on which region it was read in: :meth:`region` and :attr:`frame` agree
+    wherever they overlap, and a frame read twice is the same frame.
+
+    Parameters
     ----------
-    frame : numpy.ndarray
-        Digital values, uint16, shape (height, width) [DN].
-    saturated : numpy.ndarray
-        Boolean mask: pixel at full well or at the ADC maximum.
+    sensor : CCDSensor
+        The sensor that took it (its fixed patterns and parameters).
+    photons : numpy.ndarray or float
+        Mean photons per pixel during the exposure, shape (height, width) or scalar.
+    exposure_s, gain_factor : float
+        Exposure time [s] and analog gain factor.
+    key : numpy.ndarray
+        The frame's key of the noise generator: two unsigned 64-bit integers.
     """
 
-    frame: np.ndarray
-    saturated: np.ndarray
+    def __init__(self, sensor: "CCDSensor", photons: np.ndarray | float, exposure_s: float, gain_factor: float,
+                 key: np.ndarray) -> None:
+        self.sensor = sensor
+        self.photons = photons if np.ndim(photons) == 0 else np.asarray(photons, float)
+        self.exposure_s = float(exposure_s)
+        self.gain_factor = float(gain_factor)
+        self.key = key
+        self._rendered: dict[tuple[int, int, int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    def region(self, x0: int, y0: int, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        """The digital values (uint16) [DN] and the saturation mask of a rectangle of pixels,
+        shape (height, width); the last two rectangles asked for are kept."""
+        box = (int(x0), int(y0), int(width), int(height))
+        if box not in self._rendered:
+            if len(self._rendered) >= 2:
+                self._rendered.pop(next(iter(self._rendered)))
+            self._rendered[box] = self.sensor.render(self, *box)
+        return self._rendered[box]
+
+    @property
+    def frame(self) -> np.ndarray:
+        """Digital values of the whole sensor, uint16, shape (height, width) [DN]."""
+        return self.region(0, 0, self.sensor.params.width, self.sensor.params.height)[0]
+
+    @property
+    def saturated(self) -> np.ndarray:
+        """Boolean mask of the whole sensor: pixel at full well or at the ADC maximum."""
+        return self.region(0, 0, self.sensor.params.width, self.sensor.params.height)[1]
+
+
+def normal_field(key: np.ndarray, stream: int, x0: int, y0: int, width: int, height: int,
+                 sensor_width: int, sensor_height: int) -> np.ndarray:
+    """Standard normal deviates of a rectangle of pixels, the same whatever rectangle a
+    pixel is read in [-].
+
+    Pixel (row, column) of field ``stream`` takes the uniform deviate number
+    ``(stream * sensor_height + row) * sensor_width + column`` of a Philox generator keyed
+    by ``key`` (Salmon et al. 2011, a counter-based generator: draw ``n`` is reached by
+    setting the counter, without drawing the ones before it), mapped to a normal deviate
+    by the inverse normal CDF at the centre of its 2^-53 bin (tails cut at 8.3 sd).
+
+    Parameters
+    ----------
+    key : numpy.ndarray
+        Two unsigned 64-bit integers.
+    stream : int
+        Which of the frame's independent fields (0, 1, ...).
+    x0, y0, width, height : int
+        The rectangle [pixels].
+    sensor_width, sensor_height : int
+        The sensor's size [pixels].
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (height, width).
+
+    References
+    ----------
+    J. K. Salmon, M. A. Moraes, R. O. Dror, D. E. Shaw, "Parallel random numbers: as easy
+    as 1, 2, 3", SC '11 (2011).
+    """
+    from scipy.special import ndtri
+
+    first = (stream * sensor_height + y0) * sensor_width + x0
+    block, skip = divmod(first, _PHILOX_LANES)
+    generator = np.random.Generator(np.random.Philox(key=key, counter=np.array([block, 0, 0, 0], np.uint64)))
+    rows = generator.random(skip + height * sensor_width)[skip:].reshape(height, sensor_width)[:, :width]
+    rows += _HALF_BIN
+    return ndtri(rows)
+
+
+#: 64-bit outputs of one Philox counter value (numpy's Philox 4x64).
+_PHILOX_LANES = 4
+#: Half the spacing of ``Generator.random``'s doubles (k / 2^53): their bins' centres.
+_HALF_BIN = 2.0 ** -54
 
 
 class CCDSensor:
@@ -180,7 +269,7 @@ class CCDSensor:
 
     def expose(self, photons: np.ndarray | float, exposure_s: float, gain_factor: float,
                rng: np.random.Generator) -> Exposure:
-        """Render one frame.
+        """Take one frame (rendered where it is read, :class:`Exposure`).
 
         Parameters
         ----------
@@ -192,35 +281,51 @@ class CCDSensor:
         gain_factor : float
             Analog gain factor; ``K = K0 * gain_factor``.
         rng : numpy.random.Generator
-            Source of the temporal noise.
+            Source of the temporal noise: the frame's key is drawn from it.
 
         Returns
         -------
         Exposure
-            Frame [DN] and saturation mask.
+            The frame [DN] and its saturation mask.
+        """
+        return Exposure(self, photons, exposure_s, gain_factor, rng.integers(0, 2**64, size=2, dtype=np.uint64))
+
+    def render(self, shot: Exposure, x0: int, y0: int, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        """Digital values (uint16) [DN] and saturation mask of a rectangle of a frame.
+
+        Gaussian shot noise: a pixel that cannot reach full well (10 sd below it) takes the
+        shot and read noise in one normal deviate of the summed variance (the same
+        distribution as drawing them one after the other); any other pixel takes its shot
+        noise from field 0, is clipped at full well and takes its read noise from field 1.
+        Poisson shot noise draws the whole frame from the frame's key (exact counts are not
+        addressable pixel by pixel) and crops it.
         """
         p = self.params
-        shape = (p.height, p.width)
-        mean_e = self.dark_map * exposure_s
-        mean_e += np.asarray(photons, float) * self._qe_map
+        rows, cols = slice(y0, y0 + height), slice(x0, x0 + width)
+        mean_e = self.dark_map[rows, cols] * shot.exposure_s
+        photons = shot.photons if np.ndim(shot.photons) == 0 else shot.photons[rows, cols]
+        mean_e += photons * self._qe_map[rows, cols]
         read_var = p.read_noise_e**2
         if self.shot_noise == "poisson":
-            electrons = rng.poisson(mean_e).astype(np.float64)  # photon + dark shot noise
+            frame_e = self._poisson_frame(shot)
+            electrons = frame_e[rows, cols].copy()
             full = electrons >= p.full_well_e
             np.minimum(electrons, p.full_well_e, out=electrons)
-            electrons += p.read_noise_e * rng.standard_normal(shape)
-        elif mean_e.max() + 10.0 * np.sqrt(mean_e.max() + read_var) < p.full_well_e:
-            # No pixel can reach full well (10 sigma): shot and read noise in one normal draw
-            # with the summed variance (same distribution as drawing them one after the other).
-            full = np.zeros(shape, bool)
-            electrons = _add_scaled_noise(mean_e, read_var, rng.standard_normal(shape))
-        else:  # same mean and variance as the Poisson count, clipped at full well
-            electrons = _add_scaled_noise(mean_e, 0.0, rng.standard_normal(shape))
-            full = electrons >= p.full_well_e
-            np.minimum(electrons, p.full_well_e, out=electrons)
-            electrons += p.read_noise_e * rng.standard_normal(shape)
+            electrons += p.read_noise_e * normal_field(shot.key, 1, x0, y0, width, height, p.width, p.height)
+        else:
+            field = normal_field(shot.key, 0, x0, y0, width, height, p.width, p.height)
+            can_fill = mean_e + 10.0 * np.sqrt(mean_e + read_var) >= p.full_well_e
+            filling = bool(can_fill.any())
+            if filling:
+                shot_only = mean_e[can_fill] + np.sqrt(mean_e[can_fill]) * field[can_fill]
+            electrons = _add_scaled_noise(mean_e, read_var, field)
+            full = np.zeros((height, width), bool)
+            if filling:
+                full[can_fill] = shot_only >= p.full_well_e
+                read = normal_field(shot.key, 1, x0, y0, width, height, p.width, p.height)[can_fill]
+                electrons[can_fill] = np.minimum(shot_only, p.full_well_e) + p.read_noise_e * read
         dn = electrons
-        dn *= self.system_gain(gain_factor)
+        dn *= self.system_gain(shot.gain_factor)
         if self.nonlinearity:
             nonlinear_signal(dn, self.nonlinearity, p.max_dn - p.offset_dn, out=dn)
         dn += p.offset_dn + 0.5
@@ -228,7 +333,13 @@ class CCDSensor:
         np.clip(dn, 0, p.max_dn, out=dn)
         saturated = dn >= p.max_dn
         saturated |= full
-        return Exposure(frame=dn.astype(np.uint16), saturated=saturated)
+        return dn.astype(np.uint16), saturated
+
+    def _poisson_frame(self, shot: Exposure) -> np.ndarray:
+        """The whole frame's electron counts with exact Poisson shot noise [e-]."""
+        mean_e = self.dark_map * shot.exposure_s + np.asarray(shot.photons, float) * self._qe_map
+        generator = np.random.Generator(np.random.Philox(key=shot.key))
+        return generator.poisson(mean_e).astype(np.float64)
 
 
 def _add_scaled_noise(mean: np.ndarray, extra_variance: float, noise: np.ndarray) -> np.ndarray:

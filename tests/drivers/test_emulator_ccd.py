@@ -9,7 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.emulator.ccd import CCDParams, CCDSensor
+from scipy import stats
+
+from drivers.emulator.ccd import CCDParams, CCDSensor, normal_field
 
 SMALL = CCDParams(width=128, height=96)
 
@@ -117,3 +119,44 @@ def test_frames_are_reproducible_from_seeds():
 def test_bad_shot_noise_option_names_the_parameter():
     with pytest.raises(ValueError, match="shot_noise"):
         CCDSensor(SMALL, shot_noise="binomial")
+
+
+@pytest.mark.parametrize("shot_noise", ["gaussian", "poisson"])
+def test_a_pixel_has_one_value_whichever_region_it_is_read_in(shot_noise):
+    """The rig reads its radiance window only (ccd module notes): a window, the whole frame
+    and an overlapping window must agree pixel for pixel, near full well too, where the
+    pixels that can fill take a second (read-noise) field."""
+    sensor = CCDSensor(SMALL, seed=21, shot_noise=shot_noise)
+    photons = np.linspace(0.0, 7.68e4, SMALL.width * SMALL.height).reshape(SMALL.height, SMALL.width)
+    shot = sensor.expose(photons, 0.01, 1.0, np.random.default_rng(22))
+    window, window_saturated = shot.region(17, 60, 40, 30)
+    overlap, _ = shot.region(30, 70, 50, 26)
+    assert 0 < window_saturated.sum() < window_saturated.size  # the window crosses full well
+    full = CCDSensor(SMALL, seed=21, shot_noise=shot_noise).expose(photons, 0.01, 1.0, np.random.default_rng(22))
+    assert np.array_equal(window, full.frame[60:90, 17:57])
+    assert np.array_equal(window_saturated, full.saturated[60:90, 17:57])
+    assert np.array_equal(overlap, full.frame[70:96, 30:80])
+
+
+def test_noise_fields_are_standard_normal_and_independent():
+    key = np.array([5, 7], np.uint64)
+    a = normal_field(key, 0, 0, 0, 300, 200, 300, 200).ravel()
+    b = normal_field(key, 1, 0, 0, 300, 200, 300, 200).ravel()
+    other = normal_field(np.array([5, 8], np.uint64), 0, 0, 0, 300, 200, 300, 200).ravel()
+    # 60,000 deviates: the mean's sd is 0.004, the variance's 0.006, a correlation's 0.004
+    assert abs(a.mean()) < 0.02 and abs(a.var() - 1.0) < 0.03
+    assert stats.kstest(a, "norm").pvalue > 1e-3
+    assert abs(np.corrcoef(a, b)[0, 1]) < 0.02 and abs(np.corrcoef(a, other)[0, 1]) < 0.02
+    # neighbouring pixels are independent too (the counter's lanes, rows and columns)
+    field = a.reshape(200, 300)
+    assert abs(np.corrcoef(field[:, 1:].ravel(), field[:, :-1].ravel())[0, 1]) < 0.02
+    assert abs(np.corrcoef(field[1:].ravel(), field[:-1].ravel())[0, 1]) < 0.02
+
+
+def test_successive_frames_have_their_own_noise():
+    sensor = CCDSensor(SMALL, seed=23)
+    rng = np.random.default_rng(24)
+    first, second = (sensor.expose(2000.0, 0.01, 1.0, rng).region(0, 0, 64, 48)[0] for _ in range(2))
+    difference = first.astype(float) - second
+    # shot + read noise: sqrt(1000 + 64) e- = 3.3 DN per frame, 4.6 DN in a difference
+    assert 4.0 < difference.std() < 5.2

@@ -65,7 +65,8 @@ def test_a_comparison_s_fit_is_reused_with_its_table_error(monkeypatch):
     comparison = compare_models(data, ["lambert", "oren-nayar-tabulated"])
     given = comparison.fits["oren-nayar-tabulated"]
     assert given.table_error == pytest.approx(polish_module.table_error(
-        FitProblem("oren-nayar-tabulated", data), FitProblem("oren-nayar-exact", data), given.values))
+        FitProblem("oren-nayar-tabulated", data), FitProblem("oren-nayar-exact", data, {}, {"rtol": 1e-5}),
+        given.values))
     again = fit(data, "oren-nayar-tabulated", mcmc=False, jitter=False)
     calls = []
     monkeypatch.setattr(workflow, "fit_least_squares", lambda *a, **k: calls.append("least squares"))
@@ -76,3 +77,17 @@ def test_a_comparison_s_fit_is_reused_with_its_table_error(monkeypatch):
         assert reused.best_values()[name] == pytest.approx(again.best_values()[name], rel=1e-6)
     with pytest.raises(ValueError, match=r"least_squares: its free parameters \['rho'\] are not those"):
         fit(data, "oren-nayar-tabulated", mcmc=False, jitter=False, least_squares=comparison.fits["lambert"])
+
+
+def test_the_exact_model_measures_the_table_at_its_set_accuracy():
+    """The table's error is measured with the exact model at rtol 1e-5
+    (polish.EXACT_OPTIONS), within 1 % of what its tightest setting measures."""
+    data = _exact_data(1e-4)
+    build = lambda name: FitProblem(name, data)  # noqa: E731
+    measuring = polish_module.exact_problem(build, "oren-nayar-exact")
+    assert measuring.options["rtol"] == 1e-5
+    values = fit(data, "oren-nayar-tabulated", mcmc=False, jitter=False).least_squares.values
+    tight = FitProblem("oren-nayar-exact", data, {}, {"rtol": 1e-7})
+    table = FitProblem("oren-nayar-tabulated", data)
+    assert polish_module.table_error(table, measuring, values) == pytest.approx(
+        polish_module.table_error(table, tight, values), rel=0.01)
