@@ -66,7 +66,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .dataset import Dataset
-from .evidence import laplace_evidence, tempered_evidence, laplace_log_evidence, scale_degenerate_factor
+from .evidence import laplace_evidence, log_posterior, tempered_evidence, laplace_log_evidence, scale_degenerate_factor
 from .csv_table import ASSUMED_SIGMA
 from .problem import jitter_mode
 
@@ -375,6 +375,17 @@ def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, st
                                                 warnings=[*polished.least_squares.warnings, polished.flag()])
     candidate_priors = resolve_priors(problem, ls.values, given)
     verdict = assess(problem, ls)
+    terms = _evidence_terms(problem, ls, candidate_priors, sample=verdict.verdict in _passing(True),
+                            restartable=polished is None)
+    higher = terms.pop("higher_point", None)
+    restarted = None if higher is None else _restarted(problem, ls, given, candidate_priors, higher)
+    if restarted is not None:
+        ls = own = with_table_error(problem, restarted, problem_of)
+        candidate_priors = resolve_priors(problem, ls.values, given)
+        verdict = assess(problem, ls)
+        terms = _evidence_terms(problem, ls, candidate_priors, sample=verdict.verdict in _passing(True))
+    elif higher is not None:
+        terms.update(_sampled_evidence(problem, candidate_priors))
     row = {
         "label": candidate_label(name, fixed),
         "model": name,
@@ -389,14 +400,14 @@ def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, st
         "adequacy": verdict.headline(),
         "undetermined": _undetermined(problem, ls),
         **information_criteria(ls.log_likelihood, len(problem.free), problem.n_informative),
-        **_evidence_terms(problem, ls, candidate_priors, sample=verdict.verdict in _passing(True)),
+        **terms,
         "values": ls.values,
         "warnings": ls.warnings,
     }
     return row, own, (problem, ls, candidate_priors)
 
 
-def _evidence_terms(problem, least_squares, priors, sample: bool = True) -> dict[str, Any]:
+def _evidence_terms(problem, least_squares, priors, sample: bool = True, restartable: bool = False) -> dict[str, Any]:
     """``log_evidence`` and how it was computed, for a row of the comparison.
 
     Laplace's corrected approximation where it is defined (its terms as
@@ -409,7 +420,9 @@ def _evidence_terms(problem, least_squares, priors, sample: bool = True) -> dict
     deterministic approximation). A failing candidate's profiles (the shape corrections,
     about 30 least-squares fits a parameter near a bound) are not computed either: its
     evidence is then :data:`NOT_NEEDED` too, and computed in full only if no candidate
-    passes.
+    passes. With ``restartable``, a Laplace evidence undefined because a profile rose above
+    the optimum is returned with that point as ``higher_point`` instead of being sampled:
+    the caller restarts the least squares from it.
     """
     laplace = laplace_evidence(problem, least_squares, priors, profiles=sample)
     terms = {"log_evidence": laplace.log_evidence, "log_evidence_laplace": laplace.raw,
@@ -419,7 +432,27 @@ def _evidence_terms(problem, least_squares, priors, sample: bool = True) -> dict
         return terms
     if not sample:
         return {**terms, "log_evidence": math.nan, "evidence_method": NOT_NEEDED, "evidence_error": math.nan}
+    if restartable and laplace.higher_point is not None:  # the caller restarts the least squares there
+        return {**terms, "higher_point": laplace.higher_point}
     return {**terms, **_sampled_evidence(problem, priors)}
+
+
+def _restarted(problem, least_squares, given, priors, higher: Mapping[str, float]):
+    """The least squares restarted from ``higher``, a point an evidence profile found above
+    the optimum (the first fit stopped short of the posterior's mode, evidence module
+    docstring), flagged; None if it does not end higher than ``least_squares``."""
+    from .least_squares import fit_least_squares
+
+    restarted = fit_least_squares(problem, start=higher, n_starts=1, priors=given)
+    if not _at_optimum(problem, priors, restarted) > _at_optimum(problem, priors, least_squares):
+        return None
+    return replace(restarted, warnings=[*restarted.warnings, "least squares restarted from a higher point of an "
+                                        "evidence profile: the first optimum stopped short of the mode"])
+
+
+def _at_optimum(problem, priors, least_squares) -> float:
+    """The log posterior at a least-squares optimum."""
+    return log_posterior(problem, priors, np.array([least_squares.values[n] for n in problem.free], float))
 
 
 def _sampled_evidence(problem, priors) -> dict[str, Any]:

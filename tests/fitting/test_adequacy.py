@@ -320,6 +320,59 @@ def test_a_profile_above_the_mode_gives_an_undefined_evidence_not_an_overflow():
     lambertian = fit_least_squares(FitProblem("oren-nayar-qualitative", data, {"sigma": 1e-3}))
     assert lambertian.log_likelihood + priors["rho"].logpdf(lambertian.values["rho"]) + priors["sigma"].logpdf(
         1e-3) - peak > 710  # the rise exp() would overflow on
-    assert math.isnan(laplace_evidence(problem, stalled, priors).log_evidence)
+    undefined = laplace_evidence(problem, stalled, priors)
+    assert math.isnan(undefined.log_evidence)
+    # it carries the point the profile found, higher than the stalled one
+    higher = np.array([undefined.higher_point[n] for n in problem.free])
+    assert problem.log_likelihood(higher) + sum(priors[n].logpdf(undefined.higher_point[n]) for n in problem.free) \
+        > peak + 1.0
     # the true optimum's evidence is still defined (the check does not fire at a real mode)
     assert math.isfinite(laplace_evidence(problem, least_squares, priors).log_evidence)
+
+
+def test_a_comparison_goes_on_from_where_a_profile_found_the_posterior_higher(monkeypatch):
+    """A candidate whose least squares stopped short of the mode (sigma left at its bound
+    on data of sigma = 8 deg, which it still passes) is restarted from the profile's higher
+    point: its row holds the real optimum and a finite Laplace evidence, flagged, not a
+    sampled one."""
+    import dataclasses
+
+    import gonio.fitting.least_squares as least_squares_module
+
+    data = synthetic_dataset("oren-nayar-qualitative", {"rho": 0.8, "sigma": 8.0}, noise=0.02, seed=2)
+    real = least_squares_module.fit_least_squares
+    calls = []
+
+    def stalls_first(problem, *args, **kwargs):
+        result = real(problem, *args, **kwargs)
+        calls.append(kwargs.get("start"))
+        if len(calls) == 1:  # the comparison's own fit: stopped next to sigma's bound
+            return dataclasses.replace(result, values=dict(result.values, sigma=1e-3))
+        return result
+
+    monkeypatch.setattr(least_squares_module, "fit_least_squares", stalls_first)
+    comparison = compare_models(data, ["oren-nayar-qualitative"])
+    row = comparison.row("oren-nayar-qualitative")
+    truth = real(FitProblem("oren-nayar-qualitative", data)).values
+    assert row["values"]["sigma"] == pytest.approx(truth["sigma"], rel=1e-3)
+    assert row["evidence_method"] == "laplace" and math.isfinite(row["log_evidence"])
+    assert any("restarted from a higher point" in w for w in row["warnings"])
+
+
+@pytest.mark.parametrize("slope_per_sd", [3.0, 40.0, 434.0])
+def test_a_profile_falling_steeply_from_its_bound_is_integrated_over_its_own_scale(slope_per_sd):
+    """A mode held on a bound by a slope (gonio.fitting.evidence._side_integral): the
+    profile can fall by hundreds within the Gaussian's sd; its integral must still be the
+    exact one, sd / slope (with 12 nodes over the whole sd, 434 per sd is 45 % off)."""
+    from gonio.fitting.evidence import _side_integral
+
+    sd = 0.01
+    evaluated = []
+
+    def profile(x: float) -> float:
+        evaluated.append(x)
+        return -slope_per_sd * (1.0 - x) / sd
+
+    integral = _side_integral(profile, 1.0, 0.0, sd)
+    assert integral == pytest.approx(sd / slope_per_sd * (1.0 - math.exp(-slope_per_sd * 1.0 / sd)), rel=1e-5)
+    assert len(evaluated) < 60
