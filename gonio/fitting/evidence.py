@@ -279,13 +279,12 @@ def _side_integral(profile, centre: float, edge: float, sd: float) -> float:
         reach *= 2.0
     reach = min(reach, distance)
     # a mode held on a bound by a slope can fall by hundreds within one sd: the range is
-    # halved while the profile falls by more than twice the depth across it and by more
-    # than the depth across half of it, so the nodes resolve it (exp(-30 t) on [0, 1] to
-    # 2e-7 with 12 nodes) and what is left beyond is negligible (a Minnaert k held on 1 by a
-    # slope of 434 per sd, 0.3 % noise stated as 0.03 %, was 0.03 off in ln Z with 24
-    # nodes over the whole sd)
-    while (profile(centre + direction * reach) < -2.0 * PROFILE_DEPTH
-           and profile(centre + direction * 0.5 * reach) < -PROFILE_DEPTH):
+    # halved while the profile falls by more than the depth across half of it (what lies
+    # beyond is negligible), so that the nodes resolve it (exp(-30 t) on [0, 1] to 2e-7 with
+    # 12 nodes; a Minnaert k held on 1 by a slope of 434 per sd, 0.3 % noise stated as
+    # 0.03 %, was 0.03 off in ln Z with 24 nodes over the whole sd). The bound itself is
+    # never evaluated: a parameter's range may be open there (a pit's psi > 0).
+    while profile(centre + direction * 0.5 * reach) < -PROFILE_DEPTH:
         reach *= 0.5
     end = centre + direction * reach
     half = 0.5 * (end - centre)

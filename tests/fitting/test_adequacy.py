@@ -376,3 +376,21 @@ def test_a_profile_falling_steeply_from_its_bound_is_integrated_over_its_own_sca
     integral = _side_integral(profile, 1.0, 0.0, sd)
     assert integral == pytest.approx(sd / slope_per_sd * (1.0 - math.exp(-slope_per_sd * 1.0 / sd)), rel=1e-5)
     assert len(evaluated) < 60
+
+
+@pytest.mark.parametrize("slope_per_sd", [0.5, 434.0])
+def test_a_profile_is_never_evaluated_on_its_bound(slope_per_sd):
+    """A parameter's range may be open at its bound (a pit's aperture psi > 0, the model
+    refuses psi = 0): the profile's integral up to a bound half an sd away uses interior
+    points only, and is still the exact integral."""
+    from gonio.fitting.evidence import _side_integral
+
+    sd, edge = 0.01, 0.995
+
+    def profile(x: float) -> float:
+        if x <= edge:
+            raise ValueError(f"evaluated at {x}, on or beyond the bound {edge}")
+        return -slope_per_sd * (1.0 - x) / sd
+
+    expected = sd / slope_per_sd * (1.0 - math.exp(-slope_per_sd * (1.0 - edge) / sd))
+    assert _side_integral(profile, 1.0, edge, sd) == pytest.approx(expected, rel=1e-6)
