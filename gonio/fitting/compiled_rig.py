@@ -65,6 +65,7 @@ from numba import njit, prange
 
 from drivers.rig_geometry import ALIGNMENT_ERRORS
 from gonio.instrument import COMPACT_MAX_THETA_DEG, COMPACT_MIN_SEPARATION_DEG, COMPACT_RULE_MODELS, RULES, cone_offsets
+from gonio import models
 from gonio.models import Model
 from gonio.models._compiled import JIT_OPTIONS
 from gonio.models.oren_nayar.compiled import eq33_35
@@ -80,6 +81,8 @@ __all__ = ["CompiledRigRadiance", "rig_radiance", "rig_radiance_table"]
 TABULATED = "oren-nayar-tabulated"
 #: The model whose shape is eq 36's (:func:`_qualitative`), not eq 33-35's.
 QUALITATIVE = "oren-nayar-qualitative"
+#: The diffuse + specular model (eq 38), whose loop adds the lobe of :func:`_specular`.
+COMBINED = "oren-nayar+torrance-sparrow"
 
 _RAD = math.pi / 180.0
 _HALF_PI = 0.5 * math.pi
@@ -196,6 +199,32 @@ def _qualitative(t_i: float, cp_i: float, sp_i: float, s_i: float, tan_i: float,
 
 
 @njit(**JIT_OPTIONS)
+def _specular(s_i: float, cp_i: float, sp_i: float, c_i: float, s_r: float, cp_r: float, sp_r: float, c_r: float,
+              amplitude: float, exponent: float) -> float:
+    """The Torrance-Sparrow lobe of eq 37 with F = 1 of one (lamp, camera) sub-ray pair,
+    ``amplitude exp(exponent theta_a^2) GAF / (4 cos ti cos tr cos theta_a)`` with
+    ``amplitude = ks c(sigma_s)`` and ``exponent = -1 / (2 sigma_s^2)`` [rad^-2], as
+    :func:`gonio.models.torrance_sparrow._specular_geometry` forms it: the half vector
+    h = s + v is the facet normal (theta_a its slope), and the V-cavity GAF of eq 15 with
+    <s,a> = <v,a> = |h| / 2 and <a,n> = h_z / |h| is min(1, 4 cos(theta) h_z / |h|^2) for
+    the lower of the two cosines, floored at 0."""
+    hx = s_i * cp_i + s_r * cp_r
+    hy = s_i * sp_i + s_r * sp_r
+    hz = c_i + c_r
+    planar = math.sqrt(hx * hx + hy * hy)
+    length_sq = planar * planar + hz * hz
+    denominator = 4.0 * c_i * c_r * hz
+    if length_sq <= 0.0 or not denominator > 0.0:
+        return 0.0
+    gaf = min(1.0, 4.0 * min(c_i, c_r) * hz / length_sq)
+    if gaf <= 0.0:
+        return 0.0
+    theta_a = math.atan2(planar, hz)
+    # GAF / (4 cos ti cos tr cos theta_a), cos theta_a = h_z / |h|
+    return amplitude * math.exp(exponent * theta_a * theta_a) * gaf * math.sqrt(length_sq) / denominator
+
+
+@njit(**JIT_OPTIONS)
 def _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camera_rule, ring, lamp_rays, camera_rays,
                  lamp_cos, camera_cos, w) -> None:
     """The sub-rays of every distinct lamp and camera direction at walker ``w``'s alignment
@@ -218,7 +247,7 @@ def _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camer
 
 @njit(**JIT_OPTIONS)
 def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignment, coefficients,
-                 lamp_rule, camera_rule, ring, weights, compact, qualitative, out) -> None:
+                 lamp_rule, camera_rule, ring, weights, compact, qualitative, specular, out) -> None:
     """``<f cos theta_i>`` through the apertures at the true geometry of every alignment [1/sr].
 
     Parameters
@@ -230,7 +259,8 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
     alignment : numpy.ndarray
         (W, 5) view_offset, theta_i_offset, phi_i_offset, tilt_x, tilt_y [deg].
     coefficients : numpy.ndarray
-        (W, 3) the model's a, b, c (:func:`_oren_nayar`; :func:`_qualitative` takes a, b).
+        (W, 5) the model's a, b, c (:func:`_oren_nayar`; :func:`_qualitative` takes a, b)
+        and the specular lobe's amplitude and exponent (:func:`_specular`).
     lamp_rule, camera_rule : numpy.ndarray
         (2, 11) cos and sin of each cubature point's angle from its cone's axis (the full
         rule's 7 points, then the compact rule's 4, :func:`_rule`).
@@ -241,6 +271,8 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
         Whether the model may take the compact rule (:func:`_rule_range`).
     qualitative : bool
         The qualitative model's shape (eq 36, :func:`_qualitative`) instead of eq 33-35's.
+    specular : bool
+        Add the Torrance-Sparrow lobe (eq 37-38, :func:`_specular`).
     out : numpy.ndarray
         (W, N), written: 0 where a true axis lies below the horizon.
     """
@@ -252,6 +284,7 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
         _walker_rays(alignment, lamp_directions, camera_directions, lamp_rule, camera_rule, ring, lamp_rays,
                      camera_rays, lamp_cos, camera_cos, w)
         a, b, c = coefficients[w, 0], coefficients[w, 1], coefficients[w, 2]
+        amplitude, exponent = coefficients[w, 3], coefficients[w, 4]
         for n in range(lamp_of.shape[0]):
             lamp, camera = lamp_of[n], camera_of[n]
             if lamp_cos[lamp] < 0.0 or camera_cos[camera] < 0.0:  # an axis below the horizon
@@ -279,6 +312,9 @@ def rig_radiance(lamp_directions, camera_directions, lamp_of, camera_of, alignme
                         value = _oren_nayar(t_i, cp_i, sp_i, s_i, c_i, tan_i, camera_rays[camera, j, 0],
                                             camera_rays[camera, j, 1], camera_rays[camera, j, 2],
                                             camera_rays[camera, j, 3], c_r, camera_rays[camera, j, 5], a, b, c)
+                    if specular:
+                        value += _specular(s_i, cp_i, sp_i, c_i, camera_rays[camera, j, 3], camera_rays[camera, j, 1],
+                                           camera_rays[camera, j, 2], c_r, amplitude, exponent)
                     total += weight * weights[j] * value
             out[w, n] = total * lamp_cos[lamp] if grazing else total
 
@@ -455,15 +491,23 @@ class CompiledRigRadiance:
 
             self._table = table().lookup
             return
-        probe = base.at(30.0, 0.0, 10.0, 180.0).linear_form()
-        self._coefficients = probe.coefficients
+        diffuse = models.get("oren-nayar") if base.name == COMBINED else base
+        self._coefficients = diffuse.at(30.0, 0.0, 10.0, 180.0).linear_form().coefficients
 
     def coefficients(self, params: Mapping[str, Any]) -> np.ndarray:
-        """The model's (a, b, c) of :func:`_oren_nayar` per parameter row, shape (W, 3)."""
-        terms = self._coefficients(**params)
+        """The model's (a, b, c) of :func:`_oren_nayar` and the lobe's amplitude and
+        exponent of :func:`_specular` (0 for a model without it) per parameter row, shape
+        (W, 5). The combined model's diffuse part is eq 33-35 with the interreflection
+        term whole (``ir_weight`` 1, as it evaluates it) times ``kd``."""
+        if self.base.name == COMBINED:
+            terms = [np.asarray(t, float) * np.asarray(params["kd"], float) for t in
+                     self._coefficients(rho=params["rho"], sigma=params["sigma"], ir_weight=1.0)]
+            terms += _lobe(params["ks"], params["sigma_s"])
+        else:
+            terms = list(self._coefficients(**params))
         rows = max([np.size(t) for t in terms] + [1])
         columns = [np.broadcast_to(np.reshape(np.asarray(t, float), -1), (rows,)) for t in terms]
-        columns += [np.zeros(rows)] * (3 - len(columns))  # lambert: (rho / pi, 0, 0)
+        columns += [np.zeros(rows)] * (5 - len(columns))  # lambert: (rho / pi, 0, 0), no lobe
         return np.ascontiguousarray(np.stack(columns, axis=1))
 
     def __call__(self, params: Mapping[str, Any], alignment: Mapping[str, Any]) -> np.ndarray:
@@ -482,10 +526,10 @@ class CompiledRigRadiance:
         if self.base.name == TABULATED:
             self._tabulated(params, rows, offsets, out)
         else:
-            coefficients = np.ascontiguousarray(np.broadcast_to(coefficients, (rows, 3)))
+            coefficients = np.ascontiguousarray(np.broadcast_to(coefficients, (rows, 5)))
             rig_radiance(self._lamp, self._camera, self._lamp_of, self._camera_of, offsets, coefficients,
                          self._rules[0], self._rules[1], self._ring, self._weights, self._compact,
-                         self.base.name == QUALITATIVE, out)
+                         self.base.name == QUALITATIVE, self.base.name == COMBINED, out)
         if all(np.ndim(v) == 0 for v in (*params.values(), *alignment.values())):
             return out[0]
         return out
@@ -505,6 +549,17 @@ class CompiledRigRadiance:
                            np.ascontiguousarray(sigma == 0.0), tuple(int(n) for n in lookup.values.shape[1:]),
                            lookup.lo, lookup.step, self._rules[0], self._rules[1], self._ring, self._weights,
                            self._compact, out)
+
+
+def _lobe(ks, sigma_s) -> list[np.ndarray]:
+    """The specular lobe's amplitude ``ks c(sigma_s)`` (eq 32's constant, the lobe's own
+    normalisation, :mod:`gonio.models.torrance_sparrow`) and exponent ``-1/(2 sigma_s^2)``
+    [rad^-2] per row, for ``sigma_s`` [deg]."""
+    from gonio.models.torrance_sparrow import _slope_area_normalisation_rad
+
+    slope = np.radians(np.reshape(np.asarray(sigma_s, float), -1))
+    constant = np.array([_slope_area_normalisation_rad(float(s)) for s in slope])
+    return [np.reshape(np.asarray(ks, float), -1) * constant, -0.5 / (slope * slope)]
 
 
 def _distinct(theta: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,8 @@ from .dataset import Dataset
 __all__ = ["combine_prediction", "evaluated_model", "apertures_of", "COMPILED_MODELS"]
 
 #: Models whose misaligned aperture average has a compiled path (gonio.fitting.compiled_rig).
-COMPILED_MODELS = ("oren-nayar", "lambert", "oren-nayar-qualitative", "oren-nayar-tabulated")
+COMPILED_MODELS = ("oren-nayar", "lambert", "oren-nayar-qualitative", "oren-nayar-tabulated",
+                   "oren-nayar+torrance-sparrow")
 
 
 def combine_prediction(

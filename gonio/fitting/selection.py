@@ -357,10 +357,8 @@ def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, st
     """Fit one candidate by least squares: its row of the comparison, its own model's fit
     (:attr:`ModelComparison.fits`), and the problem, fit and priors it is judged by (the
     exact model's where a table's fit was polished)."""
-    from .adequacy import assess
     from .least_squares import fit_least_squares
-    from .mcmc import resolve_priors
-    from .polish import polish, with_table_error
+    from .polish import with_table_error
     from .problem import FitProblem
 
     def problem_of(model: str) -> FitProblem:
@@ -368,24 +366,16 @@ def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, st
 
     problem = problem_of(name)
     given = {k: v for k, v in problem.priors_with_defaults(priors).items() if k in problem.free}
-    ls = own = with_table_error(problem, fit_least_squares(problem, n_starts=n_starts, priors=given), problem_of)
-    polished = polish(problem, ls, given, problem_of)
-    if polished is not None:  # the table's error matters: judge the candidate by its exact model
-        problem, ls = polished.problem, replace(polished.least_squares,
-                                                warnings=[*polished.least_squares.warnings, polished.flag()])
-    candidate_priors = resolve_priors(problem, ls.values, given)
-    verdict = assess(problem, ls)
-    terms = _evidence_terms(problem, ls, candidate_priors, sample=verdict.verdict in _passing(True),
-                            restartable=polished is None)
+    own = with_table_error(problem, fit_least_squares(problem, n_starts=n_starts, priors=given), problem_of)
+    judged, ls, candidate_priors, verdict, terms = _judged(problem, own, given, problem_of, restartable=True)
     higher = terms.pop("higher_point", None)
-    restarted = None if higher is None else _restarted(problem, ls, given, candidate_priors, higher)
+    restarted = None if higher is None else _restarted(judged, ls, given, candidate_priors, higher)
     if restarted is not None:
-        ls = own = with_table_error(problem, restarted, problem_of)
-        candidate_priors = resolve_priors(problem, ls.values, given)
-        verdict = assess(problem, ls)
-        terms = _evidence_terms(problem, ls, candidate_priors, sample=verdict.verdict in _passing(True))
+        own = with_table_error(problem, restarted, problem_of)
+        judged, ls, candidate_priors, verdict, terms = _judged(problem, own, given, problem_of, restartable=False)
     elif higher is not None:
-        terms.update(_sampled_evidence(problem, candidate_priors))
+        terms.update(_sampled_evidence(judged, candidate_priors))
+    problem = judged
     row = {
         "label": candidate_label(name, fixed),
         "model": name,
@@ -405,6 +395,26 @@ def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, st
         "warnings": ls.warnings,
     }
     return row, own, (problem, ls, candidate_priors)
+
+
+def _judged(problem, own, given, problem_of, restartable: bool):
+    """What a candidate is judged by: the problem and fit (the exact model's where a
+    table's error matters, :mod:`gonio.fitting.polish`), its priors, its verdict and its
+    evidence terms (:func:`_evidence_terms`; ``restartable`` only for an unpolished fit)."""
+    from .adequacy import assess
+    from .mcmc import resolve_priors
+    from .polish import polish
+
+    ls = own
+    polished = polish(problem, own, given, problem_of)
+    if polished is not None:  # the table's error matters: judge the candidate by its exact model
+        problem, ls = polished.problem, replace(polished.least_squares,
+                                                warnings=[*polished.least_squares.warnings, polished.flag()])
+    candidate_priors = resolve_priors(problem, ls.values, given)
+    verdict = assess(problem, ls)
+    terms = _evidence_terms(problem, ls, candidate_priors, sample=verdict.verdict in _passing(True),
+                            restartable=restartable and polished is None)
+    return problem, ls, candidate_priors, verdict, terms
 
 
 def _evidence_terms(problem, least_squares, priors, sample: bool = True, restartable: bool = False) -> dict[str, Any]:
