@@ -191,7 +191,11 @@ def comparison_text(comparison: Mapping[str, Any]) -> str:
         for name in row.get("undetermined", ()):
             lines.append(f"note: {row['label']}: {name} is undetermined, only {name} x scale is (relative radiance "
                          f"without a calibration prior); its evidence integrates over the product")
-    lines.append("lnZ by: Laplace = corrected Laplace approximation; SMC+-error = sequential Monte Carlo, where "
+    quadrature = [f"{r['label']}: {r['evidence_method'].rpartition(' ')[2]}" for r in comparison["rows"]
+                  if str(r["evidence_method"]).startswith("laplace, quadrature over ")]
+    lines.append("lnZ by: Laplace = corrected Laplace approximation; " + (
+                 f"Laplace+quad = quadrature over the parameter the data leave undetermined ({', '.join(quadrature)}), "
+                 "Laplace for the others; " if quadrature else "") + "SMC+-error = sequential Monte Carlo, where "
                  "Laplace has no Gaussian to expand" + ("; - = not computed: the candidate fails the goodness-of-fit "
                  "test, so its evidence cannot change the choice" if any(r["evidence_method"] == NOT_NEEDED
                                                                         for r in comparison["rows"]) else ""))
@@ -234,6 +238,8 @@ def _evidence_method_text(row: Mapping[str, Any]) -> str:
         return f"SMC+-{row['evidence_error']:.2g}"
     if row["evidence_method"] == NOT_NEEDED:
         return "-"
+    if str(row["evidence_method"]).startswith("laplace, quadrature over "):
+        return "Laplace+quad"
     return "Laplace" if row["evidence_method"] == "laplace" else "n/a"
 
 
@@ -437,7 +443,8 @@ def _evidence_terms(problem, least_squares, priors, sample: bool = True, restart
     laplace = laplace_evidence(problem, least_squares, priors, profiles=sample)
     terms = {"log_evidence": laplace.log_evidence, "log_evidence_laplace": laplace.raw,
              "evidence_truncation": laplace.truncation, "evidence_shape": dict(laplace.shape),
-             "evidence_method": "laplace", "evidence_error": 0.0}
+             "evidence_method": "laplace" if laplace.quadrature_over is None
+             else f"laplace, quadrature over {laplace.quadrature_over}", "evidence_error": 0.0}
     if math.isfinite(laplace.log_evidence) and not laplace.profiles_skipped:
         return terms
     if not sample:
