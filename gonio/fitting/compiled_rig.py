@@ -555,10 +555,11 @@ def _lobe(ks, sigma_s) -> list[np.ndarray]:
     """The specular lobe's amplitude ``ks c(sigma_s)`` (eq 32's constant, the lobe's own
     normalisation, :mod:`gonio.models.torrance_sparrow`) and exponent ``-1/(2 sigma_s^2)``
     [rad^-2] per row, for ``sigma_s`` [deg]."""
-    from gonio.models.torrance_sparrow import _slope_area_normalisation_rad
+    from gonio.models.torrance_sparrow import slope_area_normalisation
 
-    slope = np.radians(np.reshape(np.asarray(sigma_s, float), -1))
-    constant = np.array([_slope_area_normalisation_rad(float(s)) for s in slope])
+    degrees = np.reshape(np.asarray(sigma_s, float), -1)
+    constant = np.array([slope_area_normalisation(float(s)) for s in degrees])
+    slope = np.radians(degrees)
     return [np.reshape(np.asarray(ks, float), -1) * constant, -0.5 / (slope * slope)]
 
 

@@ -230,7 +230,7 @@ def _conditional_evidence(problem, least_squares, priors, candidates: list[str])
     u as ``quadrature_over``; NaN where no candidate qualifies.
     """
     for name in candidates:
-        reduced = _fixed_at(problem, name, least_squares.values[name])
+        reduced = problem.fixing({name: least_squares.values[name]})
         rest = {n: least_squares.values[n] for n in reduced.free}
         if not _positive_definite(_numerical_covariance(reduced, rest, priors)):
             continue
@@ -244,8 +244,6 @@ def _quadrature_over(problem, least_squares, priors, name: str) -> float:
     """ln of the integral over ``name``'s support of its prior times the others' Laplace
     evidence (:func:`_conditional_evidence`); NaN if a node's is undefined or one node
     carries more than :data:`LARGEST_NODE_SHARE` of it."""
-    from .least_squares import fit_least_squares
-
     lo, hi = _support(problem, priors[name], name)
     nodes, weights = np.polynomial.legendre.leggauss(CONDITIONAL_NODES)
     values = lo + 0.5 * (hi - lo) * (nodes + 1.0)
@@ -253,10 +251,8 @@ def _quadrature_over(problem, least_squares, priors, name: str) -> float:
     terms = []
     for k in np.argsort(np.abs(values - least_squares.values[name])):  # outward from the optimum
         u = float(values[k])
-        reduced = _fixed_at(problem, name, u)
         start = optima[min(optima, key=lambda done: abs(done - u))]
-        gaussian = {n: priors[n] for n in reduced.free if isinstance(priors[n], Normal)}
-        fitted = fit_least_squares(reduced, start=start, n_starts=1, priors=gaussian)
+        reduced, fitted = _optimum_at(problem, priors, name, u, start)
         optima[u] = dict(fitted.values, **{name: u})
         inner = laplace_evidence(reduced, fitted, priors, conditional=False)
         if not math.isfinite(inner.log_evidence):
@@ -267,12 +263,14 @@ def _quadrature_over(problem, least_squares, priors, name: str) -> float:
     return top + math.log(total) if 1.0 / total <= LARGEST_NODE_SHARE else math.nan
 
 
-def _fixed_at(problem, name: str, value: float):
-    """The problem with ``name`` fixed at ``value``."""
-    from .problem import FitProblem
+def _optimum_at(problem, priors, name: str, value: float, start: Mapping[str, float]):
+    """The problem with ``name`` fixed at ``value`` and its least squares (one start from
+    ``start``, the Gaussian priors as in the full fit)."""
+    from .least_squares import fit_least_squares
 
-    return FitProblem(problem.base_model, problem.dataset, dict(problem.fixed, **{name: value}), problem.options,
-                      problem.jitter, problem.alignment, problem.stray_light)
+    reduced = problem.fixing({name: value})
+    gaussian = {n: priors[n] for n in reduced.free if isinstance(priors[n], Normal)}
+    return reduced, fit_least_squares(reduced, start=dict(start, **{name: value}), n_starts=1, priors=gaussian)
 
 
 class _NotTheMode(Exception):
@@ -403,16 +401,9 @@ def _profile_log_posterior(problem, priors, name: str, value: float,
     ``value``, and the values there; the others start from ``start`` (the optimum at the
     nearest value already profiled: a profile's nodes are close, and a start near the
     optimum saves most of the least squares' iterations)."""
-    from .least_squares import fit_least_squares
-    from .problem import FitProblem
-
     values = dict(start, **{name: value})
     if len(problem.free) > 1:
-        fixed = dict(problem.fixed, **{name: value})
-        reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter,
-                             problem.alignment, problem.stray_light)
-        gaussian = {n: priors[n] for n in reduced.free if isinstance(priors[n], Normal)}
-        values.update(fit_least_squares(reduced, start=values, n_starts=1, priors=gaussian).values)
+        values.update(_optimum_at(problem, priors, name, value, start)[1].values)
     return log_posterior(problem, priors, np.array([values[n] for n in problem.free], float)), values
 
 
@@ -477,14 +468,11 @@ def _product_evidence(problem, least_squares, priors, factor: str) -> LaplaceEvi
     twice.
     """
     from .least_squares import fit_least_squares
-    from .problem import FitProblem
 
     reference = least_squares.values[factor]
     if not reference > 0:
         return LaplaceEvidence(math.nan)
-    fixed = dict(problem.fixed, **{factor: reference})
-    reduced = FitProblem(problem.base_model, problem.dataset, fixed, problem.options, problem.jitter,
-                         problem.alignment, problem.stray_light)
+    reduced = problem.fixing({factor: reference})
     reduced_ls = fit_least_squares(reduced, start=least_squares.values, n_starts=1)
     reduced_priors: dict[str, Any] = {n: p for n, p in priors.items() if n in reduced.free}
     reduced_priors["scale"] = _ProductPrior(priors[factor], priors["scale"], problem.spec(factor).bounds, reference)

@@ -104,14 +104,9 @@ def with_table_error(problem, least_squares, build_problem):
 
 def exact_problem(build_problem, exact: str):
     """The problem of the exact model ``exact`` with its :data:`EXACT_OPTIONS`."""
-    from .problem import FitProblem
-
     built = build_problem(exact)
     options = EXACT_OPTIONS.get(exact)
-    if not options:
-        return built
-    return FitProblem(built.base_model, built.dataset, built.fixed, {**built.options, **options}, built.jitter,
-                      built.alignment, built.stray_light)
+    return built.fixing(options=options) if options else built
 
 
 def polish(problem, least_squares, priors, build_problem) -> Polish | None:

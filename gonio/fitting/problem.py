@@ -373,6 +373,13 @@ class FitProblem:
         #: Number of model evaluations so far (for benchmarks).
         self.evaluations = 0
 
+    def fixing(self, values: Mapping[str, Any] | None = None, options: Mapping[str, Any] | None = None) -> "FitProblem":
+        """The same problem (model, data, extra noise, rig errors) with ``values`` fixed
+        too and ``options`` overriding its own: a profile's or a quadrature node's reduced
+        problem, the exact model at another accuracy."""
+        return FitProblem(self.base_model, self.dataset, {**self.fixed, **dict(values or {})},
+                          {**self.options, **dict(options or {})}, self.jitter, self.alignment, self.stray_light)
+
     def _quadratic_chi_square(self) -> tuple[Any, QuadraticChiSquare, FloorPoints | None,
                                              SharedSources | None] | None:
         """(linear form, :class:`QuadraticChiSquare`, :class:`FloorPoints` or None,
