@@ -161,10 +161,12 @@ def laplace_evidence(problem, least_squares, priors, profiles: bool = True,
     if undetermined and not profiles:
         return LaplaceEvidence(math.nan, profiles_skipped=tuple(undetermined))
     if undetermined:
-        # a parameter the data leave undetermined, as where the model is nested in a
-        # simpler one (a pit's psi at coverage 0): its integral by quadrature over its
-        # prior, Laplace's method for the others at each node
-        return _conditional_evidence(problem, least_squares, priors, undetermined)
+        # a parameter the data leave undetermined or barely determined, as where the model
+        # is nested in a simpler one (a pit's psi at coverage 0): its integral by
+        # quadrature over its prior, Laplace's method for the others at each node
+        conditional_evidence = _conditional_evidence(problem, least_squares, priors, undetermined)
+        if math.isfinite(conditional_evidence.log_evidence) or not _positive_definite(covariance):
+            return conditional_evidence
     if not _positive_definite(covariance):
         return LaplaceEvidence(math.nan)
     sign, log_det = np.linalg.slogdet(covariance)
@@ -197,25 +199,32 @@ CONDITIONAL_NODES = 12
 LARGEST_NODE_SHARE = 0.5
 
 
-def _undetermined_first(problem, covariance: np.ndarray, priors) -> list[str]:
-    """For an indefinite curvature, the model's own free parameters with a bounded support,
-    least determined first (the magnitude of the inverse curvature's diagonal over the
-    support's width squared); none for a positive definite one.
+#: A parameter whose Gaussian sd exceeds this share of its support's width is barely
+#: determined: Laplace's Gaussian is no description of its posterior, which the
+#: quadrature integrates instead (:func:`_undetermined_first`).
+BARELY_DETERMINED = 0.25
 
-    Where the curvature is positive definite but a parameter is still poorly determined
-    (``pitted`` on a Lambertian sample: psi 45 +- 65 deg), Laplace's Gaussian is kept: it
-    was measured 2.4 above sequential Monte Carlo there, and the quadrature over psi is
-    not resolved by its nodes (the integrand peaks within 4 deg of psi = 0)."""
-    if _positive_definite(covariance):
-        return []
+
+def _undetermined_first(problem, covariance: np.ndarray, priors) -> list[str]:
+    """The model's own free parameters of bounded support to integrate by quadrature,
+    least determined first (the Gaussian's sd over the support's width): for an
+    indefinite curvature all of them; for a positive definite one those whose sd exceeds
+    :data:`BARELY_DETERMINED` of the width.
+
+    Where the curvature is positive definite but a parameter is poorly determined
+    (``pitted`` on Lambertian data: psi 45 +- 65 deg over (0, 90]), Laplace's Gaussian,
+    even corrected, was off by 2.4 to 2.9 in ln Z in either direction against sequential
+    Monte Carlo; the quadrature over psi was within 0.02 (tests/fitting/test_adequacy.py)."""
     names = list(problem.free)
+    definite = _positive_definite(covariance)
     shares = {}
     for name in (p.name for p in problem.base_model.params if p.name in names):
         lo, hi = _support(problem, priors[name], name)
         if math.isfinite(lo) and math.isfinite(hi) and hi > lo:
             k = names.index(name)
             shares[name] = math.sqrt(abs(covariance[k, k])) / (hi - lo) if math.isfinite(covariance[k, k]) else math.inf
-    return sorted(shares, key=lambda n: -shares[n])
+    chosen = [n for n in shares if not definite or shares[n] > BARELY_DETERMINED]
+    return sorted(chosen, key=lambda n: -shares[n])
 
 
 def _conditional_evidence(problem, least_squares, priors, candidates: list[str]) -> LaplaceEvidence:
@@ -242,25 +251,152 @@ def _conditional_evidence(problem, least_squares, priors, candidates: list[str])
 
 def _quadrature_over(problem, least_squares, priors, name: str) -> float:
     """ln of the integral over ``name``'s support of its prior times the others' Laplace
-    evidence (:func:`_conditional_evidence`); NaN if a node's is undefined or one node
-    carries more than :data:`LARGEST_NODE_SHARE` of it."""
+    evidence (:func:`_conditional_evidence`); NaN if a node's is undefined or the
+    integrand is not resolved.
+
+    The nodes are first spread evenly (:data:`CONDITIONAL_NODES` Gauss-Legendre nodes of
+    the support). Where the largest term is an interior node's, that rule is trusted if no
+    node carries more than :data:`LARGEST_NODE_SHARE` of the integral. Where it is an end
+    node's, the integrand peaks against that bound (a nested candidate near its nesting
+    point: a pit's psi or coverage near 0, where the data say the parameter is small but
+    not how small), and the integral is taken again with the nodes crowded towards it
+    (:func:`_crowded_nodes`), trusted where no node of that rule carries more than
+    :data:`LARGEST_NODE_SHARE` or the two rules agree within :data:`RULES_AGREE`.
+
+    Measured against sequential Monte Carlo (2000 particles) on ``pitted`` fitted to
+    Lambertian data (tests/fitting/test_adequacy.py's draws): seed 6 (psi 0.3 deg,
+    coverage 0) 283.569 against 283.552 +- 0.058, where the even rule alone gave 283.672.
+    """
     lo, hi = _support(problem, priors[name], name)
-    nodes, weights = np.polynomial.legendre.leggauss(CONDITIONAL_NODES)
-    values = lo + 0.5 * (hi - lo) * (nodes + 1.0)
     optima = {float(least_squares.values[name]): dict(least_squares.values)}
-    terms = []
-    for k in np.argsort(np.abs(values - least_squares.values[name])):  # outward from the optimum
-        u = float(values[k])
+    even, weights = np.polynomial.legendre.leggauss(CONDITIONAL_NODES)
+    terms = _node_terms(problem, least_squares, priors, name, lo + 0.5 * (hi - lo) * (even + 1.0),
+                        0.5 * (hi - lo) * weights, optima)
+    if terms is None:
+        return math.nan
+    shares = _shares(terms)
+    top = int(np.argmax(shares))
+    if top not in (0, len(terms) - 1):
+        return _log_sum(terms) if shares[top] <= LARGEST_NODE_SHARE else math.nan
+    nodes, node_weights = _crowded_nodes(lo, hi, towards_upper=top == len(terms) - 1)
+    crowded = _node_terms(problem, least_squares, priors, name, nodes, node_weights, optima)
+    if crowded is None:
+        return math.nan
+    if max(_shares(crowded)) <= LARGEST_NODE_SHARE or abs(_log_sum(crowded) - _log_sum(terms)) <= RULES_AGREE:
+        return _log_sum(crowded)
+    return math.nan
+
+
+#: Two quadrature rules (even and crowded nodes) whose results differ by no more than this
+#: [ln units] have resolved the integral, whatever share one node carries.
+RULES_AGREE = 0.2
+#: Power of the substitution that crowds the quadrature's nodes towards a bound
+#: (:func:`_crowded_nodes`).
+CROWDING_POWER = 3
+
+
+def _crowded_nodes(lo: float, hi: float, towards_upper: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre nodes and weights on [lo, hi] crowded towards one bound.
+
+    The substitution ``u = lo + (hi - lo) t^p`` (p = :data:`CROWDING_POWER`, t the
+    :data:`CONDITIONAL_NODES` Gauss-Legendre nodes of [0, 1], weight times
+    ``du/dt = p (hi - lo) t^(p-1)``) puts a third of the nodes within 1 % of the range
+    from ``lo`` (mirrored for ``towards_upper``). An integrand that is flat against the
+    bound and falls away from it, as the evidence of a nested candidate near its nesting
+    point, is smooth in t and integrated to the rule's order.
+
+    Examples
+    --------
+    >>> nodes, weights = _crowded_nodes(0.0, 90.0)
+    >>> round(float(weights.sum()), 9), bool(nodes[3] < 0.9)     # the range, 4 nodes within 1 %
+    (90.0, True)
+    >>> round(float(np.sum(weights * np.exp(-nodes / 2.0))), 3)  # int_0^90 exp(-u/2) du = 2
+    2.0
+    """
+    t, w = np.polynomial.legendre.leggauss(CONDITIONAL_NODES)
+    t, w = 0.5 * (t + 1.0), 0.5 * w
+    offset = (hi - lo) * t ** CROWDING_POWER
+    weights = w * CROWDING_POWER * (hi - lo) * t ** (CROWDING_POWER - 1)
+    return (hi - offset if towards_upper else lo + offset), weights
+
+
+def _node_terms(problem, least_squares, priors, name: str, nodes: np.ndarray, weights: np.ndarray,
+                optima: dict[float, dict[str, float]]) -> list[float] | None:
+    """ln of each node's weight x prior x the others' Laplace evidence with ``name`` fixed
+    there (in the order of ``nodes``), fitted outward from the optimum, each from the
+    nearest optimum in ``optima`` (which gains every node's); None if one is undefined."""
+    terms = [math.nan] * len(nodes)
+    for k in np.argsort(np.abs(nodes - least_squares.values[name])):  # outward from the optimum
+        u = float(nodes[k])
         start = optima[min(optima, key=lambda done: abs(done - u))]
         reduced, fitted = _optimum_at(problem, priors, name, u, start)
         optima[u] = dict(fitted.values, **{name: u})
-        inner = laplace_evidence(reduced, fitted, priors, conditional=False)
-        if not math.isfinite(inner.log_evidence):
-            return math.nan
-        terms.append(math.log(0.5 * (hi - lo) * weights[k]) + priors[name].logpdf(u) + inner.log_evidence)
+        inner = laplace_evidence(reduced, fitted, priors, conditional=False).log_evidence
+        if not math.isfinite(inner):
+            inner = _without_uninformed(reduced, fitted, priors)
+        if not math.isfinite(inner):
+            return None
+        terms[k] = math.log(weights[k]) + priors[name].logpdf(u) + inner
+    return terms
+
+
+#: A parameter across whose prior the log-likelihood changes by less than this [ln units]
+#: is integrated as its prior alone, a factor 1 (:func:`_without_uninformed`).
+UNINFORMED_CHANGE = 0.05
+
+
+def _without_uninformed(problem, least_squares, priors) -> float:
+    """The corrected Laplace ln Z of a problem some of whose parameters the data do not
+    inform at its optimum, NaN if it has none or the rest still has no Gaussian.
+
+    At a quadrature node next to the nesting point (a pit's psi of 1e-4 deg) the model no
+    longer depends on another parameter (the pits' coverage), whose curvature is then
+    zero: Laplace's Gaussian does not exist, but the integral over that parameter is its
+    prior's, 1, to within :data:`UNINFORMED_CHANGE` (the log-likelihood's largest change
+    between 2 % and 98 % of its support). Such parameters are fixed at the optimum and
+    the others' evidence is Laplace's."""
+    flat = _uninformed(problem, least_squares.values, priors)
+    if not flat:
+        return math.nan
+    reduced = problem.fixing(flat)
+    gaussian = {n: priors[n] for n in reduced.free if isinstance(priors[n], Normal)}
+    from .least_squares import fit_least_squares
+
+    fitted = fit_least_squares(reduced, start=least_squares.values, n_starts=1, priors=gaussian)
+    return laplace_evidence(reduced, fitted, priors, conditional=False).log_evidence
+
+
+def _uninformed(problem, values: Mapping[str, float], priors) -> dict[str, float]:
+    """The model's own free parameters of bounded support across which the log-likelihood,
+    the others held at ``values``, changes by less than :data:`UNINFORMED_CHANGE`, with
+    their values."""
+    names = list(problem.free)
+    at = np.array([values[n] for n in names], float)
+    level = problem.log_likelihood(at)
+    flat = {}
+    for name in (p.name for p in problem.base_model.params if p.name in names):
+        lo, hi = _support(problem, priors[name], name)
+        if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+            continue
+        changes = []
+        for u in (lo + 0.02 * (hi - lo), hi - 0.02 * (hi - lo)):
+            moved = at.copy()
+            moved[names.index(name)] = u
+            changes.append(abs(problem.log_likelihood(moved) - level))
+        if max(changes) < UNINFORMED_CHANGE:
+            flat[name] = float(values[name])
+    return flat
+
+
+def _shares(terms: list[float]) -> np.ndarray:
+    """Each term's share of the sum of their exponentials."""
+    values = np.exp(np.asarray(terms) - max(terms))
+    return values / values.sum()
+
+
+def _log_sum(terms: list[float]) -> float:
     top = max(terms)
-    total = sum(math.exp(t - top) for t in terms)
-    return top + math.log(total) if 1.0 / total <= LARGEST_NODE_SHARE else math.nan
+    return top + math.log(sum(math.exp(t - top) for t in terms))
 
 
 def _optimum_at(problem, priors, name: str, value: float, start: Mapping[str, float]):
