@@ -214,7 +214,7 @@ def _undetermined_first(problem, covariance: np.ndarray, priors) -> list[str]:
     Where the curvature is positive definite but a parameter is poorly determined
     (``pitted`` on Lambertian data: psi 45 +- 65 deg over (0, 90]), Laplace's Gaussian,
     even corrected, was off by 2.4 to 2.9 in ln Z in either direction against sequential
-    Monte Carlo; the quadrature over psi was within 0.02 (tests/fitting/test_adequacy.py)."""
+    Monte Carlo; the quadrature over psi was within 0.03 (benchmarks/bench_nested_evidence.py)."""
     names = list(problem.free)
     definite = _positive_definite(covariance)
     shares = {}
