@@ -9,17 +9,18 @@ recording is fitted by least squares with each candidate (the design's priors) a
 remedies for a real rig (``--calibration per-incidence --alignment all --stray-light``, as
 ``gonio demo``; without them a Lambertian sample measured at 80-85 deg is fitted with a
 reduced chi-square of 12 by its own model), and the candidate of least BIC is chosen,
-the simpler within 2 of it (the rule ``gonio fit --model ...`` falls back to when a
-Laplace evidence is undefined). The comparison's own evidence, by sequential Monte Carlo
-whenever a parameter sits at its prior's edge (sigma for a Lambertian truth), takes 1 to
-7 minutes per candidate here. Per protocol and truth: the fraction of seeds whose chosen
-model is the truth's, with a Wilson 95 % interval.
+the simpler within 2 of it. Each candidate's least squares is bounded by its physical
+range (the design's uniform priors do not restrict it). Per protocol, truth and realism:
+the fraction of seeds whose chosen model is the truth's, with a Wilson 95 % interval, and
+for the Lambertian truth, oren-nayar's fitted sigma against the sample's texture slope
+rms (what the sample's mesoscale slopes look like to the design: docs/design.md).
 
 Target (docs/design.md): the right family in at least 95 % of seeds with at most a quarter
 of the points of the Fig 16 and Fig 19 protocols (126 points: 31).
 
-Run: ``python benchmarks/discrimination_study.py --seeds 10`` (about 40 minutes); writes
-``docs/benchmarks/discrimination_study.json`` (runs appended to
+Run: ``python benchmarks/discrimination_study.py --seeds 20`` (about 25 minutes on one
+core), and the control ``--seeds 20 --truth lambert --realism lab:texture_slope=0``;
+writes ``docs/benchmarks/discrimination_study.json`` (runs appended to
 ``discrimination_study.jsonl`` as they finish).
 """
 from __future__ import annotations
@@ -61,10 +62,11 @@ def protocols_studied(with_fig16: bool = False) -> dict[str, str]:
     return texts
 
 
-def run_one(name: str, text: str, truth: str, seed: int, scratch: Path) -> dict[str, Any]:
+def run_one(name: str, text: str, truth: str, seed: int, scratch: Path, realism: str = "lab") -> dict[str, Any]:
     import gonio
     import gonio.fitting
     from gonio import acquisition, models, protocols
+    from gonio.cli.realism import parse_realism
     from gonio.cli.run import emulated_rig
     from gonio.fitting.priors import Uniform
 
@@ -72,12 +74,12 @@ def run_one(name: str, text: str, truth: str, seed: int, scratch: Path) -> dict[
     folder = scratch / f"run-{seed}"
     shutil.rmtree(folder, ignore_errors=True)
     start = time.perf_counter()
-    with emulated_rig(TRUTHS[truth], seed, name=f"discrimination-{seed}") as (rig, _, change_sample, metadata):
+    with emulated_rig(TRUTHS[truth], seed, name=f"discrimination-{seed}", realism=realism) as (rig, _, change_sample, metadata):
         run = acquisition.run_protocol(protocol, rig, folder, metadata=metadata,
                                        change_sample=lambda which, **how: change_sample(which, 0.99, **how))
     dataset, data_priors = gonio.load_data(folder, calibration="per-incidence")
     shutil.rmtree(folder, ignore_errors=True)
-    bic, redchi = {}, {}
+    bic, redchi, fitted = {}, {}, {}
     for model in CANDIDATES:
         names = models.get(model).param_names
         priors = {**data_priors, **{n: Uniform(*r) for n, r in PRIORS.items() if n in names}}
@@ -87,9 +89,12 @@ def run_one(name: str, text: str, truth: str, seed: int, scratch: Path) -> dict[
         ls = fit.least_squares
         bic[model] = ls.chi2 + len(fit.free) * math.log(dataset.n)
         redchi[model] = ls.redchi
+        fitted[model] = {n: [ls.values[n], ls.stderr.get(n, math.nan)] for n in names if n in ls.values}
     chosen = choose_by_bic(bic)
-    return {"protocol": name, "truth": truth, "seed": seed, "points": run.measured, "chosen": chosen,
-            "right": chosen == truth, "bic": bic, "redchi": redchi, "wall_seconds": time.perf_counter() - start}
+    return {"protocol": name, "truth": truth, "seed": seed, "realism": realism,
+            "texture_slope": parse_realism(realism, seed).texture_slope, "points": run.measured,
+            "chosen": chosen, "right": chosen == truth, "bic": bic, "redchi": redchi, "fitted": fitted,
+            "wall_seconds": time.perf_counter() - start}
 
 
 def choose_by_bic(bic: dict[str, float], threshold: float = 2.0) -> str:
@@ -99,23 +104,47 @@ def choose_by_bic(bic: dict[str, float], threshold: float = 2.0) -> str:
     return next(model for model in CANDIDATES if bic[model] <= best + threshold)
 
 
+def _realism_of(record: dict[str, Any]) -> str:
+    return record.get("realism", "lab")
+
+
+def roughness_found(mine: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """Of the runs whose choice was ``oren-nayar-tabulated``: its fitted sigma (median,
+    range) and how often its 95 % interval (value +- 1.96 standard errors) holds the
+    sample's texture slope rms, the roughness the mesoscale texture gives a Lambertian
+    sample (docs/design.md, "Telling models apart")."""
+    chose = [r for r in mine if r["chosen"] == "oren-nayar-tabulated" and "fitted" in r]
+    if not chose:
+        return None
+    sigma = [r["fitted"]["oren-nayar-tabulated"]["sigma"] for r in chose]
+    held = sum(abs(value - r["texture_slope"]) <= 1.96 * error for (value, error), r in zip(sigma, chose))
+    values = sorted(value for value, _ in sigma)
+    return {"runs": len(chose), "sigma_median": values[len(values) // 2], "sigma_range": [values[0], values[-1]],
+            "texture_slope": chose[0]["texture_slope"], "interval_holds_texture_slope": held}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--with-fig16", action="store_true",
                         help="also the shipped Fig 16 protocol (its fits of pitted with the rig's errors take minutes)")
+    parser.add_argument("--realism", default="lab",
+                        help="the emulated rig's realism (gonio run --realism), e.g. lab:texture_slope=0")
+    parser.add_argument("--truth", action="append", choices=list(TRUTHS),
+                        help="only this truth (repeatable; default all)")
     args = parser.parse_args()
     texts = protocols_studied(args.with_fig16)
-    done = {(r["protocol"], r["truth"], r["seed"]) for r in map(json.loads, RECORDS.read_text().splitlines())} \
-        if RECORDS.exists() else set()
-    todo = [(name, truth, seed) for seed in range(args.seeds) for truth in TRUTHS for name in texts
-            if (name, truth, seed) not in done]
-    print(f"{len(texts) * len(TRUTHS) * args.seeds} runs, {len(todo)} to do", flush=True)
+    truths = args.truth or list(TRUTHS)
+    done = {(r["protocol"], r["truth"], r["seed"], _realism_of(r))
+            for r in map(json.loads, RECORDS.read_text().splitlines())} if RECORDS.exists() else set()
+    todo = [(name, truth, seed) for seed in range(args.seeds) for truth in truths for name in texts
+            if (name, truth, seed, args.realism) not in done]
+    print(f"{len(texts) * len(truths) * args.seeds} runs, {len(todo)} to do", flush=True)
     scratch = Path(tempfile.mkdtemp(prefix="gonio-discrimination-"))
     start = time.perf_counter()
     try:
         for k, (name, truth, seed) in enumerate(todo, start=1):
-            record = run_one(name, texts[name], truth, seed, scratch)
+            record = run_one(name, texts[name], truth, seed, scratch, args.realism)
             with RECORDS.open("a") as sink:
                 sink.write(json.dumps(record) + "\n")
             elapsed = time.perf_counter() - start
@@ -125,16 +154,20 @@ def main() -> int:
         shutil.rmtree(scratch, ignore_errors=True)
     records = [r for r in map(json.loads, RECORDS.read_text().splitlines()) if r["seed"] < args.seeds]
     rows = []
-    for name in texts:
-        for truth in TRUTHS:
-            mine = [r for r in records if r["protocol"] == name and r["truth"] == truth]
-            if mine:
-                right = sum(r["right"] for r in mine)
-                rows.append({"protocol": name, "truth": truth, "seeds": len(mine), "points": mine[0]["points"],
-                             "right": right / len(mine), "right_wilson": wilson(right, len(mine)),
-                             "chosen": {c: sum(r["chosen"] == c for r in mine) for c in CANDIDATES}})
-                print(f"{name:<34} truth {truth:<22} {mine[0]['points']:3d} points: right {right}/{len(mine)} "
-                      f"chosen {rows[-1]['chosen']}")
+    for realism in sorted({_realism_of(r) for r in records}):
+        for name in texts:
+            for truth in TRUTHS:
+                mine = [r for r in records if r["protocol"] == name and r["truth"] == truth
+                        and _realism_of(r) == realism]
+                if mine:
+                    right = sum(r["right"] for r in mine)
+                    rows.append({"protocol": name, "truth": truth, "realism": realism, "seeds": len(mine),
+                                 "points": mine[0]["points"], "right": right / len(mine),
+                                 "right_wilson": wilson(right, len(mine)),
+                                 "chosen": {c: sum(r["chosen"] == c for r in mine) for c in CANDIDATES},
+                                 "roughness_found": roughness_found(mine) if truth == "lambert" else None})
+                    print(f"{realism:<22} {name:<34} truth {truth:<22} {mine[0]['points']:3d} points: "
+                          f"right {right}/{len(mine)} chosen {rows[-1]['chosen']} {rows[-1]['roughness_found'] or ''}")
     write_json("discrimination_study", {"candidates": CANDIDATES, "priors": PRIORS, "truths": TRUTHS, "rows": rows,
                                         "protocols": texts, "machine": machine()})
     return 0
