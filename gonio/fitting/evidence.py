@@ -57,8 +57,6 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .priors import Normal
-
 __all__ = ["LaplaceEvidence", "TemperedEvidence", "laplace_evidence", "laplace_log_evidence", "log_posterior",
            "tempered_evidence", "scale_degenerate_factor"]
 
@@ -359,10 +357,10 @@ def _without_uninformed(problem, least_squares, priors) -> float:
     if not flat:
         return math.nan
     reduced = problem.fixing(flat)
-    gaussian = {n: priors[n] for n in reduced.free if isinstance(priors[n], Normal)}
     from .least_squares import fit_least_squares
 
-    fitted = fit_least_squares(reduced, start=least_squares.values, n_starts=1, priors=gaussian)
+    fitted = fit_least_squares(reduced, start=least_squares.values, n_starts=1,
+                               priors={n: priors[n] for n in reduced.free})
     return laplace_evidence(reduced, fitted, priors, conditional=False).log_evidence
 
 
@@ -401,12 +399,12 @@ def _log_sum(terms: list[float]) -> float:
 
 def _optimum_at(problem, priors, name: str, value: float, start: Mapping[str, float]):
     """The problem with ``name`` fixed at ``value`` and its least squares (one start from
-    ``start``, the Gaussian priors as in the full fit)."""
+    ``start``, the priors as in the full fit)."""
     from .least_squares import fit_least_squares
 
     reduced = problem.fixing({name: value})
-    gaussian = {n: priors[n] for n in reduced.free if isinstance(priors[n], Normal)}
-    return reduced, fit_least_squares(reduced, start=dict(start, **{name: value}), n_starts=1, priors=gaussian)
+    return reduced, fit_least_squares(reduced, start=dict(start, **{name: value}), n_starts=1,
+                                      priors={n: priors[n] for n in reduced.free})
 
 
 class _NotTheMode(Exception):

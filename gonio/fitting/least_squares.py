@@ -149,8 +149,26 @@ class LeastSquaresResult:
         return cls(**kwargs)
 
 
-def _optimiser_bounds(problem: FitProblem, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    return optimiser_bounds([problem.spec(name) for name in names])
+def _optimiser_bounds(problem: FitProblem, names: Sequence[str],
+                      priors: Mapping[str, Any] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`optimiser_bounds` narrowed to each prior's support: a fit given
+    ``sigma ~ uniform(10, 45)`` looks for its optimum there, as the sampler does.
+
+    Raises
+    ------
+    ValueError
+        A prior's support outside the parameter's physical range.
+    """
+    lower, upper = optimiser_bounds([problem.spec(name) for name in names])
+    for k, name in enumerate(names):
+        prior = (priors or {}).get(name)
+        if prior is None:
+            continue
+        lower[k], upper[k] = max(lower[k], prior.lower), min(upper[k], prior.upper)
+        if not lower[k] < upper[k]:
+            lo, hi = problem.spec(name).bounds
+            raise ValueError(f"the prior of {name}, {prior}, leaves nothing of its physical range [{lo:g}, {hi:g}]")
+    return lower, upper
 
 
 def optimiser_bounds(specs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
@@ -231,9 +249,10 @@ def _correlation(covariance: np.ndarray) -> np.ndarray:
         return covariance / np.outer(sd, sd)
 
 
-def _start_points(problem: FitProblem, start: Mapping[str, float] | None, n_starts: int, rng) -> list[np.ndarray]:
+def _start_points(problem: FitProblem, start: Mapping[str, float] | None, n_starts: int, rng,
+                  priors: Mapping[str, Any] | None = None) -> list[np.ndarray]:
     names = [n for n in problem.free if n not in (problem.noise_parameter, "scale")]
-    lower, upper = _optimiser_bounds(problem, names)
+    lower, upper = _optimiser_bounds(problem, names, priors)
     first = []
     for name, lo, hi in zip(names, lower, upper):
         value = float((start or {}).get(name, problem.spec(name).default))
@@ -410,7 +429,8 @@ def fit_least_squares(
         Priors of free parameters. Gaussian ones (:class:`~gonio.fitting.priors.Normal`,
         e.g. the calibration's prior on ``scale``) add the residual ``(x - mean) / sd``, so
         the fit is the posterior mode under the same likelihood and priors the sampler
-        uses; the others only restrict the range, as the physical bounds already do.
+        uses; every prior restricts the range to its support, as the physical bounds do
+        (``sigma ~ uniform(10, 45)``: the optimum is sought between 10 and 45 deg).
 
     Returns
     -------
@@ -432,7 +452,7 @@ def fit_least_squares(
     rng = np.random.default_rng(seed)
     free = problem.free
     optimised = [n for n in free if n != problem.noise_parameter]
-    lower, upper = _optimiser_bounds(problem, optimised)
+    lower, upper = _optimiser_bounds(problem, optimised, priors)
     index = [free.index(n) for n in optimised]
     gaussian = [(optimised.index(n), p.mean, p.sd) for n, p in (priors or {}).items()
                 if isinstance(p, Normal) and n in optimised]
@@ -475,7 +495,7 @@ def fit_least_squares(
         jac = jacobian if not problem.jitter else "2-point"
         return optimize.least_squares(residuals, x0, jac=jac, bounds=(lower, upper), x_scale="jac", method="trf")
 
-    for point in _start_points(problem, start, n_starts, rng):
+    for point in _start_points(problem, start, n_starts, rng, priors):
         heartbeat.start += 1
         found = solve(point, np.clip(point[index], lower, upper))
         if found is None:

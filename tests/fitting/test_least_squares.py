@@ -223,3 +223,27 @@ def test_the_batched_jacobian_reaches_the_optimum_scipy_s_reaches():
             assert batched.values[name] == pytest.approx(reference.values[name], abs=1e-4 * reference.stderr[name])
             assert batched.stderr[name] == pytest.approx(reference.stderr[name], rel=1e-4)
         assert batched.chi2 == pytest.approx(reference.chi2, rel=1e-8)
+
+
+def test_a_prior_narrower_than_the_physical_range_bounds_the_optimum():
+    """Oren-Nayar fitted to Lambertian data with ``sigma ~ uniform(10, 45)``: the optimum
+    is sought where the prior has mass, as the sampler's posterior is (it had come out at
+    sigma 0.95 deg, a mode the posterior excludes), and on the prior's edge here."""
+    from gonio.fitting.priors import Uniform
+
+    data = synthetic_dataset("lambert", {"rho": 0.8}, noise=0.003, seed=0)
+    problem = FitProblem("oren-nayar-tabulated", data)
+    free = fit_least_squares(problem)
+    assert free.values["sigma"] < 5.0
+    bounded = fit_least_squares(problem, priors={"sigma": Uniform(10.0, 45.0)})
+    assert 10.0 <= bounded.values["sigma"] <= 45.0
+    assert bounded.values["sigma"] == pytest.approx(10.0, abs=0.01)
+    assert bounded.chi2 > free.chi2
+
+
+def test_a_prior_outside_the_physical_range_is_refused_by_name():
+    from gonio.fitting.priors import Uniform
+
+    data = synthetic_dataset("lambert", {"rho": 0.8}, noise=0.003, seed=0)
+    with pytest.raises(ValueError, match="prior of sigma.*physical range"):
+        fit_least_squares(FitProblem("oren-nayar-tabulated", data), priors={"sigma": Uniform(100.0, 120.0)})
