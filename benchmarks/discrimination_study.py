@@ -9,17 +9,19 @@ recording is fitted by least squares with each candidate (the design's priors) a
 remedies for a real rig (``--calibration per-incidence --alignment all --stray-light``, as
 ``gonio demo``; without them a Lambertian sample measured at 80-85 deg is fitted with a
 reduced chi-square of 12 by its own model), and the candidate of least BIC is chosen,
-the simpler within 2 of it. Each candidate's least squares is bounded by its physical
-range (the design's uniform priors do not restrict it). Per protocol, truth and realism:
-the fraction of seeds whose chosen model is the truth's, with a Wilson 95 % interval, and
-for the Lambertian truth, oren-nayar's fitted sigma against the sample's texture slope
-rms (what the sample's mesoscale slopes look like to the design: docs/design.md).
+the simpler within 2 of it. Each candidate's least squares is bounded by the design's
+priors (sigma 10-45 deg, psi 20-90 deg, coverage 0.2-0.8), or with ``--physical-range``
+by its physical range only. Per protocol, truth, realism and range: the fraction of seeds
+whose chosen model is the truth's, with a Wilson 95 % interval, and for the Lambertian
+truth, oren-nayar's fitted sigma against the sample's texture slope rms (what the
+sample's mesoscale slopes look like to the design: docs/design.md).
 
 Target (docs/design.md): the right family in at least 95 % of seeds with at most a quarter
 of the points of the Fig 16 and Fig 19 protocols (126 points: 31).
 
 Run: ``python benchmarks/discrimination_study.py --seeds 20`` (about 25 minutes on one
-core), and the control ``--seeds 20 --truth lambert --realism lab:texture_slope=0``;
+core), the same with ``--physical-range``, and the control ``--seeds 20 --truth lambert
+--realism lab:texture_slope=0 --physical-range``;
 writes ``docs/benchmarks/discrimination_study.json`` (runs appended to
 ``discrimination_study.jsonl`` as they finish).
 """
@@ -62,7 +64,11 @@ def protocols_studied(with_fig16: bool = False) -> dict[str, str]:
     return texts
 
 
-def run_one(name: str, text: str, truth: str, seed: int, scratch: Path, realism: str = "lab") -> dict[str, Any]:
+def run_one(name: str, text: str, truth: str, seed: int, scratch: Path, realism: str = "lab",
+            fit_range: str = "design priors") -> dict[str, Any]:
+    """Measure the design on the emulated rig and choose among the candidates by BIC, each
+    fitted within the design's priors (``fit_range`` "design priors") or within its
+    physical range ("physical")."""
     import gonio
     import gonio.fitting
     from gonio import acquisition, models, protocols
@@ -82,7 +88,8 @@ def run_one(name: str, text: str, truth: str, seed: int, scratch: Path, realism:
     bic, redchi, fitted = {}, {}, {}
     for model in CANDIDATES:
         names = models.get(model).param_names
-        priors = {**data_priors, **{n: Uniform(*r) for n, r in PRIORS.items() if n in names}}
+        design = {n: Uniform(*r) for n, r in PRIORS.items() if n in names} if fit_range == "design priors" else {}
+        priors = {**data_priors, **design}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             fit = gonio.fitting.fit(dataset, model, priors=priors, mcmc=False, jitter=False, **RIG_ERRORS)
@@ -91,7 +98,7 @@ def run_one(name: str, text: str, truth: str, seed: int, scratch: Path, realism:
         redchi[model] = ls.redchi
         fitted[model] = {n: [ls.values[n], ls.stderr.get(n, math.nan)] for n in names if n in ls.values}
     chosen = choose_by_bic(bic)
-    return {"protocol": name, "truth": truth, "seed": seed, "realism": realism,
+    return {"protocol": name, "truth": truth, "seed": seed, "realism": realism, "fit_range": fit_range,
             "texture_slope": parse_realism(realism, seed).texture_slope, "points": run.measured,
             "chosen": chosen, "right": chosen == truth, "bic": bic, "redchi": redchi, "fitted": fitted,
             "wall_seconds": time.perf_counter() - start}
@@ -104,8 +111,10 @@ def choose_by_bic(bic: dict[str, float], threshold: float = 2.0) -> str:
     return next(model for model in CANDIDATES if bic[model] <= best + threshold)
 
 
-def _realism_of(record: dict[str, Any]) -> str:
-    return record.get("realism", "lab")
+def _arm_of(record: dict[str, Any]) -> tuple[str, str]:
+    """(realism, fit range) of a run; the first runs, without these fields, were on the
+    ``lab`` rig with least squares bounded by the physical range only."""
+    return record.get("realism", "lab"), record.get("fit_range", "physical")
 
 
 def roughness_found(mine: list[dict[str, Any]]) -> dict[str, Any] | None:
@@ -130,21 +139,24 @@ def main() -> int:
                         help="also the shipped Fig 16 protocol (its fits of pitted with the rig's errors take minutes)")
     parser.add_argument("--realism", default="lab",
                         help="the emulated rig's realism (gonio run --realism), e.g. lab:texture_slope=0")
+    parser.add_argument("--physical-range", action="store_true",
+                        help="fit every candidate within its physical range, not the design's priors")
     parser.add_argument("--truth", action="append", choices=list(TRUTHS),
                         help="only this truth (repeatable; default all)")
     args = parser.parse_args()
     texts = protocols_studied(args.with_fig16)
     truths = args.truth or list(TRUTHS)
-    done = {(r["protocol"], r["truth"], r["seed"], _realism_of(r))
+    arm = (args.realism, "physical" if args.physical_range else "design priors")
+    done = {(r["protocol"], r["truth"], r["seed"], _arm_of(r))
             for r in map(json.loads, RECORDS.read_text().splitlines())} if RECORDS.exists() else set()
     todo = [(name, truth, seed) for seed in range(args.seeds) for truth in truths for name in texts
-            if (name, truth, seed, args.realism) not in done]
+            if (name, truth, seed, arm) not in done]
     print(f"{len(texts) * len(truths) * args.seeds} runs, {len(todo)} to do", flush=True)
     scratch = Path(tempfile.mkdtemp(prefix="gonio-discrimination-"))
     start = time.perf_counter()
     try:
         for k, (name, truth, seed) in enumerate(todo, start=1):
-            record = run_one(name, texts[name], truth, seed, scratch, args.realism)
+            record = run_one(name, texts[name], truth, seed, scratch, *arm)
             with RECORDS.open("a") as sink:
                 sink.write(json.dumps(record) + "\n")
             elapsed = time.perf_counter() - start
@@ -154,19 +166,20 @@ def main() -> int:
         shutil.rmtree(scratch, ignore_errors=True)
     records = [r for r in map(json.loads, RECORDS.read_text().splitlines()) if r["seed"] < args.seeds]
     rows = []
-    for realism in sorted({_realism_of(r) for r in records}):
+    for realism, fit_range in sorted({_arm_of(r) for r in records}):
         for name in texts:
             for truth in TRUTHS:
                 mine = [r for r in records if r["protocol"] == name and r["truth"] == truth
-                        and _realism_of(r) == realism]
+                        and _arm_of(r) == (realism, fit_range)]
                 if mine:
                     right = sum(r["right"] for r in mine)
-                    rows.append({"protocol": name, "truth": truth, "realism": realism, "seeds": len(mine),
+                    rows.append({"protocol": name, "truth": truth, "realism": realism, "fit_range": fit_range,
+                                 "seeds": len(mine),
                                  "points": mine[0]["points"], "right": right / len(mine),
                                  "right_wilson": wilson(right, len(mine)),
                                  "chosen": {c: sum(r["chosen"] == c for r in mine) for c in CANDIDATES},
                                  "roughness_found": roughness_found(mine) if truth == "lambert" else None})
-                    print(f"{realism:<22} {name:<34} truth {truth:<22} {mine[0]['points']:3d} points: "
+                    print(f"{realism:<22} {fit_range:<14} {name:<34} truth {truth:<22} {mine[0]['points']:3d} points: "
                           f"right {right}/{len(mine)} chosen {rows[-1]['chosen']} {rows[-1]['roughness_found'] or ''}")
     write_json("discrimination_study", {"candidates": CANDIDATES, "priors": PRIORS, "truths": TRUTHS, "rows": rows,
                                         "protocols": texts, "machine": machine()})
