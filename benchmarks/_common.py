@@ -97,3 +97,19 @@ def wilson(k: int, n: int) -> list[float]:
 
     interval = stats.binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
     return [float(interval.low), float(interval.high)]
+
+
+def record_on_emulator(protocol, sample: str, seed: int, folder: Path, reflectance: float | None = None,
+                       realism: str = "lab", name: str = "study", extend=None):
+    """Run ``protocol`` (a :class:`gonio.protocols.Protocol`) on an in-process emulated rig
+    with ``sample`` (a sample spec) and emulator seed ``seed``, recording into ``folder``;
+    the reference standard, where the protocol swaps it in, has ``reflectance`` (default:
+    the protocol's own). Returns the acquisition's run (``gonio.acquisition.run_protocol``)."""
+    from gonio import acquisition
+    from gonio.cli.run import emulated_rig
+
+    if reflectance is None and protocol.reference is not None:
+        reflectance = protocol.reference.reflectance
+    with emulated_rig(sample, seed, name=f"{name}-{seed}", realism=realism) as (rig, _, change_sample, metadata):
+        return acquisition.run_protocol(protocol, rig, folder, metadata=metadata, extend=extend,
+                                        change_sample=lambda which, **how: change_sample(which, reflectance, **how))

@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import OUT, ROOT, machine, wilson, write_json
+from _common import OUT, ROOT, machine, record_on_emulator, wilson, write_json
 
 MODEL = "oren-nayar-tabulated"
 TRUTH_SPEC = "oren-nayar-exact:rho=0.9,sigma=30"
@@ -88,14 +88,10 @@ def start_protocol() -> str:
 
 
 def measure(text: str, folder: Path, seed: int, extend=None):
-    from gonio import acquisition, protocols
-    from gonio.cli.run import emulated_rig
+    from gonio import protocols
 
-    protocol = protocols.loads(text, source="study")
-    reflectance = protocol.reference.reflectance if protocol.reference else None
-    with emulated_rig(TRUTH_SPEC, seed, name=f"adaptive-study-{seed}") as (rig, _, change_sample, metadata):
-        return acquisition.run_protocol(protocol, rig, folder, metadata=metadata, extend=extend,
-                                        change_sample=lambda which, **how: change_sample(which, reflectance, **how))
+    return record_on_emulator(protocols.loads(text, source="study"), TRUTH_SPEC, seed, folder,
+                              name="adaptive-study", extend=extend)
 
 
 def outcome(posterior) -> dict[str, Any]:

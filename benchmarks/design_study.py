@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import OUT, ROOT, machine, wilson, write_json
+from _common import OUT, ROOT, machine, record_on_emulator, wilson, write_json
 
 MODEL = "oren-nayar-tabulated"
 TRUTH_SPEC = "oren-nayar-exact:rho=0.9,sigma=30"
@@ -67,18 +67,14 @@ def protocols_studied() -> dict[str, str]:
 def run_one(name: str, text: str, seed: int, scratch: Path) -> dict[str, Any]:
     """Measure ``text`` on the emulated rig with seed ``seed``, fit it, and record the outcome."""
     import gonio
-    from gonio import acquisition, protocols
-    from gonio.cli.run import emulated_rig
+    from gonio import protocols
     from gonio.fitting.priors import Uniform
 
     protocol = protocols.loads(text, source=name)
     folder = scratch / f"run-{seed}"
     shutil.rmtree(folder, ignore_errors=True)
     start = time.perf_counter()
-    reflectance = protocol.reference.reflectance if protocol.reference else None
-    with emulated_rig(TRUTH_SPEC, seed, name=f"design-study-{seed}") as (rig, _, change_sample, metadata):
-        run = acquisition.run_protocol(protocol, rig, folder, metadata=metadata,
-                                       change_sample=lambda which, **how: change_sample(which, reflectance, **how))
+    run = record_on_emulator(protocol, TRUTH_SPEC, seed, folder, name="design-study")
     record = {"protocol": name, "seed": seed, "points": run.measured,
               "planned_seconds": protocols.plan(protocol).estimated_seconds,
               "recorded_seconds": run.instrument_seconds - run.warm_up_seconds,

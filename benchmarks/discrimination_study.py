@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from _common import OUT, ROOT, machine, write_json
-from _common import wilson
+from _common import record_on_emulator, wilson
 
 CANDIDATES = ("lambert", "oren-nayar-tabulated", "pitted")
 PRIORS = {"rho": (0.5, 1.0), "sigma": (10.0, 45.0), "psi": (20.0, 90.0), "coverage": (0.2, 0.8)}
@@ -71,18 +71,16 @@ def run_one(name: str, text: str, truth: str, seed: int, scratch: Path, realism:
     physical range ("physical")."""
     import gonio
     import gonio.fitting
-    from gonio import acquisition, models, protocols
+    from gonio import models, protocols
     from gonio.cli.realism import parse_realism
-    from gonio.cli.run import emulated_rig
     from gonio.fitting.priors import Uniform
 
     protocol = protocols.loads(text, source=name)
     folder = scratch / f"run-{seed}"
     shutil.rmtree(folder, ignore_errors=True)
     start = time.perf_counter()
-    with emulated_rig(TRUTHS[truth], seed, name=f"discrimination-{seed}", realism=realism) as (rig, _, change_sample, metadata):
-        run = acquisition.run_protocol(protocol, rig, folder, metadata=metadata,
-                                       change_sample=lambda which, **how: change_sample(which, 0.99, **how))
+    run = record_on_emulator(protocol, TRUTHS[truth], seed, folder, reflectance=0.99, realism=realism,
+                             name="discrimination")
     dataset, data_priors = gonio.load_data(folder, calibration="per-incidence")
     shutil.rmtree(folder, ignore_errors=True)
     bic, redchi, fitted = {}, {}, {}

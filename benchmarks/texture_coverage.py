@@ -25,7 +25,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from _common import machine, wilson, write_json
+from _common import machine, record_on_emulator, wilson, write_json
 from design_study import MODEL, PRIORS, TRUTH, TRUTH_SPEC, protocols_studied
 
 PROTOCOL = "designed, Fig 16's time"
@@ -36,17 +36,13 @@ def run_one(text: str, realism: str, seed: int, scratch: Path) -> dict[str, Any]
     """Measure the design with seed ``seed`` on a rig of ``realism`` and fit it."""
     import gonio
     import gonio.fitting
-    from gonio import acquisition, protocols
-    from gonio.cli.run import emulated_rig
+    from gonio import protocols
     from gonio.fitting.priors import Uniform
 
     protocol = protocols.loads(text, source=PROTOCOL)
     folder = scratch / f"run-{seed}"
     shutil.rmtree(folder, ignore_errors=True)
-    with emulated_rig(TRUTH_SPEC, seed, name=f"texture-{seed}", realism=realism) as (rig, _, change_sample, metadata):
-        acquisition.run_protocol(protocol, rig, folder, metadata=metadata,
-                                 change_sample=lambda which, **how: change_sample(
-                                     which, protocol.reference.reflectance, **how))
+    record_on_emulator(protocol, TRUTH_SPEC, seed, folder, realism=realism, name="texture")
     dataset, data_priors = gonio.load_data(folder, calibration="per-incidence")
     shutil.rmtree(folder, ignore_errors=True)
     priors = {**data_priors, **{n: Uniform(*r) for n, r in PRIORS.items()}}

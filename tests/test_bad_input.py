@@ -257,6 +257,8 @@ BAD_ARGUMENTS = [
     ("fit-missing-data", ["fit", "nothing.csv", "--model", "lambert"], ["nothing.csv", "no such file or recording folder"]),
     ("fit-folder-not-recording", ["fit", "mine", "--model", "lambert"], ["mine", "not a recording"]),
     ("fit-unknown-model", ["fit", "data.csv", "--model", "no-such-model"], ["unknown model", "no-such-model"]),
+    ("fit-prior-outside-range", ["fit", "data.csv", "--model", "oren-nayar", "--no-mcmc", "--prior",
+                                 "sigma=uniform:100:120"], ["--prior sigma=uniform:100:120", "physical range is [0, 90]"]),
     ("fit-out-file", ["fit", "data.csv", "--model", "lambert", "--no-mcmc", "--out", "notes.txt"],
      ["--out notes.txt", "an existing file"]),
     ("fit-out-device", ["fit", "data.csv", "--model", "lambert", "--no-mcmc", "--out", "/dev/null"],

@@ -291,6 +291,7 @@ def _priors(items: list[str], names: list[str]) -> dict[str, Prior]:
     """The ``--prior`` overrides, each checked against the bounds of the parameter it names
     (in the first model that has it, or the rig's errors)."""
     from gonio import models
+    from gonio.cli import CLIError
     from gonio.fitting import parse_prior
     from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
 
@@ -300,7 +301,11 @@ def _priors(items: list[str], names: list[str]) -> dict[str, Prior]:
                       (-float("inf"), float("inf")))
         if key in RIG_ERROR_NAMES:
             bounds = STRAY_LIGHT.bounds if key == STRAY_LIGHT.name else (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
-        priors[key] = parse_prior(text, bounds)
+        try:
+            priors[key] = parse_prior(text, bounds)
+        except ValueError as error:
+            raise CLIError(f"--prior {key}={text}: {error}; {key}'s physical range is "
+                           f"[{bounds[0]:g}, {bounds[1]:g}]") from None
     return priors
 
 

@@ -272,16 +272,18 @@ def _quadrature_over(problem, least_squares, priors, name: str) -> float:
                         0.5 * (hi - lo) * weights, optima)
     if terms is None:
         return math.nan
-    shares = _shares(terms)
+    from scipy.special import logsumexp, softmax
+
+    shares = softmax(terms)
     top = int(np.argmax(shares))
     if top not in (0, len(terms) - 1):
-        return _log_sum(terms) if shares[top] <= LARGEST_NODE_SHARE else math.nan
+        return float(logsumexp(terms)) if shares[top] <= LARGEST_NODE_SHARE else math.nan
     nodes, node_weights = _crowded_nodes(lo, hi, towards_upper=top == len(terms) - 1)
     crowded = _node_terms(problem, least_squares, priors, name, nodes, node_weights, optima)
     if crowded is None:
         return math.nan
-    if max(_shares(crowded)) <= LARGEST_NODE_SHARE or abs(_log_sum(crowded) - _log_sum(terms)) <= RULES_AGREE:
-        return _log_sum(crowded)
+    if max(softmax(crowded)) <= LARGEST_NODE_SHARE or abs(logsumexp(crowded) - logsumexp(terms)) <= RULES_AGREE:
+        return float(logsumexp(crowded))
     return math.nan
 
 
@@ -384,17 +386,6 @@ def _uninformed(problem, values: Mapping[str, float], priors) -> dict[str, float
         if max(changes) < UNINFORMED_CHANGE:
             flat[name] = float(values[name])
     return flat
-
-
-def _shares(terms: list[float]) -> np.ndarray:
-    """Each term's share of the sum of their exponentials."""
-    values = np.exp(np.asarray(terms) - max(terms))
-    return values / values.sum()
-
-
-def _log_sum(terms: list[float]) -> float:
-    top = max(terms)
-    return top + math.log(sum(math.exp(t - top) for t in terms))
 
 
 def _optimum_at(problem, priors, name: str, value: float, start: Mapping[str, float]):
