@@ -700,6 +700,28 @@ def _any_array(params: Mapping[str, Any]) -> bool:
     return any(isinstance(v, np.ndarray) for v in params.values())
 
 
+def _distinct_rows(table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of a 2-D ``table`` and each row's index among them, as
+    ``np.unique(table, axis=0, return_inverse=True)`` (inverse flat).
+
+    Parameter tables repeat each combination over long runs of consecutive rows (a
+    batch row's value over every geometry and sub-ray of an aperture average), so the
+    sort runs over the first row of each run only: sorting every row had been a third
+    of the time of fitting ``pitted`` to a misaligned rig's recording.
+
+    Examples
+    --------
+    >>> rows, index = _distinct_rows(np.array([[2.0, 1.0], [2.0, 1.0], [0.5, 1.0], [2.0, 1.0]]))
+    >>> rows.tolist(), index.tolist()
+    ([[0.5, 1.0], [2.0, 1.0]], [1, 1, 0, 1])
+    """
+    if table.shape[0] == 0:
+        return table[:0], np.zeros(0, dtype=np.intp)
+    starts = np.flatnonzero(np.concatenate(([True], np.any(table[1:] != table[:-1], axis=1))))
+    distinct, run_index = np.unique(table[starts], axis=0, return_inverse=True)
+    return distinct, np.repeat(run_index.reshape(-1), np.diff(np.append(starts, table.shape[0])))
+
+
 def _evaluate_by_combination(
     params: Mapping[str, Any], evaluate: Callable[[np.ndarray, dict[str, float]], np.ndarray], size: int
 ) -> np.ndarray:
@@ -724,8 +746,7 @@ def _evaluate_by_combination(
     shape = np.broadcast_shapes((size,), *(np.shape(v) for v in params.values()))
     names = list(params)
     table = np.stack([np.broadcast_to(np.asarray(params[n], float), shape).reshape(-1) for n in names], axis=1)
-    combinations, inverse = np.unique(table, axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
+    combinations, inverse = _distinct_rows(table)
     point = np.broadcast_to(np.arange(size), shape).reshape(-1)
     out = np.empty(table.shape[0])
     for k, row in enumerate(combinations):
@@ -860,11 +881,11 @@ class FixedGeometryModel:
         size = int(np.prod(lead, dtype=int))
         names = list(rows)
         columns = np.stack([np.broadcast_to(np.asarray(rows[k], float), (size,)) for k in names], axis=1)
-        combinations, inverse = np.unique(columns, axis=0, return_inverse=True)
+        combinations, inverse = _distinct_rows(columns)
         out = np.empty((size, n))
         for k, row in enumerate(combinations):
             values = self._evaluate(**{name: float(x) for name, x in zip(names, row)})
-            out[inverse.reshape(-1) == k] = np.broadcast_to(np.asarray(values, float), (n,))
+            out[inverse == k] = np.broadcast_to(np.asarray(values, float), (n,))
         return out.reshape(lead + (n,))
 
     def _geometry_for(self, lead: tuple[int, ...]) -> tuple[np.ndarray, ...]:
