@@ -64,9 +64,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "the prediction)")
     parser.add_argument("--alignment", action="append", default=[], metavar="NAMES",
                         help="fit the rig's alignment as nuisance parameters: 'all' or comma-separated names from "
-                             "view_offset, theta_i_offset, phi_i_offset (axis zero offsets), tilt_x, tilt_y (sample "
-                             "tilt) [deg], with normal priors N(0, 0.5 deg) unless --prior overrides them; for "
-                             "recordings of this rig (docs/fitting.md, 'The rig's errors as parameters')")
+                             "view_offset, theta_i_offset, phi_i_offset (axis zero offsets), tilt_x, tilt_y (holder "
+                             "tilt), sample_tilt_x, sample_tilt_y (the sample's own tilt) [deg], with normal priors "
+                             "N(0, 0.5 deg) unless --prior overrides them; and texture_slope, the rms of the sample's "
+                             "mesoscale slope [deg] (uniform prior on [0, 3]; not part of 'all'); for recordings of "
+                             "this rig (docs/fitting.md, 'The rig's errors as parameters')")
     parser.add_argument("--stray-light", action="store_true",
                         help="fit the rig's stray light as a nuisance parameter: stray_light, the stray radiance as a "
                              "fraction of a white Lambertian's at normal incidence (uniform prior on [0, 0.05])")
@@ -293,14 +295,15 @@ def _priors(items: list[str], names: list[str]) -> dict[str, Prior]:
     from gonio import models
     from gonio.cli import CLIError
     from gonio.fitting import parse_prior
-    from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT
+    from gonio.fitting.rig_errors import ALIGNMENT_BOUND_DEG, RIG_ERROR_NAMES, STRAY_LIGHT, TEXTURE_SLOPE
 
     priors = {}
     for key, text in name_value_pairs(items, "--prior").items():
         bounds = next((models.get(n).param(key).bounds for n in names if key in models.get(n).param_names),
                       (-float("inf"), float("inf")))
         if key in RIG_ERROR_NAMES:
-            bounds = STRAY_LIGHT.bounds if key == STRAY_LIGHT.name else (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
+            own = {STRAY_LIGHT.name: STRAY_LIGHT.bounds, TEXTURE_SLOPE.name: TEXTURE_SLOPE.bounds}
+            bounds = own.get(key, (-ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG))
         try:
             priors[key] = parse_prior(text, bounds)
         except ValueError as error:

@@ -28,6 +28,10 @@ Nuisance parameters
     the plain one exactly. Their default priors are normal (N(0, 0.5 deg)):
     :meth:`FitProblem.priors_with_defaults` adds them, as :func:`gonio.fitting.fit` and
     :func:`gonio.fitting.compare_models` do.
+``texture_slope`` [deg]
+    The rms of the sample's mesoscale slope (``alignment="texture_slope"``): the model is
+    averaged over the sample's facets (:mod:`gonio.fitting.rig_errors`). Range [0, 3],
+    uniform prior.
 ``stray_light`` [-]
     Stray radiance over the image as a fraction of ``E_0 / pi`` (``stray_light=True``),
     added to the sample's radiance and to the reference standard's
@@ -57,8 +61,8 @@ from gonio.models import Model, Param
 from .covariance import DenseNoise, LowRankNoise, noise_of
 from .dataset import Dataset
 from .evaluation import combine_prediction, evaluated_model
-from .rig_errors import ALIGNMENT_NAMES, ALIGNMENT_PARAMETERS, RIG_ERROR_NAMES, STRAY_LIGHT, RigPrediction, \
-    alignment_prior, is_identity, parse_alignment
+from .rig_errors import ALIGNMENT_PARAMETERS, GEOMETRY_NAMES, RIG_ERROR_NAMES, STRAY_LIGHT, TEXTURE_SLOPE, \
+    RigPrediction, alignment_prior, is_identity, parse_alignment
 from .priors import Prior
 
 __all__ = ["FitProblem", "combine_prediction", "predict_quantity"]
@@ -267,8 +271,9 @@ class FitProblem:
         ("relative"); see the module docstring.
     alignment : str or sequence of str, optional
         Alignment nuisance parameters to fit (``"all"`` or names of
-        :data:`gonio.fitting.rig_errors.ALIGNMENT_NAMES`); one given in ``fixed`` is part
-        of the problem at its fixed value without being listed here.
+        :data:`gonio.fitting.rig_errors.GEOMETRY_NAMES`: the alignment and the sample's
+        mesoscale slope ``texture_slope``, which ``"all"`` leaves out); one given in
+        ``fixed`` is part of the problem at its fixed value without being listed here.
     stray_light : bool
         Fit the rig's stray light (``stray_light``, :mod:`gonio.fitting.rig_errors`); a
         value in ``fixed`` includes it at that value.
@@ -318,10 +323,11 @@ class FitProblem:
             specs.append(Param("jitter", "arb. units" if dataset.unit.startswith("arb") else dataset.unit, 0.0, (0.0, upper), _JITTER_DESCRIPTION))
         elif self.jitter == "relative":
             specs.append(Param("rel_jitter", "-", 0.0, (0.0, 10.0), _REL_JITTER_DESCRIPTION))
-        included = set(parse_alignment(alignment)) | {name for name in (fixed or {}) if name in ALIGNMENT_NAMES}
-        #: The alignment parameters of the problem, free or fixed (gonio.fitting.rig_errors).
-        self.alignment: tuple[str, ...] = tuple(name for name in ALIGNMENT_NAMES if name in included)
-        specs.extend(p for p in ALIGNMENT_PARAMETERS if p.name in included)
+        included = set(parse_alignment(alignment)) | {name for name in (fixed or {}) if name in GEOMETRY_NAMES}
+        #: The alignment parameters of the problem, free or fixed, and the sample's mesoscale
+        #: slope where asked for (gonio.fitting.rig_errors).
+        self.alignment: tuple[str, ...] = tuple(name for name in GEOMETRY_NAMES if name in included)
+        specs.extend(p for p in ALIGNMENT_PARAMETERS + (TEXTURE_SLOPE,) if p.name in included)
         #: Whether the rig's stray light is a parameter (free or fixed).
         self.stray_light = bool(stray_light) or STRAY_LIGHT.name in (fixed or {})
         if self.stray_light:

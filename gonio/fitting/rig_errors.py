@@ -15,6 +15,8 @@ name               unit   meaning
 ``tilt_y``         deg    tilt of the sample's normal toward +y (along the swing axis)
 ``sample_tilt_x``  deg    the sample's own tilt toward +x beyond the holder's (its wedge, its seat)
 ``sample_tilt_y``  deg    the sample's own tilt toward +y beyond the holder's
+``texture_slope``  deg    rms of each component of the sample's mesoscale slope: the tilt of
+                          its surface from place to place within the camera's window
 ``stray_light``    -      stray radiance over the image, as a fraction of the radiance
                           ``E_0 / pi`` of a white Lambertian sample at normal incidence
 =================  =====  ===================================================================
@@ -28,6 +30,20 @@ their ratio; a tilt of the sample alone changes the sample's irradiance by
 ``tan(theta_i) * tilt`` (0.45 % for 0.15 deg at theta_i = 60 deg), which no tilt of the
 holder can mimic. The sample sees the holder's tilt plus its own (the two add, as in the
 emulator, ``drivers.emulator.rig``).
+
+A real sample's surface is not flat at the scale the camera resolves: its facets tilt by a
+fraction of a degree from place to place (docs/emulator.md, "The sample as labs meet it"),
+and the camera reads their mean, weighted by each facet's projected area toward it. That
+mean is not the reflectance model's value: to second order in the slope it differs by
+``s^2 / 2`` times the apparent reflectance's curvature in the tilt, which grows toward
+grazing (a bias of -0.022 deg in sigma, 1.1 standard errors, in the designed sweep of
+docs/design.md). ``texture_slope`` carries it (:meth:`RigPrediction.textured_radiance`):
+the mean over facets whose slope components are independent with rms ``texture_slope``, by
+the 5-point rule exact for the second-order expansion, facets tilted by ``+/- sqrt(3) s``
+along each axis (weight 1/6 each) and the mean plane (weight 1/3). The reference standard
+is taken as flat. It is named among the alignment parameters (``alignment="texture_slope"``,
+not part of ``"all"``: it costs five evaluations of the model), with a uniform prior on
+[0, 3] deg.
 
 The geometry is :func:`drivers.rig_geometry.misaligned_angles`, the function the emulator
 places its lamp and camera with, and ``stray_light`` means what the emulator's switch of
@@ -78,10 +94,10 @@ from gonio.models import Model, Param
 
 from .dataset import Dataset
 from .evaluation import COMPILED_MODELS, apertures_of, combine_prediction, evaluated_model
-from .priors import Normal
+from .priors import Normal, Prior, Uniform
 
 __all__ = ["ALIGNMENT_PARAMETERS", "ALIGNMENT_NAMES", "SAMPLE_TILT_NAMES", "DEFAULT_PRIOR_SD", "ALIGNMENT_BOUND_DEG",
-           "STRAY_LIGHT", "RIG_ERROR_NAMES", "COMPILED_MODELS", "rig_alignment", "sample_alignment",
+           "TEXTURE_SLOPE", "GEOMETRY_NAMES", "STRAY_LIGHT", "RIG_ERROR_NAMES", "COMPILED_MODELS", "rig_alignment", "sample_alignment",
            "parse_alignment", "alignment_prior",
            "reference_calibration", "incidence_weights", "RigPrediction", "is_identity"]
 
@@ -109,14 +125,26 @@ DEFAULT_PRIOR_SD = {name: 0.5 for name in ALIGNMENT_NAMES}
 #: The stray-light parameter (module docstring); its default prior is uniform over its range.
 STRAY_LIGHT = Param("stray_light", "-", 0.0, (0.0, 0.05),
                     "stray radiance over the image as a fraction of E_0 / pi (a white Lambertian at normal incidence)")
-#: Every rig-error parameter.
-RIG_ERROR_NAMES = ALIGNMENT_NAMES + (STRAY_LIGHT.name,)
+#: The sample's mesoscale slope (module docstring): rms of each component [deg].
+TEXTURE_SLOPE = Param("texture_slope", "deg", 0.0, (0.0, 3.0),
+                      "rms of each component of the sample's mesoscale slope within the camera's window")
+#: The names ``alignment=`` accepts: the alignment and the sample's mesoscale slope.
+GEOMETRY_NAMES = ALIGNMENT_NAMES + (TEXTURE_SLOPE.name,)
+#: Every rig-error parameter (with the sample's mesoscale slope, which acts like one).
+RIG_ERROR_NAMES = GEOMETRY_NAMES + (STRAY_LIGHT.name,)
+#: The facets of :meth:`RigPrediction.textured_radiance`: (weight, tilt toward +x, tilt toward
+#: +y in units of sqrt(3) texture_slope). Its mean over slopes of variance s^2 per component
+#: is exact for any second-order expansion of the apparent reflectance in the slope (the
+#: 3-point Gauss-Hermite rule along each axis, whose centres coincide).
+TEXTURE_FACETS = ((1.0 / 3.0, 0.0, 0.0), (1.0 / 6.0, 1.0, 0.0), (1.0 / 6.0, -1.0, 0.0),
+                  (1.0 / 6.0, 0.0, 1.0), (1.0 / 6.0, 0.0, -1.0))
 
 
 def parse_alignment(names: str | Iterable[str] | None) -> tuple[str, ...]:
     """Alignment parameter names from ``"all"``, a comma-separated string or a sequence.
 
-    Returns them in the canonical order of :data:`ALIGNMENT_NAMES`, without repeats.
+    Returns them in the canonical order of :data:`GEOMETRY_NAMES`, without repeats;
+    ``"all"`` is the alignment (:data:`ALIGNMENT_NAMES`), not ``texture_slope``.
 
     Raises
     ------
@@ -129,18 +157,19 @@ def parse_alignment(names: str | Iterable[str] | None) -> tuple[str, ...]:
     ('view_offset', 'tilt_y')
     >>> parse_alignment("all") == ALIGNMENT_NAMES
     True
+    >>> parse_alignment("all, texture_slope")[-1]
+    'texture_slope'
     """
     if names is None:
         return ()
     items = [n.strip() for n in names.split(",")] if isinstance(names, str) else [str(n).strip() for n in names]
     items = [n for n in items if n]
-    if "all" in items:
-        return ALIGNMENT_NAMES
-    unknown = [n for n in items if n not in ALIGNMENT_NAMES]
+    unknown = [n for n in items if n not in GEOMETRY_NAMES + ("all",)]
     if unknown:
         raise ValueError(f"unknown alignment parameter {unknown[0]!r}; expected 'all' or names from "
-                         f"{list(ALIGNMENT_NAMES)}")
-    return tuple(n for n in ALIGNMENT_NAMES if n in items)
+                         f"{list(GEOMETRY_NAMES)}")
+    chosen = set(items) | (set(ALIGNMENT_NAMES) if "all" in items else set())
+    return tuple(n for n in GEOMETRY_NAMES if n in chosen)
 
 
 def rig_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
@@ -149,7 +178,7 @@ def rig_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
     >>> rig_alignment({"tilt_x": 0.1, "sample_tilt_x": 0.2})
     {'tilt_x': 0.1}
     """
-    return {name: value for name, value in alignment.items() if name not in SAMPLE_TILT_NAMES}
+    return {name: value for name, value in alignment.items() if name not in SAMPLE_TILT_NAMES + (TEXTURE_SLOPE.name,)}
 
 
 def sample_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
@@ -159,7 +188,7 @@ def sample_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
     >>> sample_alignment({"tilt_x": 0.1, "sample_tilt_x": 0.2, "sample_tilt_y": 0.0})
     {'tilt_x': 0.30000000000000004, 'tilt_y': 0.0}
     """
-    out = rig_alignment(alignment)
+    out = rig_alignment(alignment)  # without texture_slope, which is no tilt
     for axis in ("x", "y"):
         own = alignment.get(f"sample_tilt_{axis}")
         if own is not None:
@@ -167,8 +196,11 @@ def sample_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def alignment_prior(name: str) -> Normal:
-    """The default prior of an alignment parameter: N(0, 0.5 deg) within +/-5 deg."""
+def alignment_prior(name: str) -> Prior:
+    """The default prior of an alignment parameter: N(0, 0.5 deg) within +/-5 deg;
+    ``texture_slope``'s uniform over its range, [0, 3] deg."""
+    if name == TEXTURE_SLOPE.name:
+        return Uniform(*TEXTURE_SLOPE.bounds)
     return Normal(0.0, DEFAULT_PRIOR_SD[name], -ALIGNMENT_BOUND_DEG, ALIGNMENT_BOUND_DEG)
 
 
@@ -405,17 +437,47 @@ class RigPrediction:
         true = misaligned_angles(*recorded, **alignment)
         return self.model(*true, **params, **self.options) * np.clip(np.cos(np.radians(true[0])), 0.0, None)
 
+    def textured_radiance(self, which: str, params: Mapping[str, Any], alignment: Mapping[str, Any],
+                          texture_slope: Any = 0.0) -> np.ndarray:
+        """``f cos(theta_i)`` of the recorded ``which`` ('data' or 'normal' view) geometries
+        [1/sr], averaged over the sample's facets (module docstring): the facets of
+        :data:`TEXTURE_FACETS`, each tilted beyond the sample's mean plane and weighted by
+        its projected area toward the camera relative to the mean plane's,
+        ``cos(theta_r,facet) / (cos(theta_r) cos(t_x) cos(t_y))`` (0 for a facet the camera
+        cannot see). ``texture_slope`` [deg] as a float or a column (W, 1); 0 gives
+        :meth:`_model_at` itself.
+
+        Decision: the facets' projected areas are taken on the camera's axis, as in the
+        emulator (``drivers.emulator.texture.slope_response``): the apertures change them by a
+        fraction of order half-angle^2, 1e-3 of an effect itself of order 1e-3."""
+        if np.ndim(texture_slope) == 0 and float(texture_slope) == 0.0:
+            return self._model_at(which, params, alignment)
+        recorded = self.geometry if which == "data" else self.normal_geometry
+        step = np.sqrt(3.0) * np.asarray(texture_slope, float)
+        mean_view = np.cos(np.radians(misaligned_angles(*recorded, **sample_alignment(alignment))[2]))
+        total = 0.0
+        for weight, along_x, along_y in TEXTURE_FACETS:
+            facet = dict(alignment)
+            for axis, along in (("x", along_x), ("y", along_y)):
+                facet[f"sample_tilt_{axis}"] = alignment.get(f"sample_tilt_{axis}", 0.0) + along * step
+            view = np.cos(np.radians(misaligned_angles(*recorded, **sample_alignment(facet))[2]))
+            area = np.clip(view, 0.0, None) / (np.maximum(mean_view, 1e-12)
+                                               * np.cos(np.radians(along_x * step)) * np.cos(np.radians(along_y * step)))
+            total = total + weight * area * self._model_at(which, params, facet)
+        return total
+
     def __call__(self, params: Mapping[str, Any], alignment: Mapping[str, Any], scale: Any = 1.0,
-                 stray_light: Any = 0.0) -> np.ndarray:
+                 stray_light: Any = 0.0, texture_slope: Any = 0.0) -> np.ndarray:
         """The predicted measured values: shape (N,) or (W, N) for parameter columns (W, 1).
 
         ``params`` are the model's (checked), ``alignment`` the alignment values
-        (:data:`ALIGNMENT_NAMES`, or some of them) [deg], ``scale`` and ``stray_light`` as in the module docstring.
+        (:data:`ALIGNMENT_NAMES`, or some of them) [deg], ``scale``, ``stray_light`` and
+        ``texture_slope`` [deg] as in the module docstring.
         """
         stray = np.asarray(stray_light, float) / np.pi
-        radiance = self._model_at("data", params, alignment) + stray
+        radiance = self.textured_radiance("data", params, alignment, texture_slope) + stray
         if self.quantity == "normalised_radiance":
-            normal = self._model_at("normal", params, alignment) + stray
+            normal = self.textured_radiance("normal", params, alignment, texture_slope) + stray
             return self._combine(self.quantity, radiance, normal, self.cos_recorded, scale)
         apparent = np.divide(radiance, self.cos_recorded, out=np.zeros(np.shape(radiance)),
                              where=self.cos_recorded > 0) * self.calibration_factor(alignment, stray_light)
@@ -427,7 +489,8 @@ class RigPrediction:
         valid (they are not checked here), missing ones take their defaults."""
         params = {p.name: values.get(p.name, p.default) for p in self.model.params}
         alignment = {name: values[name] for name in ALIGNMENT_NAMES if name in values}
-        return self(params, alignment, values.get("scale", 1.0), values.get(STRAY_LIGHT.name, 0.0))
+        return self(params, alignment, values.get("scale", 1.0), values.get(STRAY_LIGHT.name, 0.0),
+                    values.get(TEXTURE_SLOPE.name, 0.0))
 
 
 def _kernel_model(model: Model, options: Mapping[str, Any], apertures) -> tuple[Model, tuple[float, float]] | None:
