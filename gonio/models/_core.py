@@ -722,6 +722,18 @@ def _distinct_rows(table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return distinct, np.repeat(run_index.reshape(-1), np.diff(np.append(starts, table.shape[0])))
 
 
+def _members(index: np.ndarray, count: int) -> list[np.ndarray]:
+    """The positions of each value ``0 .. count - 1`` in ``index``, in order: one stable sort
+    instead of a comparison of every position per value (quadratic where each of two
+    thousand particles of an evidence's sampler is its own combination).
+
+    >>> [m.tolist() for m in _members(np.array([1, 0, 1, 2]), 3)]
+    [[1], [0, 2], [3]]
+    """
+    order = np.argsort(index, kind="stable")
+    return np.split(order, np.searchsorted(index[order], np.arange(1, count)))
+
+
 def _evaluate_by_combination(
     params: Mapping[str, Any], evaluate: Callable[[np.ndarray, dict[str, float]], np.ndarray], size: int
 ) -> np.ndarray:
@@ -749,8 +761,7 @@ def _evaluate_by_combination(
     combinations, inverse = _distinct_rows(table)
     point = np.broadcast_to(np.arange(size), shape).reshape(-1)
     out = np.empty(table.shape[0])
-    for k, row in enumerate(combinations):
-        where = np.flatnonzero(inverse == k)
+    for row, where in zip(combinations, _members(inverse, len(combinations))):
         values = evaluate(point[where], {n: float(x) for n, x in zip(names, row)})
         out[where] = np.broadcast_to(np.asarray(values, float), where.shape)
     return out.reshape(shape)
@@ -883,9 +894,9 @@ class FixedGeometryModel:
         columns = np.stack([np.broadcast_to(np.asarray(rows[k], float), (size,)) for k in names], axis=1)
         combinations, inverse = _distinct_rows(columns)
         out = np.empty((size, n))
-        for k, row in enumerate(combinations):
+        for row, where in zip(combinations, _members(inverse, len(combinations))):
             values = self._evaluate(**{name: float(x) for name, x in zip(names, row)})
-            out[inverse == k] = np.broadcast_to(np.asarray(values, float), (n,))
+            out[where] = np.broadcast_to(np.asarray(values, float), (n,))
         return out.reshape(lead + (n,))
 
     def _geometry_for(self, lead: tuple[int, ...]) -> tuple[np.ndarray, ...]:
