@@ -185,3 +185,26 @@ def test_the_monte_carlo_error_covers_a_lit_part_no_sample_found():
     closed = float(gonio.brdf("pitted", 89.99, 0.0, 15.0, 0.0, rho=0.9, psi=45.0, coverage=1.0))
     assert estimate.value < 0.2 * closed  # the lit part was missed ...
     assert abs(closed - estimate.value) < 3.0 * estimate.standard_error  # ... and the error bar says so
+
+
+def test_parameter_columns_give_each_combination_s_values():
+    """The model broadcasts its parameters (a sampler's particles in one call): columns of
+    rho, psi and coverage give, row by row, the values of each combination alone, grazing
+    slivers (quadrature) and flat pits (psi 1e-4 deg) included, and through the rig's
+    apertures too."""
+    from gonio.instrument import aperture_averaged
+
+    ti = np.array([0.0, 30.0, 60.0, 89.999, 89.9999, 45.0])
+    pi_ = np.array([0.0, 0.0, 40.0, 0.0, 0.0, 0.0])
+    tr = np.array([10.0, 70.0, 30.0, 89.999, 89.9999, 89.0])
+    pr = np.array([180.0, 0.0, 200.0, 0.0, 180.0, 0.0])
+    rho = np.array([[0.3], [0.8], [0.95], [0.5]])
+    psi = np.array([[90.0], [45.0], [1e-4], [45.0]])
+    coverage = np.array([[0.4], [1.0], [0.7], [0.0]])
+    for model in (PITTED, aperture_averaged(PITTED)):
+        fixed = model.at(ti, pi_, tr, pr)
+        together = fixed(rho=rho, psi=psi, coverage=coverage)
+        alone = np.array([fixed(rho=float(r), psi=float(p), coverage=float(c))
+                          for r, p, c in zip(rho[:, 0], psi[:, 0], coverage[:, 0])])
+        np.testing.assert_allclose(together, alone, rtol=1e-12, atol=0)
+    assert PITTED.broadcasts_params

@@ -64,8 +64,8 @@ class PitTerms:
     """
 
     single_scattering: np.ndarray
-    interreflection_scale: float
-    interreflection_sin2_half: float
+    interreflection_scale: float | np.ndarray
+    interreflection_sin2_half: float | np.ndarray
 
     def pit_brdf(self, rho: float) -> np.ndarray:
         """BRDF of a fully pitted surface [1/sr] for micro-albedo ``rho``."""
@@ -78,7 +78,7 @@ class PitTerms:
         return (1.0 - coverage) * rho / np.pi + coverage * self.pit_brdf(rho)
 
 
-def single_scattering(alpha: np.ndarray, beta: np.ndarray, epsilon: np.ndarray, psi: float,
+def single_scattering(alpha: np.ndarray, beta: np.ndarray, epsilon: np.ndarray, psi: float | np.ndarray,
                       order: int | None = None) -> np.ndarray:
     """F1 [1/sr]: single-scattering BRDF of one pit per unit micro-albedo (angles [rad]).
 
@@ -88,8 +88,9 @@ def single_scattering(alpha: np.ndarray, beta: np.ndarray, epsilon: np.ndarray, 
         Source and viewer polar angles [rad] in [0, pi/2].
     epsilon : numpy.ndarray
         Viewer azimuth from the plane of incidence [rad].
-    psi : float
-        Aperture [rad], 0 < psi <= pi/2.
+    psi : float or numpy.ndarray
+        Aperture [rad], 0 < psi <= pi/2; an array broadcasts with the angles (a sampler's
+        particles, one aperture each) and is evaluated in the closed form only.
     order : int, optional
         None (default): the closed form (:mod:`.closed_form`, ~1e-10 relative, millions of
         geometries per second), with the quadrature (``SLIVER_ORDER`` nodes per panel)
@@ -102,6 +103,8 @@ def single_scattering(alpha: np.ndarray, beta: np.ndarray, epsilon: np.ndarray, 
     numpy.ndarray
         F1, broadcast shape of the angles.
     """
+    if np.ndim(psi):
+        return _single_scattering_apertures(alpha, beta, epsilon, np.asarray(psi, float))
     alpha, beta, epsilon = np.broadcast_arrays(*(np.asarray(a, float) for a in (alpha, beta, epsilon)))
     if order is not None:
         return single_scattering_factor(alpha, beta, epsilon, psi, order)
@@ -124,9 +127,32 @@ def single_scattering(alpha: np.ndarray, beta: np.ndarray, epsilon: np.ndarray, 
     return factor
 
 
-def _terms_rad(ti, pi_, tr, pr, psi_deg: float, order: int | None = None) -> PitTerms:
+def _single_scattering_apertures(alpha, beta, epsilon, psi: np.ndarray) -> np.ndarray:
+    """:func:`single_scattering` (closed form) for an array of apertures [rad] broadcasting
+    with the angles: the closed form at once, then the slivers of each distinct aperture
+    by its quadrature, as for one aperture."""
+    from .closed_form import single_scattering_factor_closed
+
+    alpha, beta, epsilon, psi = np.broadcast_arrays(*(np.asarray(a, float) for a in (alpha, beta, epsilon, psi)))
+    factor = np.array(single_scattering_factor_closed(alpha, beta, epsilon, psi), float, ndmin=1).reshape(alpha.shape)
+    sin2_psi = np.sin(psi.reshape(-1)) ** 2
+    half_pi = 0.5 * np.pi
+    limit = SLIVER_LIMIT / np.maximum(sin2_psi, FLAT_LIMIT)
+    a, b, e = alpha.reshape(-1), beta.reshape(-1), epsilon.reshape(-1)
+    candidate = np.flatnonzero((sin2_psi >= FLAT_LIMIT) & ((half_pi - a) * (half_pi - b) < half_pi**2 * limit))
+    slivers = candidate[np.cos(a[candidate]) * np.cos(b[candidate]) < limit[candidate]]
+    flat = factor.reshape(-1)
+    for aperture in np.unique(psi.reshape(-1)[slivers]):
+        at = slivers[psi.reshape(-1)[slivers] == aperture]
+        flat[at] = single_scattering_factor(a[at], b[at], e[at], float(aperture), SLIVER_ORDER)
+    return factor
+
+
+def _terms_rad(ti, pi_, tr, pr, psi_deg: float | np.ndarray, order: int | None = None) -> PitTerms:
     psi = np.radians(psi_deg)
     factor = single_scattering(ti, tr, pr - pi_, psi, order)
+    if np.ndim(psi):
+        return PitTerms(factor, np.sin(psi) ** 2 / (4.0 * np.pi), np.sin(psi / 2.0) ** 2)
     return PitTerms(factor, float(np.sin(psi) ** 2 / (4.0 * np.pi)), float(np.sin(psi / 2.0) ** 2))
 
 
@@ -168,10 +194,14 @@ def pitted_terms(
 
 
 def _prepare(ti, pi_, tr, pr) -> Callable[..., np.ndarray]:
-    """Geometry [rad] -> f(rho, psi, coverage); F1 is cached per aperture."""
+    """Geometry [rad] -> f(rho, psi, coverage); F1 is cached per aperture. Parameters may
+    be arrays broadcasting with the geometry (the model broadcasts its parameters: a
+    sampler's particles in one call)."""
     cache: dict[float, PitTerms] = {}
 
-    def evaluate(rho: float, psi: float, coverage: float) -> np.ndarray:
+    def evaluate(rho, psi, coverage) -> np.ndarray:
+        if np.ndim(psi):
+            return _terms_rad(ti, pi_, tr, pr, np.asarray(psi, float)).brdf(rho, coverage)
         if psi not in cache:
             if len(cache) > 8:
                 cache.clear()
@@ -309,5 +339,6 @@ PITTED = register(
         prepare=_prepare,
         energy_conserving=True,
         reciprocal=True,
+        broadcasts_params=True,
     )
 )
