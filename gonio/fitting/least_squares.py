@@ -569,6 +569,12 @@ def _describe(problem, values, stderr, at_bound, insensitive, degenerate, dof) -
             f"fix it (--fix {name}=VALUE) or measure a quantity that constrains it"
         )
     for group in degenerate:
+        if len(group) == 1:  # a null direction along one parameter, the others' parts below _NULL_COMPONENT
+            notes.append(
+                f"{group[0]} is not determined: at the best fit its effect is matched by small changes of the "
+                f"other parameters; fix it (--fix {group[0]}=VALUE) or measure where it matters"
+            )
+            continue
         why = ""
         if "scale" in group:
             why = " (relative radiance has a free scale, and an albedo-like factor only multiplies it)"

@@ -105,6 +105,24 @@ def test_albedo_and_free_scale_are_reported_degenerate():
     assert fixed.degenerate == [] and fixed.values["scale"] == pytest.approx(50.0, rel=0.01)
 
 
+def test_a_null_direction_along_one_parameter_is_not_called_a_combination():
+    """A parameter whose column is a small multiple of another's (a mesoscale slope at 0,
+    whose second-order effect looks like a little roughness) makes a null direction along
+    itself alone: the warning names it as not determined, not as "a combination of them"."""
+    from gonio.fitting.least_squares import _describe, jacobian_diagnostics
+
+    rng = np.random.default_rng(0)
+    jacobian = rng.normal(size=(40, 3))
+    jacobian[:, 2] = 0.05 * jacobian[:, 0] + 1e-12 * rng.normal(size=40)
+    covariance, insensitive, degenerate = jacobian_diagnostics(jacobian, ["a", "b", "c"], [1.0, 1.0, 1.0])
+    assert insensitive == [] and degenerate == [["c"]]
+    assert np.isnan(covariance[2, 2]) and np.isfinite(covariance[1, 1])
+    problem = FitProblem("lambert", synthetic_dataset("lambert", dict(rho=0.5), 0.01))
+    notes = _describe(problem, {"rho": 0.5}, {"rho": 0.01}, {}, [], [["rho"]], 10)
+    assert notes == ["rho is not determined: at the best fit its effect is matched by small changes of the other "
+                     "parameters; fix it (--fix rho=VALUE) or measure where it matters"]
+
+
 def test_parameter_at_a_physical_bound_is_flagged():
     # Data that darken towards the horizon faster than Lambert (cos(theta_r)^0.3) would need
     # a Minnaert exponent k > 1 (Oren & Nayar section 1: k in [0, 1]); the fit stops at k = 1.
