@@ -13,11 +13,41 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["inverse_hessian"]
+__all__ = ["inverse_hessian", "range_steps", "steps_at_mode"]
 
 #: Finite-difference step of each parameter, as a fraction of its physical range (of its
 #: magnitude when the range is unbounded).
 STEP_FRACTION = 1e-4
+
+
+def range_steps(x: Sequence[float], bounds: Sequence[tuple[float, float]]) -> list[float]:
+    """The default finite-difference steps: :data:`STEP_FRACTION` of each parameter's
+    range (of its magnitude when the range is unbounded)."""
+    return [STEP_FRACTION * ((hi - lo) if math.isfinite(hi - lo) else max(abs(value), 1e-12))
+            for value, (lo, hi) in zip(x, bounds)]
+
+
+def steps_at_mode(mode: Sequence[float], stderr: Sequence[float], bounds: Sequence[tuple[float, float]]) -> list[float]:
+    """Finite-difference steps about a least-squares optimum: a hundredth of each
+    parameter's standard error where it is known, else a thousandth of its value (1e-9
+    of its range's width at 0; of 1 where the range is unbounded).
+
+    A step of the range (:data:`STEP_FRACTION`) is no step for a parameter whose posterior
+    is narrow against its range: an extra noise of 3.4e-4 on a range of 10 was differenced
+    about 2e-3, beyond its peak, and the curvature came out negative (the evidence of every
+    candidate compared with an extra-noise term then fell to sampling).
+
+    Examples
+    --------
+    >>> steps = steps_at_mode([0.9, 3.4e-4, 0.0], [0.004, float("nan"), float("nan")], [(0, 1), (0, 10), (0, 90)])
+    >>> [float(f"{step:.3g}") for step in steps]
+    [4e-05, 3.4e-07, 9e-08]
+    """
+    steps = []
+    for value, error, (lo, hi) in zip(mode, stderr, bounds):
+        width = hi - lo if math.isfinite(hi - lo) else 1.0
+        steps.append(0.01 * error if error > 0 else max(1e-3 * abs(value), 1e-9 * width))
+    return steps
 
 
 def inverse_hessian(negative_log_density: Callable[[np.ndarray], float], x: np.ndarray,
@@ -52,11 +82,8 @@ def inverse_hessian(negative_log_density: Callable[[np.ndarray], float], x: np.n
     x = np.asarray(x, float)
     k = x.size
     centre = x.copy()
-    given = steps
-    steps = np.empty(k)
+    steps = np.array(range_steps(x, bounds) if steps is None else steps, float)
     for i, (lo, hi) in enumerate(bounds):
-        steps[i] = given[i] if given is not None else \
-            STEP_FRACTION * ((hi - lo) if math.isfinite(hi - lo) else max(abs(x[i]), 1e-12))
         if math.isfinite(hi - lo):
             centre[i] = min(max(x[i], lo + 2 * steps[i]), hi - 2 * steps[i])
     hessian = np.empty((k, k))

@@ -154,7 +154,7 @@ def laplace_evidence(problem, least_squares, priors, profiles: bool = True,
         if factor is not None:
             return _product_evidence(problem, least_squares, priors, factor)
     if problem.noise_parameter in names or not np.all(np.isfinite(covariance)):
-        covariance = _numerical_covariance(problem, least_squares.values, priors)
+        covariance = _numerical_covariance(problem, least_squares.values, priors, least_squares.stderr)
     undetermined = _undetermined_first(problem, covariance, priors) if conditional and len(names) > 1 else []
     if undetermined and not profiles:
         return LaplaceEvidence(math.nan, profiles_skipped=tuple(undetermined))
@@ -239,7 +239,7 @@ def _conditional_evidence(problem, least_squares, priors, candidates: list[str])
     for name in candidates:
         reduced = problem.fixing({name: least_squares.values[name]})
         rest = {n: least_squares.values[n] for n in reduced.free}
-        if not _positive_definite(_numerical_covariance(reduced, rest, priors)):
+        if not _positive_definite(_numerical_covariance(reduced, rest, priors, least_squares.stderr)):
             continue
         log_evidence = _quadrature_over(problem, least_squares, priors, name)
         if math.isfinite(log_evidence):
@@ -604,14 +604,26 @@ def _product_evidence(problem, least_squares, priors, factor: str) -> LaplaceEvi
     return laplace_evidence(reduced, reduced_ls, reduced_priors)
 
 
-def _numerical_covariance(problem, values: Mapping[str, float], priors) -> np.ndarray:
+def _numerical_covariance(problem, values: Mapping[str, float], priors,
+                          stderr: Mapping[str, float] | None = None) -> np.ndarray:
     """Inverse Hessian of -ln(likelihood x prior) at ``values`` by finite differences
-    (:func:`gonio.fitting.curvature.inverse_hessian`)."""
-    from .curvature import inverse_hessian
+    (:func:`gonio.fitting.curvature.inverse_hessian`): steps of a fraction of each
+    parameter's range, the one this module's evidences were measured with against
+    sampling, except for a free extra noise, whose posterior can be narrow against its
+    range (3e-4 on [0, 10]): its step is scaled to its value
+    (:func:`gonio.fitting.curvature.steps_at_mode`, ``stderr`` the least-squares standard
+    errors where known)."""
+    from .curvature import inverse_hessian, range_steps, steps_at_mode
 
     names = list(problem.free)
-    return inverse_hessian(lambda vector: -log_posterior(problem, priors, vector),
-                           np.array([values[n] for n in names], float), [problem.spec(n).bounds for n in names])
+    mode = np.array([values[n] for n in names], float)
+    bounds = [problem.spec(n).bounds for n in names]
+    steps = range_steps(mode, bounds)
+    if problem.noise_parameter in names:
+        k = names.index(problem.noise_parameter)
+        error = (stderr or {}).get(problem.noise_parameter, math.nan)
+        steps[k] = min(steps[k], steps_at_mode([mode[k]], [error], [bounds[k]])[0])
+    return inverse_hessian(lambda vector: -log_posterior(problem, priors, vector), mode, bounds, steps)
 
 
 @dataclass(frozen=True)

@@ -549,17 +549,15 @@ def laplace_covariance(problem: FitProblem, posterior: LogPosterior, start: Leas
     still be unusable (an indefinite curvature at a bound): the moves then leave the
     Laplace move out (:func:`gonio.fitting.moves.ensemble_moves`).
     """
-    from .curvature import inverse_hessian
+    from .curvature import inverse_hessian, steps_at_mode
 
     covariance = np.asarray(start.covariance, float)
     if np.all(np.isfinite(covariance)):
         return covariance
     mode = np.array([start.values[name] for name in problem.free], float)
-    steps = [0.01 * start.stderr[name] if start.stderr.get(name, math.nan) > 0
-             else max(1e-3 * abs(value), 1e-9 * _width(problem.spec(name).bounds))
-             for name, value in zip(problem.free, mode)]
-    return inverse_hessian(lambda vector: -posterior(vector), mode, [problem.spec(name).bounds for name in problem.free],
-                           steps)
+    bounds = [problem.spec(name).bounds for name in problem.free]
+    steps = steps_at_mode(mode, [start.stderr.get(name, math.nan) for name in problem.free], bounds)
+    return inverse_hessian(lambda vector: -posterior(vector), mode, bounds, steps)
 
 
 def _width(bounds: tuple[float, float]) -> float:

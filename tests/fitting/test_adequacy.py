@@ -455,3 +455,31 @@ def test_an_undetermined_parameter_is_integrated_by_quadrature_not_sampled():
     row = compare_models(data, ["lambert", "pitted"]).row("pitted")
     assert row["evidence_method"] == f"laplace, quadrature over {evidence.quadrature_over}"
     assert row["log_evidence"] == pytest.approx(evidence.log_evidence, abs=1e-6)
+
+
+def test_the_evidence_of_a_narrow_extra_noise_is_its_quadrature():
+    """An extra relative noise of 3.3e-4 on its range of [0, 10] (0.04 % scatter, 0.01 %
+    stated): the curvature is taken with steps scaled to the fit's errors, not to the
+    range (a step of 1e-3 differenced it about 2e-3, beyond its peak, and the evidence was
+    undefined). Laplace then agrees with the quadrature over the noise, each node the
+    others' Laplace evidence, within 0.1."""
+    from scipy.special import logsumexp
+
+    from gonio.fitting import evidence
+
+    data = synthetic_dataset("oren-nayar", dict(rho=0.8, sigma=20.0), 4e-4, seed=1, relative=True)
+    data = Dataset(*data.geometry, data.value, 1e-4 * np.abs(data.value), quantity=data.quantity)
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0}, jitter="relative")
+    ls = fit_least_squares(problem)
+    priors = resolve_priors(problem, ls.values, {})
+    assert 2e-4 < ls.values["rel_jitter"] < 5e-4
+    laplace = evidence.laplace_evidence(problem, ls, priors).log_evidence
+    nodes = np.linspace(1e-5, 1.2e-3, 60)
+    terms = []
+    for value in nodes:
+        reduced, fitted = evidence._optimum_at(problem, priors, "rel_jitter", float(value), ls.values)
+        terms.append(evidence.laplace_evidence(reduced, fitted, priors, conditional=False).log_evidence
+                     + priors["rel_jitter"].logpdf(value))
+    assert terms[0] < max(terms) - 30 and terms[-1] < max(terms) - 30  # the grid holds the whole peak
+    quadrature = logsumexp(terms) + math.log(nodes[1] - nodes[0])
+    assert laplace == pytest.approx(quadrature, abs=0.1)
