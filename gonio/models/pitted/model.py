@@ -40,6 +40,13 @@ __all__ = ["PitTerms", "single_scattering", "pitted_terms", "pitted_brdf", "aper
 SLIVER_LIMIT = 1e-10
 #: Quadrature nodes per panel at those points (few, so the higher order costs nothing).
 SLIVER_ORDER = 32
+#: Where sin^2(psi) < SHALLOW_LIMIT cos(alpha) cos(beta), F1 is taken as 1/pi, the flat
+#: pit's value. Its departure from 1/pi is 0.25 psi^2 / (cos alpha cos beta) of it
+#: (measured by the quadrature at psi = 1e-2 to 1e-4 rad, from normal to 1e-4 of grazing:
+#: tests/models/test_pitted_model.py), so below 3e-9 of it here, less than the closed
+#: form's own error at the sliver limit (1e-7). Such pits (a quadrature node of the
+#: evidence at psi = 7e-5 deg) had been slivers everywhere: 850 times the cost.
+SHALLOW_LIMIT = 1e-8
 
 
 @dataclass(frozen=True)
@@ -90,11 +97,12 @@ def single_scattering(alpha: np.ndarray, beta: np.ndarray, epsilon: np.ndarray, 
         Viewer azimuth from the plane of incidence [rad].
     psi : float or numpy.ndarray
         Aperture [rad], 0 < psi <= pi/2; an array broadcasts with the angles (a sampler's
-        particles, one aperture each) and is evaluated in the closed form only.
+        particles, one aperture each; the closed form only).
     order : int, optional
         None (default): the closed form (:mod:`.closed_form`, ~1e-10 relative, millions of
         geometries per second), with the quadrature (``SLIVER_ORDER`` nodes per panel)
-        where ``sin^2(psi) cos(alpha) cos(beta) < SLIVER_LIMIT``; an integer: the quadrature of :mod:`.quadrature` with
+        where ``sin^2(psi) cos(alpha) cos(beta) < SLIVER_LIMIT`` and 1/pi where
+        ``sin^2(psi) < SHALLOW_LIMIT cos(alpha) cos(beta)``; an integer: the quadrature of :mod:`.quadrature` with
         that many nodes per panel everywhere (the reference the closed form is tested
         against).
 
@@ -103,49 +111,38 @@ def single_scattering(alpha: np.ndarray, beta: np.ndarray, epsilon: np.ndarray, 
     numpy.ndarray
         F1, broadcast shape of the angles.
     """
-    if np.ndim(psi):
-        return _single_scattering_apertures(alpha, beta, epsilon, np.asarray(psi, float))
-    alpha, beta, epsilon = np.broadcast_arrays(*(np.asarray(a, float) for a in (alpha, beta, epsilon)))
     if order is not None:
-        return single_scattering_factor(alpha, beta, epsilon, psi, order)
+        alpha, beta, epsilon = np.broadcast_arrays(*(np.asarray(a, float) for a in (alpha, beta, epsilon)))
+        return single_scattering_factor(alpha, beta, epsilon, float(psi), order)
     from .closed_form import single_scattering_factor_closed  # numba loads on first use
 
-    factor = np.asarray(single_scattering_factor_closed(alpha, beta, epsilon, psi), float).copy()
-    sin2_psi = np.sin(psi) ** 2
-    if sin2_psi < FLAT_LIMIT:  # a flat pit: 1/pi from the closed form, nowhere a sliver
-        return factor
-    limit = SLIVER_LIMIT / sin2_psi
+    alpha, beta, epsilon, apertures = np.broadcast_arrays(*(np.asarray(a, float) for a in (alpha, beta, epsilon, psi)))
+    factor = np.array(single_scattering_factor_closed(alpha, beta, epsilon, apertures), float,
+                      ndmin=1).reshape(alpha.shape)
+    a, b, e, p = (x.reshape(-1) for x in (alpha, beta, epsilon, apertures))
+    sin2_psi = np.broadcast_to(np.sin(np.asarray(psi, float)) ** 2, alpha.shape).reshape(-1)
+    flat = factor.reshape(-1)
+    shallow = _shallow(a, b, sin2_psi)
+    flat[shallow] = 1.0 / np.pi
     # cos(x) >= (2/pi)(pi/2 - x) on [0, pi/2]: only geometries with a small product of the
     # distances from the horizon can be slivers, and only those need the cosines
-    half_pi = 0.5 * np.pi
-    candidate = np.flatnonzero((half_pi - alpha) * (half_pi - beta) < (half_pi**2) * limit)
-    if candidate.size:
-        a, b, e = alpha.ravel()[candidate], beta.ravel()[candidate], epsilon.ravel()[candidate]
-        sliver = np.cos(a) * np.cos(b) < limit
-        flat = factor.reshape(-1)
-        flat[candidate[sliver]] = single_scattering_factor(a[sliver], b[sliver], e[sliver], psi, SLIVER_ORDER)
-    return factor
-
-
-def _single_scattering_apertures(alpha, beta, epsilon, psi: np.ndarray) -> np.ndarray:
-    """:func:`single_scattering` (closed form) for an array of apertures [rad] broadcasting
-    with the angles: the closed form at once, then the slivers of each distinct aperture
-    by its quadrature, as for one aperture."""
-    from .closed_form import single_scattering_factor_closed
-
-    alpha, beta, epsilon, psi = np.broadcast_arrays(*(np.asarray(a, float) for a in (alpha, beta, epsilon, psi)))
-    factor = np.array(single_scattering_factor_closed(alpha, beta, epsilon, psi), float, ndmin=1).reshape(alpha.shape)
-    sin2_psi = np.sin(psi.reshape(-1)) ** 2
-    half_pi = 0.5 * np.pi
     limit = SLIVER_LIMIT / np.maximum(sin2_psi, FLAT_LIMIT)
-    a, b, e = alpha.reshape(-1), beta.reshape(-1), epsilon.reshape(-1)
+    half_pi = 0.5 * np.pi
     candidate = np.flatnonzero((sin2_psi >= FLAT_LIMIT) & ((half_pi - a) * (half_pi - b) < half_pi**2 * limit))
+    candidate = np.setdiff1d(candidate, shallow, assume_unique=True)
     slivers = candidate[np.cos(a[candidate]) * np.cos(b[candidate]) < limit[candidate]]
-    flat = factor.reshape(-1)
-    for aperture in np.unique(psi.reshape(-1)[slivers]):
-        at = slivers[psi.reshape(-1)[slivers] == aperture]
+    for aperture in np.unique(p[slivers]):  # one quadrature per distinct aperture
+        at = slivers[p[slivers] == aperture]
         flat[at] = single_scattering_factor(a[at], b[at], e[at], float(aperture), SLIVER_ORDER)
     return factor
+
+
+def _shallow(alpha: np.ndarray, beta: np.ndarray, sin2_psi: np.ndarray) -> np.ndarray:
+    """Indices (into the flat arrays) of the geometries where the pit is flat to within
+    :data:`SHALLOW_LIMIT` of F1 = 1/pi: ``sin^2(psi) < SHALLOW_LIMIT cos(alpha) cos(beta)``
+    (a pit of sin^2(psi) below the limit at least; the cosines only for those)."""
+    near = np.flatnonzero((sin2_psi < SHALLOW_LIMIT) & (sin2_psi >= FLAT_LIMIT))
+    return near[sin2_psi[near] < SHALLOW_LIMIT * np.cos(alpha[near]) * np.cos(beta[near])]
 
 
 def _terms_rad(ti, pi_, tr, pr, psi_deg: float | np.ndarray, order: int | None = None) -> PitTerms:
