@@ -48,14 +48,27 @@ minutes of a comparison that is otherwise about fifteen seconds), and where it w
 the profiles of its shape corrections (a parameter near a bound: about 30 least-squares
 fits each: 1.6-1.8 s for each of two failing candidates of the demo's comparison, which
 took 6.8 s) it is not computed either. Only when no candidate passes, and the best by evidence is shown, are
-those evidences computed in full. Only where
-sampling fails as well does the rule use Delta BIC / 2, which approximates -Delta ln Z for
-large n, naming the candidate.
+those evidences computed in full. Nor is a candidate's evidence sampled where it nests an
+adequate candidate of the comparison and sits at the nesting point (:data:`NESTINGS`: the
+Oren-Nayar + Torrance-Sparrow sum with ``kd = 1`` and ``ks = 0`` is ``oren-nayar`` with
+``ir_weight = 1``; ``evidence_method`` "not needed", ``nested_in`` that candidate): its
+nesting parameter at the nesting value within two standard errors, and its standard error
+below a tenth of the prior's width, so that the posterior's density there exceeds the
+prior's, and by the Savage-Dickey ratio (Dickey 1971; Verdinelli & Wasserman 1995, the
+priors of the shared parameters being the same) its evidence is below the nested one's,
+which has fewer parameters: it can be neither chosen nor the best. On the lab rig's smooth
+samples that sampling (``ks`` held on 0, ``sigma_s`` without effect) was four to eight
+minutes of a comparison. Only where sampling fails as well does the rule use Delta BIC / 2,
+which approximates -Delta ln Z for large n, naming the candidate.
 
 References
 ----------
 R. E. Kass, A. E. Raftery, "Bayes factors", J. Am. Stat. Assoc. 90, 773 (1995), section 3
 (interpretation scale) and 4.1.1 (Laplace's method).
+J. M. Dickey, "The weighted likelihood ratio, linear hypotheses on normal location
+parameters", Ann. Math. Stat. 42, 204 (1971); I. Verdinelli, L. Wasserman, "Computing Bayes
+factors using a generalization of the Savage-Dickey density ratio", J. Am. Stat. Assoc. 90,
+614 (1995).
 """
 from __future__ import annotations
 
@@ -66,7 +79,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .dataset import Dataset
-from .evidence import laplace_evidence, log_posterior, tempered_evidence, laplace_log_evidence, scale_degenerate_factor
+from .evidence import _support, laplace_evidence, log_posterior, tempered_evidence, laplace_log_evidence, \
+    scale_degenerate_factor
 from .csv_table import ASSUMED_SIGMA
 from .problem import jitter_mode
 
@@ -165,8 +179,8 @@ class ModelComparison:
         keep = ("label", "model", "fixed", "k", "chi2", "redchi", "chi2_p", "lack_of_fit_p", "verdict", "adequate",
                 "adequacy", "aic", "aicc", "bic", "delta_bic", "log_evidence", "evidence_method", "evidence_error",
                 "log_evidence_laplace", "evidence_truncation", "evidence_shape", "delta_log_evidence", "values",
-                "undetermined")
-        rows = [{k: row[k] for k in keep} for row in self.rows]
+                "undetermined", "nested_in")
+        rows = [{k: row.get(k) for k in keep} for row in self.rows]
         return {"chosen": self.chosen, "chosen_adequate": self.chosen_adequate, "chosen_verdict": self.chosen_verdict,
                 "reason": self.reason, "threshold": self.threshold, "jitter": self.jitter, "rows": rows}
 
@@ -197,8 +211,12 @@ def comparison_text(comparison: Mapping[str, Any]) -> str:
                  f"Laplace+quad = quadrature over the parameter the data leave undetermined ({', '.join(quadrature)}), "
                  "Laplace for the others; " if quadrature else "") + "SMC+-error = sequential Monte Carlo, where "
                  "Laplace has no Gaussian to expand" + ("; - = not computed: the candidate fails the goodness-of-fit "
-                 "test, so its evidence cannot change the choice" if any(r["evidence_method"] == NOT_NEEDED
+                 "test (or see the note), so its evidence cannot change the choice" if any(r["evidence_method"] == NOT_NEEDED
                                                                         for r in comparison["rows"]) else ""))
+    for row in comparison["rows"]:
+        if row.get("nested_in"):
+            lines.append(f"note: {row['label']} sits at its nesting point in {row['nested_in']}, which is adequate: "
+                         "its evidence is below that one's (Savage-Dickey) and was not computed")
     lines.append(f"chosen: {chosen} ({comparison['reason']})")
     return "\n".join(lines)
 
@@ -316,13 +334,15 @@ def compare_models(
     note = ""
     if jitter == "auto" and dataset.metadata.get(ASSUMED_SIGMA):
         noise, note = "relative", "; the data state no uncertainties: compared with a relative noise of fitted size"
-    rows, fits, deferred = _fit_candidates(dataset, pairs, n_starts, priors, noise, alignment, stray_light)
+    rows, fits, deferred, pending = _fit_candidates(dataset, pairs, n_starts, priors, noise, alignment, stray_light)
     if noise is None and jitter == "auto" and not any(r["adequate"] for r in rows) and any(
             r["verdict"] == "noise understated" for r in rows):
         noise = "relative"
-        rows, fits, deferred = _fit_candidates(dataset, pairs, n_starts, priors, noise, alignment, stray_light)
+        rows, fits, deferred, pending = _fit_candidates(dataset, pairs, n_starts, priors, noise, alignment,
+                                                        stray_light)
         note = ("; compared with a relative extra-noise term, since the data scatter more than stated about "
                 "candidates that follow them")
+    _complete(rows, pending, deferred, bool(noise))
     if not any(r["verdict"] in _passing(bool(noise)) for r in rows):  # the best of all is shown: every evidence
         for row in rows:
             if row["evidence_method"] == NOT_NEEDED:
@@ -338,6 +358,58 @@ def compare_models(
 
 #: ``evidence_method`` of a failing candidate whose evidence was not computed (module docstring).
 NOT_NEEDED = "not needed"
+#: ``evidence_method`` of a candidate whose Laplace evidence is undefined, while the
+#: comparison decides whether it must be sampled (:func:`_sample_or_nest`).
+TO_SAMPLE = "to sample"
+
+
+@dataclass(frozen=True)
+class Nesting:
+    """A candidate that reduces to another where one parameter takes a value (module
+    docstring): ``model`` with ``fixed`` values and ``parameter = value`` is ``nested``
+    with ``nested_fixed``."""
+
+    model: str
+    parameter: str
+    value: float
+    fixed: Mapping[str, float]
+    nested: str
+    nested_fixed: Mapping[str, float]
+
+    def holds(self, row: Mapping[str, Any], other: Mapping[str, Any]) -> bool:
+        """Whether ``row``'s candidate reduces to ``other``'s by this nesting."""
+        return (row["model"] == self.model and other["model"] == self.nested
+                and all(row["fixed"].get(k) == v for k, v in self.fixed.items())
+                and all(other["fixed"].get(k) == v for k, v in self.nested_fixed.items()))
+
+
+#: The nestings among the registered models that the comparison knows: Oren & Nayar's eq 38
+#: with kd = 1 and no specular lobe is its diffuse term, eq 33-34 with interreflection.
+NESTINGS = (Nesting("oren-nayar+torrance-sparrow", "ks", 0.0, {"kd": 1.0}, "oren-nayar", {"ir_weight": 1.0}),)
+#: The nesting parameter's standard error must be below this share of its prior's width.
+NESTING_SHARE = 0.1
+
+
+def _nested_in(row: Mapping[str, Any], judged, rows: Sequence[Mapping[str, Any]],
+               accept_understated: bool) -> str | None:
+    """The label of an adequate candidate that ``row``'s nests at its optimum (module
+    docstring), ``judged`` its (problem, least squares, priors): the nesting parameter free,
+    within two standard errors of the nesting value, its standard error below
+    :data:`NESTING_SHARE` of its prior's width; None if there is none."""
+    problem, least_squares, priors = judged
+    for nesting in NESTINGS:
+        name = nesting.parameter
+        if name not in problem.free:
+            continue
+        error = least_squares.stderr.get(name, math.nan)
+        lo, hi = _support(problem, priors[name], name)
+        if not (error > 0 and abs(least_squares.values[name] - nesting.value) <= 2.0 * error
+                and error < NESTING_SHARE * (hi - lo)):
+            continue
+        for other in rows:
+            if other is not row and nesting.holds(row, other) and other["verdict"] in _passing(accept_understated):
+                return other["label"]
+    return None
 
 
 def _passing(accept_understated: bool) -> tuple[str, ...]:
@@ -348,15 +420,38 @@ def _passing(accept_understated: bool) -> tuple[str, ...]:
 def _fit_candidates(dataset, pairs, n_starts, priors, jitter, alignment, stray_light):
     """The comparison's row and own least-squares fit of every candidate, by label, and the
     (problem, least squares, priors) it is judged by of each whose evidence was left
-    uncomputed."""
-    rows, fits, deferred = [], {}, {}
+    uncomputed: not needed, or to be sampled (:func:`_complete`)."""
+    rows, fits, deferred, pending = [], {}, {}, {}
     for name, fixed in pairs:
         row, own, judged = _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, stray_light)
         rows.append(row)
         fits[row["label"]] = own
         if row["evidence_method"] == NOT_NEEDED:
             deferred[row["label"]] = judged
-    return rows, fits, deferred
+        elif row["evidence_method"] == TO_SAMPLE:
+            pending[row["label"]] = judged
+    return rows, fits, deferred, pending
+
+
+def _complete(rows: list[dict[str, Any]], pending, deferred, accept_understated: bool) -> None:
+    """Sample the :data:`TO_SAMPLE` evidences that can matter, once every verdict of the
+    comparison's last pass is known (a first pass that no candidate passes is done again
+    with the extra-noise term: its samples would be thrown away)."""
+    for row in rows:
+        if row["label"] in pending:
+            _sample_or_nest(row, pending[row["label"]], rows, accept_understated)
+            if row["evidence_method"] == NOT_NEEDED:
+                deferred[row["label"]] = pending[row["label"]]
+
+
+def _sample_or_nest(row: dict[str, Any], judged, rows: Sequence[Mapping[str, Any]], accept_understated: bool) -> None:
+    """Complete a :data:`TO_SAMPLE` row: :data:`NOT_NEEDED` with ``nested_in`` where it sits
+    at its nesting point in an adequate candidate (:func:`_nested_in`), else sampled."""
+    nested = _nested_in(row, judged, rows, accept_understated)
+    if nested is not None:
+        row.update(log_evidence=math.nan, evidence_method=NOT_NEEDED, evidence_error=math.nan, nested_in=nested)
+    else:
+        row.update(_sampled_evidence(judged[0], judged[2]))
 
 
 def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, stray_light):
@@ -419,11 +514,12 @@ def _judged(problem, own, given, problem_of, restartable: bool):
     candidate_priors = resolve_priors(problem, ls.values, given)
     verdict = assess(problem, ls)
     terms = _evidence_terms(problem, ls, candidate_priors, sample=verdict.verdict in _passing(True),
-                            restartable=restartable and polished is None)
+                            restartable=restartable and polished is None, defer=True)
     return problem, ls, candidate_priors, verdict, terms
 
 
-def _evidence_terms(problem, least_squares, priors, sample: bool = True, restartable: bool = False) -> dict[str, Any]:
+def _evidence_terms(problem, least_squares, priors, sample: bool = True, restartable: bool = False,
+                    defer: bool = False) -> dict[str, Any]:
     """``log_evidence`` and how it was computed, for a row of the comparison.
 
     Laplace's corrected approximation where it is defined (its terms as
@@ -438,7 +534,9 @@ def _evidence_terms(problem, least_squares, priors, sample: bool = True, restart
     evidence is then :data:`NOT_NEEDED` too, and computed in full only if no candidate
     passes. With ``restartable``, a Laplace evidence undefined because a profile rose above
     the optimum is returned with that point as ``higher_point`` instead of being sampled:
-    the caller restarts the least squares from it.
+    the caller restarts the least squares from it. With ``defer``, a candidate that would
+    be sampled is returned as :data:`TO_SAMPLE`, for the comparison to decide once every
+    verdict is known (:func:`_sample_or_nest`).
     """
     laplace = laplace_evidence(problem, least_squares, priors, profiles=sample)
     terms = {"log_evidence": laplace.log_evidence, "log_evidence_laplace": laplace.raw,
@@ -451,6 +549,8 @@ def _evidence_terms(problem, least_squares, priors, sample: bool = True, restart
         return {**terms, "log_evidence": math.nan, "evidence_method": NOT_NEEDED, "evidence_error": math.nan}
     if restartable and laplace.higher_point is not None:  # the caller restarts the least squares there
         return {**terms, "higher_point": laplace.higher_point}
+    if defer:
+        return {**terms, "log_evidence": math.nan, "evidence_method": TO_SAMPLE, "evidence_error": math.nan}
     return {**terms, **_sampled_evidence(problem, priors)}
 
 

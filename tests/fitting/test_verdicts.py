@@ -341,3 +341,48 @@ def test_a_failing_candidate_s_profiles_are_computed_only_when_no_candidate_pass
     assert profiled == [False, True] and lambert["evidence_method"] == "laplace"
     assert lambert["log_evidence"] == pytest.approx(lambert["log_evidence_laplace"] + lambert["evidence_truncation"]
                                                     - 0.5)
+
+
+def test_a_candidate_at_its_nesting_point_in_an_adequate_one_is_not_sampled(monkeypatch):
+    """Oren-Nayar + Torrance-Sparrow (kd = 1) on a matte Oren-Nayar sample: its lobe at
+    ks = 0, where it is oren-nayar with ir_weight = 1. Where its Laplace evidence is undefined
+    (forced here; on the lab rig ks held on 0 leaves sigma_s without effect) it is not
+    sampled while the nested candidate is adequate: by the Savage-Dickey ratio its evidence
+    is below that one's. The premise holds where both evidences can be computed (this
+    sample, the quadrature over sigma_s: 5.6 below), and with the nested candidate absent
+    the sum is sampled as before."""
+    data = synthetic_dataset_matte()
+    candidates = [("oren-nayar", {"ir_weight": 1.0}), ("oren-nayar+torrance-sparrow", {"kd": 1.0, "n": 1.5})]
+    computed = compare_models(data, candidates)
+    nested, larger = (computed.row(label) for label in ("oren-nayar (ir_weight=1)",
+                                                        "oren-nayar+torrance-sparrow (kd=1, n=1.5)"))
+    assert larger["log_evidence"] < nested["log_evidence"] - 1.0  # the rule's premise, measured
+    real = selection.laplace_evidence
+    sampled = []
+
+    def no_gaussian_for_the_sum(problem, least_squares, priors, **kwargs):
+        return LaplaceEvidence(math.nan) if problem.base_model.name == "oren-nayar+torrance-sparrow" else real(
+            problem, least_squares, priors, **kwargs)
+
+    def recorded(problem, priors, *args, **kwargs):
+        sampled.append(problem.base_model.name)
+        return tempered_evidence(problem, priors, *args, particles=300, **kwargs)
+
+    monkeypatch.setattr(selection, "laplace_evidence", no_gaussian_for_the_sum)
+    monkeypatch.setattr(selection, "tempered_evidence", recorded)
+    comparison = compare_models(data, candidates)
+    row = comparison.row("oren-nayar+torrance-sparrow (kd=1, n=1.5)")
+    assert sampled == [] and row["evidence_method"] == "not needed" and row["nested_in"] == "oren-nayar (ir_weight=1)"
+    assert comparison.chosen == "oren-nayar (ir_weight=1)" and "BIC" not in comparison.reason
+    assert "sits at its nesting point in oren-nayar (ir_weight=1)" in comparison.summary()
+    assert comparison.to_dict()["rows"][-1]["nested_in"] == "oren-nayar (ir_weight=1)"
+    alone = compare_models(data, [candidates[1], "lambert"])
+    assert sampled == ["oren-nayar+torrance-sparrow"]
+    assert alone.row(row["label"])["evidence_method"] == "sequential monte carlo"
+
+
+def synthetic_dataset_matte():
+    """A matte Oren-Nayar sample (sigma 20 deg, interreflection weight 1), 0.2 % noise."""
+    from .synthetic import synthetic_dataset
+
+    return synthetic_dataset("oren-nayar", dict(rho=0.8, sigma=20.0, ir_weight=1.0), 0.002, seed=3)
