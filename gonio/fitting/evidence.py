@@ -153,7 +153,9 @@ def laplace_evidence(problem, least_squares, priors, profiles: bool = True,
         factor = scale_degenerate_factor(problem, least_squares)
         if factor is not None:
             return _product_evidence(problem, least_squares, priors, factor)
-    if problem.noise_parameter in names or not np.all(np.isfinite(covariance)):
+    if problem.noise_parameter in names:
+        covariance = _with_noise_curvature(problem, least_squares, priors)
+    elif not np.all(np.isfinite(covariance)):
         covariance = _numerical_covariance(problem, least_squares.values, priors, least_squares.stderr)
     undetermined = _undetermined_first(problem, covariance, priors) if conditional and len(names) > 1 else []
     if undetermined and not profiles:
@@ -602,6 +604,44 @@ def _product_evidence(problem, least_squares, priors, factor: str) -> LaplaceEvi
     reduced_priors: dict[str, Any] = {n: p for n, p in priors.items() if n in reduced.free}
     reduced_priors["scale"] = _ProductPrior(priors[factor], priors["scale"], problem.spec(factor).bounds, reference)
     return laplace_evidence(reduced, reduced_ls, reduced_priors)
+
+
+def _with_noise_curvature(problem, least_squares, priors) -> np.ndarray:
+    """The covariance of a fit with a free extra noise: the least squares' for the other
+    parameters (its Jacobian whitened by the total noise, the Gaussian priors in it) and
+    the noise's own curvature, by finite differences with a step scaled to its value, the
+    cross terms left out (a Gaussian likelihood's information between the mean's
+    parameters and the variance's is zero where the variance does not depend on the mean,
+    and small for a noise relative to it); the whole curvature by finite differences where
+    the least squares' is not positive definite.
+
+    The others' curvature by finite differences is at the mercy of any roughness of the
+    likelihood at the step's scale: on the lab rig the holder's and the sample's own tilt
+    along the swing axis, which only their priors tell apart, came out indefinite (an
+    eigenvalue of -1.3), and the candidate's evidence fell to sampling."""
+    from .curvature import inverse_hessian, steps_at_mode
+
+    names = list(problem.free)
+    k = names.index(problem.noise_parameter)
+    others = [i for i in range(len(names)) if i != k]
+    covariance = np.asarray(least_squares.covariance, float)
+    block = covariance[np.ix_(others, others)]
+    if not _positive_definite(block):
+        return _numerical_covariance(problem, least_squares.values, priors, least_squares.stderr)
+    mode = np.array([least_squares.values[n] for n in names], float)
+    bounds = problem.spec(names[k]).bounds
+
+    def along_noise(value: np.ndarray) -> float:
+        point = mode.copy()
+        point[k] = value[0]
+        return -log_posterior(problem, priors, point)
+
+    step = steps_at_mode([mode[k]], [least_squares.stderr.get(names[k], math.nan)], [bounds])
+    noise = inverse_hessian(along_noise, mode[k:k + 1], [bounds], step)[0, 0]
+    out = np.zeros((len(names), len(names)))
+    out[np.ix_(others, others)] = block
+    out[k, k] = noise
+    return out
 
 
 def _numerical_covariance(problem, values: Mapping[str, float], priors,

@@ -483,3 +483,25 @@ def test_the_evidence_of_a_narrow_extra_noise_is_its_quadrature():
     assert terms[0] < max(terms) - 30 and terms[-1] < max(terms) - 30  # the grid holds the whole peak
     quadrature = logsumexp(terms) + math.log(nodes[1] - nodes[0])
     assert laplace == pytest.approx(quadrature, abs=0.1)
+
+
+def test_with_an_extra_noise_the_others_curvature_is_the_least_squares(monkeypatch):
+    """With a free extra noise the other parameters' curvature is the least squares' (their
+    Jacobian whitened by the total noise), not a finite difference of the whole posterior,
+    which any roughness of the likelihood at the step's scale can make indefinite (the lab
+    rig's two tilts along the swing axis: an eigenvalue of -1.3, and the candidate fell to
+    sampling). Forced indefinite here, the evidence is still Laplace's, equal to the
+    quadrature over the noise within 0.1."""
+    from gonio.fitting import evidence
+
+    data = synthetic_dataset("oren-nayar", dict(rho=0.8, sigma=20.0), 4e-4, seed=1, relative=True)
+    data = Dataset(*data.geometry, data.value, 1e-4 * np.abs(data.value), quantity=data.quantity)
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0}, jitter="relative")
+    ls = fit_least_squares(problem)
+    priors = resolve_priors(problem, ls.values, {})
+    expected = evidence.laplace_evidence(problem, ls, priors).log_evidence
+    rough = np.diag([1e-4, -1e-3, 1e-8])  # what finite differences of a rough likelihood can give
+    monkeypatch.setattr(evidence, "_numerical_covariance", lambda *args, **kwargs: rough)
+    forced = evidence.laplace_evidence(problem, ls, priors)
+    assert forced.quadrature_over is None and forced.log_evidence == pytest.approx(expected, abs=1e-9)
+    assert forced.log_evidence == pytest.approx(377.94, abs=0.1)  # the quadrature of the test above
