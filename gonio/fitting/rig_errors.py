@@ -178,7 +178,7 @@ def rig_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
     >>> rig_alignment({"tilt_x": 0.1, "sample_tilt_x": 0.2})
     {'tilt_x': 0.1}
     """
-    return {name: value for name, value in alignment.items() if name not in SAMPLE_TILT_NAMES + (TEXTURE_SLOPE.name,)}
+    return {name: value for name, value in alignment.items() if name not in SAMPLE_TILT_NAMES}
 
 
 def sample_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
@@ -188,7 +188,7 @@ def sample_alignment(alignment: Mapping[str, Any]) -> dict[str, Any]:
     >>> sample_alignment({"tilt_x": 0.1, "sample_tilt_x": 0.2, "sample_tilt_y": 0.0})
     {'tilt_x': 0.30000000000000004, 'tilt_y': 0.0}
     """
-    out = rig_alignment(alignment)  # without texture_slope, which is no tilt
+    out = rig_alignment(alignment)
     for axis in ("x", "y"):
         own = alignment.get(f"sample_tilt_{axis}")
         if own is not None:
