@@ -48,7 +48,10 @@ rig's errors as parameters (``alignment="all"``, ``stray_light=True``; docs/fitt
 the selection protocol then reads the reference standard at theta_i = 75 deg too
 (:func:`selection_protocol`), since each lamp polar angle needs its own reading.
 ``--realism ideal`` (the default of this script, the study's first figures) is the
-idealised rig. Outputs of the lab study are named with ``_lab``.
+idealised rig. Outputs of the lab study are named with ``_lab``. ``--texture-slope`` (with
+``--realism lab``) fits the sample's mesoscale slope too (``texture_slope``, the lab
+samples' texture; outputs named with ``_texture``), and ``--truths`` restricts the
+model-choice study to some true samples (``--truths on+ts,lambert``).
 
 Writes docs/benchmarks/calibration.json and calibration_coverage.png,
 calibration_ranks.png, calibration_zscores.png, calibration_confusion.png (``--quick``:
@@ -271,14 +274,17 @@ def warm_up() -> None:
     gonio.models.get("oren-nayar-tabulated").at(*geometry)(rho=0.9, sigma=20.0)
 
 
-#: The realism of the runs (``--realism``) and what fits do about it (set by :func:`main`).
-REALISM = {"spec": "ideal"}
+#: The realism of the runs (``--realism``) and what fits do about it (set by :func:`main`):
+#: ``texture_slope`` (``--texture-slope``) adds the sample's mesoscale slope to the rig's errors.
+REALISM = {"spec": "ideal", "texture_slope": False}
 
 
 def rig_errors() -> dict[str, Any]:
     """What every fit and comparison models of the rig: nothing on the ideal rig; the
     alignment and the stray light on a rig with systematic errors."""
-    return {} if REALISM["spec"] == "ideal" else {"alignment": "all", "stray_light": True}
+    if REALISM["spec"] == "ideal":
+        return {}
+    return {"alignment": "all,texture_slope" if REALISM["texture_slope"] else "all", "stray_light": True}
 
 
 def calibration() -> str:
@@ -968,6 +974,18 @@ def git_state() -> dict[str, Any]:
             "library_modified": bool(run("status", "--porcelain", "--", "gonio", "drivers"))}
 
 
+def _chosen_truths(parser: argparse.ArgumentParser, keys: str | None) -> tuple[SelectionTruth, ...]:
+    """The true samples ``--truths`` names (all by default); an unknown key is a usage error."""
+    if keys is None:
+        return SELECTION_TRUTHS
+    known = {t.key: t for t in SELECTION_TRUTHS}
+    wanted = [k.strip() for k in keys.split(",") if k.strip()]
+    unknown = [k for k in wanted if k not in known]
+    if unknown or not wanted:
+        parser.error(f"--truths: unknown key(s) {', '.join(unknown) or '(none given)'}; known: {', '.join(known)}")
+    return tuple(known[k] for k in wanted)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="a smoke run: few seeds, outputs named *_quick")
@@ -984,13 +1002,22 @@ def main(argv: Sequence[str] | None = None) -> int:
                              "default a file in the temporary directory, removed after a complete run")
     parser.add_argument("--selection-only", action="store_true",
                         help="only the model-choice study (no coverage arms); outputs named *_selection")
+    parser.add_argument("--texture-slope", action="store_true",
+                        help="with --realism lab: fits and comparisons also carry the sample's mesoscale slope "
+                             "(texture_slope, docs/fitting.md); outputs named *_texture")
+    parser.add_argument("--truths", default=None,
+                        help="comma-separated keys of the true samples of the model-choice study (default all: "
+                             + ", ".join(t.key for t in SELECTION_TRUTHS) + ")")
     parser.add_argument("--charts-only", action="store_true",
                         help="redraw the charts from the JSON a previous run wrote; run nothing")
     args = parser.parse_args(argv)
     quick = args.quick
-    REALISM["spec"] = args.realism
-    suffix = (("_lab" if args.realism == "lab" else "") + ("_quick" if quick else "")
-              + ("_selection" if args.selection_only else ""))
+    if args.texture_slope and args.realism != "lab":
+        parser.error("--texture-slope needs --realism lab (the ideal rig's samples have no texture)")
+    truths = _chosen_truths(parser, args.truths)
+    REALISM.update(spec=args.realism, texture_slope=args.texture_slope)
+    suffix = (("_lab" if args.realism == "lab" else "") + ("_texture" if args.texture_slope else "")
+              + ("_quick" if quick else "") + ("_selection" if args.selection_only else ""))
     if args.selection_only:
         args.seeds, args.tabulated_seeds = 0, 0
     if args.charts_only:
@@ -1006,7 +1033,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # longest runs first, so that the pool's two workers finish together
     tasks = [("coverage", "tabulated", s) for s in range(1, n_tab + 1)]
     tasks += [("coverage", "closed-form", s) for s in range(1, n_cov + 1)]
-    tasks += [("selection", t.key, s) for s in range(1, n_sel + 1) for t in SELECTION_TRUTHS]
+    tasks += [("selection", t.key, s) for s in range(1, n_sel + 1) for t in truths]
     outcomes = run_tasks(tasks, args.workers, records_path)
     noise_free = noise_free_study() if not quick and args.realism == "ideal" else None
     session = {"kind": "session", "wall_s": time.perf_counter() - start, "tasks": len(tasks),
@@ -1033,9 +1060,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         "benchmark": "calibration",
         "command": "python benchmarks/calibration.py" + (" --quick" if quick else "")
                    + (f" --realism {args.realism}" if args.realism != "ideal" else "")
+                   + (" --texture-slope" if args.texture_slope else "")
+                   + (f" --truths {args.truths}" if args.truths else "")
                    + (f" --selection-only --selection-seeds {n_sel}" if args.selection_only else ""),
         "arguments": {"coverage_seeds": n_cov, "tabulated_seeds": n_tab, "selection_seeds": n_sel,
-                      "workers": args.workers, "realism": args.realism},
+                      "workers": args.workers, "realism": args.realism, "texture_slope": args.texture_slope,
+                      "truths": [t.key for t in truths]},
         "machine": machine(),
         "git": git_state(),
         "design": {
@@ -1056,7 +1086,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             "selection_target": SELECTION_TARGET,
             "candidates": [{"model": n, "fixed": f} for n, f in CANDIDATES],
             "selection_jitter": SELECTION_JITTER,
-            "truths": [{"key": t.key, "spec": t.spec, "family": t.family} for t in SELECTION_TRUTHS],
+            "rig_errors": rig_errors(),
+            "truths": [{"key": t.key, "spec": t.spec, "family": t.family} for t in truths],
         },
         "coverage": coverage,
         "selection": selection,
