@@ -417,6 +417,7 @@ def test_a_candidate_whose_likelihood_cannot_reach_the_best_evidence_is_not_samp
     assert sampled == [] and row["evidence_method"] == "not needed"
     assert row["evidence_bound"] == pytest.approx(bound, rel=1e-9)
     assert comparison.chosen == computed.chosen and "BIC" not in comparison.reason
+    assert "texture_slope" not in comparison.reason  # no rig modelled: no hint of the sample's texture
     assert "its evidence is at most its maximum ln likelihood" in comparison.summary()
     assert comparison.to_dict()["rows"][-1]["evidence_bound"] == pytest.approx(bound, rel=1e-9)
 
@@ -437,3 +438,13 @@ def test_the_likelihood_bound_drops_the_gaussian_priors():
     free = fit_least_squares(problem).log_likelihood
     assert bound == pytest.approx(free, abs=1e-6) and bound > ls.log_likelihood + 10.0
     assert laplace_evidence(problem, ls, priors).log_evidence < bound
+
+
+def test_a_comparison_none_passes_on_a_modelled_rig_points_to_the_texture():
+    """Where the rig's alignment is modelled and the sample's mesoscale slope is not, a
+    comparison that no candidate passes names the parameter that made the lab rig's
+    specular sample pass (docs/calibration.md, section 3); not otherwise."""
+    hint = selection._texture_hint("all")
+    assert "--alignment all,texture_slope" in hint
+    assert selection._texture_hint(["tilt_x", "sample_tilt_y"]) == hint
+    assert selection._texture_hint("all,texture_slope") == "" and selection._texture_hint(None) == ""
