@@ -150,7 +150,7 @@ def laplace_evidence(problem, least_squares, priors, profiles: bool = True,
     names = list(problem.free)
     covariance = np.asarray(least_squares.covariance, float)
     if not np.all(np.isfinite(covariance)):
-        factor = scale_degenerate_factor(problem, least_squares)
+        factor = scale_degenerate_factor(problem, least_squares, priors)
         if factor is not None:
             return _product_evidence(problem, least_squares, priors, factor)
     if problem.noise_parameter in names:
@@ -534,14 +534,20 @@ def _profile_log_posterior(problem, priors, name: str, value: float,
     return log_posterior(problem, priors, np.array([values[n] for n in problem.free], float)), values
 
 
-def scale_degenerate_factor(problem, least_squares) -> str | None:
+def scale_degenerate_factor(problem, least_squares, priors: Mapping[str, Any] | None = None) -> str | None:
     """The free parameter that only multiplies the free ``scale`` (relative radiance), if any.
 
     Tested directly: the prediction is unchanged (to 1e-9) when the parameter is multiplied
     by 0.9 and ``scale`` divided by 0.9 (rho of Lambert on relative radiance without a
-    calibration prior: only rho x scale is determined).
+    calibration prior: only rho x scale is determined). None where ``priors`` give
+    ``scale`` a Gaussian prior (the calibration's): the prior determines the pair, whose
+    posterior Laplace's Gaussian describes. (On the lab rig a covariance left undefined by
+    another parameter, Oren-Nayar's sigma at 0, had sent such a fit to the product form,
+    whose induced prior, a 1-D integral across a calibration prior 0.03 % wide, came out 0.)
     """
-    if "scale" not in problem.free:
+    from .priors import Normal
+
+    if "scale" not in problem.free or isinstance((priors or {}).get("scale"), Normal):
         return None
     values = dict(least_squares.values)
     base = problem.predict(values)

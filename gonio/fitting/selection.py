@@ -565,7 +565,7 @@ def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, st
         "verdict": verdict.verdict,
         "adequate": verdict.adequate,
         "adequacy": verdict.headline(),
-        "undetermined": _undetermined(problem, ls),
+        "undetermined": _undetermined(problem, ls, candidate_priors),
         **information_criteria(ls.log_likelihood, len(problem.free), problem.n_informative),
         **terms,
         "values": ls.values,
@@ -655,11 +655,11 @@ def _sampled_evidence(problem, priors) -> dict[str, Any]:
     return {"log_evidence": sampled.log_evidence, "evidence_method": method, "evidence_error": sampled.error}
 
 
-def _undetermined(problem, least_squares) -> list[str]:
+def _undetermined(problem, least_squares, priors) -> list[str]:
     """The factor only its product with ``scale`` determines, when nothing else does."""
     if np.all(np.isfinite(np.asarray(least_squares.covariance, float))):
         return []
-    factor = scale_degenerate_factor(problem, least_squares)
+    factor = scale_degenerate_factor(problem, least_squares, priors)
     return [factor] if factor else []
 
 

@@ -141,6 +141,29 @@ def test_evidence_of_the_degenerate_pair_matches_direct_integration():
     assert laplace_log_evidence(problem, least_squares, priors) == pytest.approx(peak + math.log(total), abs=1e-3)
 
 
+def test_a_calibration_prior_on_scale_keeps_the_pair_out_of_the_product_form():
+    """Oren-Nayar fitted to a Lambertian sample's radiance, sigma at its bound 0 (its
+    covariance undefined), with a calibration prior on ``scale`` 0.03 % wide: the prior
+    determines rho and scale, so the evidence is Laplace's over both (with the quadrature
+    over sigma), not the product form, whose induced prior across so narrow a prior came out
+    20 ln units low. Checked against sequential Monte Carlo."""
+    from gonio.fitting import Normal
+    from gonio.fitting.evidence import scale_degenerate_factor, tempered_evidence
+
+    data = synthetic_dataset("lambert", dict(rho=0.5, scale=200.0), 0.002, seed=4, quantity="radiance",
+                             relative=True)
+    problem = FitProblem("oren-nayar", data, {"ir_weight": 1.0})
+    calibration = {"scale": Normal(200.0, 0.06, 0.0, math.inf)}
+    least_squares = fit_least_squares(problem, priors=calibration)
+    priors = resolve_priors(problem, least_squares.values, calibration)
+    assert least_squares.values["sigma"] < 1e-6 and not np.all(np.isfinite(least_squares.covariance))
+    assert scale_degenerate_factor(problem, least_squares) == "rho"  # the likelihood alone
+    assert scale_degenerate_factor(problem, least_squares, priors) is None
+    sampled = tempered_evidence(problem, priors)
+    assert laplace_log_evidence(problem, least_squares, priors) == pytest.approx(
+        sampled.log_evidence, abs=3 * sampled.error + 0.1)
+
+
 def test_comparison_uses_the_fits_extra_noise():
     data = synthetic_dataset("lambert", dict(rho=0.5), 0.003, seed=8)
     plain = compare_models(data, ["lambert", "minnaert"])
