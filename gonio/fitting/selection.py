@@ -519,15 +519,25 @@ def _likelihood_bound(problem, least_squares, priors) -> float:
     supports. Like Laplace's approximation it takes the least squares to have found the
     global maximum."""
     from .least_squares import fit_least_squares
-    from .priors import Normal, Uniform
 
     if not least_squares.gaussian_priors:
         return least_squares.log_likelihood
-    flat = {name: Uniform(prior.lower, prior.upper) if isinstance(prior, Normal) else prior
-            for name, prior in priors.items() if name in problem.free
-            and not (isinstance(prior, Normal) and not (math.isfinite(prior.lower) and math.isfinite(prior.upper)))}
-    unpenalised = fit_least_squares(problem, start=least_squares.values, n_starts=1, priors=flat)
+    flat = {name: _support_only(priors[name]) for name in problem.free}
+    unpenalised = fit_least_squares(problem, start=least_squares.values, n_starts=1,
+                                    priors={name: prior for name, prior in flat.items() if prior is not None})
     return max(least_squares.log_likelihood, unpenalised.log_likelihood)
+
+
+def _support_only(prior):
+    """A prior that restricts the least squares to its support and pulls nowhere: a
+    Gaussian one as the uniform prior on its support (None where that is unbounded: the
+    physical range bounds the fit), any other as it is (only Gaussian priors enter the
+    least squares' objective)."""
+    from .priors import Normal, Uniform
+
+    if not isinstance(prior, Normal):
+        return prior
+    return Uniform(prior.lower, prior.upper) if math.isfinite(prior.lower) and math.isfinite(prior.upper) else None
 
 
 def _candidate_row(dataset, name, fixed, n_starts, priors, jitter, alignment, stray_light):
