@@ -359,8 +359,8 @@ def compare_models(
     _complete(rows, pending, deferred, bool(noise), threshold)
     if not any(r["verdict"] in _passing(bool(noise)) for r in rows):  # the best of all is shown: every evidence
         pending = {}
-        for row in rows:
-            if row["evidence_method"] == NOT_NEEDED:
+        for row in rows:  # a row already bounded stays so: the evidence it must reach only rises
+            if row["evidence_method"] == NOT_NEEDED and "evidence_bound" not in row:
                 row.update(_evidence_terms(*deferred[row["label"]], defer=True))
                 if row["evidence_method"] == TO_SAMPLE:
                     pending[row["label"]] = deferred[row["label"]]
